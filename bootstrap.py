@@ -1,0 +1,74 @@
+#!/usr/bin/env python3
+"""Set up this project from nothing but Python 3.11 and pip, then run it.
+
+    python3.11 bootstrap.py          # set up, then start the dataflow with its prompt (so101 teleop)
+    python3.11 bootstrap.py test     # set up with test tools, then run the whole test suite
+    python3.11 bootstrap.py setup    # set up only
+
+Set-up is idempotent: a virtual environment in .venv, this project installed in it
+(editable), and the SO-101 model fetched and verified into assets/SO101.
+Any further arguments go to the command that runs (so101 teleop or pytest).
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import venv
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent
+VENV = ROOT / ".venv"
+BIN = VENV / ("Scripts" if os.name == "nt" else "bin")
+PYTHON = BIN / ("python.exe" if os.name == "nt" else "python")
+
+
+def run(*command: str | Path) -> None:
+    print("+", " ".join(str(part) for part in command), flush=True)
+    subprocess.run([str(part) for part in command], check=True, cwd=ROOT)
+
+
+def set_up(with_tests: bool) -> None:
+    if sys.version_info[:2] != (3, 11):
+        sys.exit(
+            f"bootstrap.py needs Python 3.11 (found {sys.version.split()[0]}): pybullet 3.2.7 has wheels "
+            "only up to 3.11 and dora-rs 1.1.0 only from 3.11. Run it as `python3.11 bootstrap.py`."
+        )
+    if not PYTHON.exists():
+        print(f"creating virtual environment {VENV}", flush=True)
+        venv.EnvBuilder(with_pip=True).create(VENV)
+    extras = "[test]" if with_tests else ""
+    run(PYTHON, "-m", "pip", "install", "--quiet", "--disable-pip-version-check", "-e", f".{extras}")
+    run(BIN / "so101", "assets")
+
+
+def main(argv: list[str]) -> int:
+    if argv[:1] in (["-h"], ["--help"]):
+        print(__doc__)
+        return 0
+    action, rest = (argv[0], argv[1:]) if argv and argv[0] in ("run", "test", "setup") else ("run", argv)
+    try:
+        set_up(with_tests=action == "test")
+    except subprocess.CalledProcessError as error:
+        print(f"set-up failed: {error}", file=sys.stderr)
+        return error.returncode or 1
+    # The venv's bin first on PATH: dora starts the nodes with the `python` it finds there.
+    env = dict(os.environ, PATH=f"{BIN}{os.pathsep}{os.environ.get('PATH', '')}", VIRTUAL_ENV=str(VENV))
+    if action == "setup":
+        print(f"ready. Activate with: source {VENV.relative_to(ROOT)}/bin/activate")
+        return 0
+    if action == "test":
+        command = [str(PYTHON), "-m", "pytest", *rest]
+    else:
+        command = [str(BIN / "so101"), "teleop", *rest]
+    print("+", " ".join(command), flush=True)
+    code = subprocess.call(command, cwd=ROOT, env=env)
+    if action == "test" and code == 5:
+        print("pytest collected no tests: that is a failure here", file=sys.stderr)
+        return 1
+    return code
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

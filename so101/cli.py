@@ -1,0 +1,51 @@
+"""`so101`: the command-line entry point.
+
+Each subcommand lives in its own module with `add_arguments(parser)` and
+`run(args) -> int`; this file only lists them and turns known failures into
+one-line errors.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from so101.assets import ModelFilesError
+from so101.display import DisplayError
+
+# name -> (module, one-line help)
+SUBCOMMANDS = {
+    "assets": ("so101.cmd_assets", "fetch the SO-101 model (URDF + meshes) and verify it"),
+    "inspect": ("so101.steps", "course step A: load the arm and print its joint table"),
+    "joints": ("so101.steps", "course step B: drive joints 0-4 and print the angles reached"),
+}
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="so101",
+        description="The SO-101 arm in PyBullet, driven through a dora-rs dataflow (course section 10.2).",
+    )
+    commands = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for name, (module_name, summary) in SUBCOMMANDS.items():
+        module = importlib.import_module(module_name)
+        sub = commands.add_parser(name, help=summary, description=summary)
+        module.add_arguments(sub, name)
+        sub.set_defaults(run=module.run)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return args.run(args) or 0
+    except (ModelFilesError, DisplayError) as error:
+        print(f"so101 {args.command}: {error}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,25 @@
+"""`so101 assets`: fetch and verify the model files."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from so101 import assets
+
+
+def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
+    parser.add_argument(
+        "--dir", type=Path, default=None,
+        help=f"where to put the model (default: ${assets.ASSETS_ENV_VAR}, else assets/SO101 in this checkout)",
+    )
+    parser.add_argument("--check", action="store_true", help="only verify; never download (exit 2 if not valid)")
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.check:
+        urdf = assets.urdf_path(args.dir)
+        print(f"SO-101 model verified: {urdf.parent} ({len(assets.manifest())} files)")
+        return 0
+    assets.fetch(args.dir)
+    return 0
