@@ -1,0 +1,83 @@
+"""Running the real dataflow.yml under `dora run` in tests: a copy with absolute paths and extra nodes."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import yaml
+
+ROOT = Path(__file__).resolve().parents[1]
+VENV_BIN = Path(sys.executable).parent
+RECORDER = ROOT / "tests" / "nodes" / "state_recorder.py"
+
+
+def dora_env(**extra: str) -> dict[str, str]:
+    """The environment for dora: this interpreter's bin first on PATH (dora starts nodes with that python)."""
+    env = dict(os.environ, PATH=f"{VENV_BIN}{os.pathsep}{os.environ.get('PATH', '')}")
+    env.pop("DISPLAY", None)
+    env.update(extra)
+    return env
+
+
+def write_test_dataflow(tmp_path: Path, sim_env: dict[str, str] | None = None, record_file: Path | None = None) -> Path:
+    """dataflow.yml with absolute node paths, the simulation forced headless, and optionally a recorder node."""
+    descriptor = yaml.safe_load((ROOT / "dataflow.yml").read_text())
+    for node in descriptor["nodes"]:
+        if node.get("path", "dynamic") != "dynamic":
+            node["path"] = str(ROOT / node["path"])
+        if node["id"] == "simulation":
+            node["env"] = {**node.get("env", {}), "SO101_MODE": "direct", **(sim_env or {})}
+    if record_file is not None:
+        descriptor["nodes"].append(
+            {
+                "id": "recorder",
+                "path": str(RECORDER),
+                "inputs": {"joint_state": "simulation/joint_state"},
+                "env": {"RECORD_FILE": str(record_file)},
+            }
+        )
+    path = tmp_path / "dataflow.yml"
+    path.write_text(yaml.safe_dump(descriptor, sort_keys=False))
+    return path
+
+
+class DoraRun:
+    """`dora run` in the background, its log in a file; stopped with Ctrl-C (SIGINT) like a person would."""
+
+    def __init__(self, dataflow: Path, log_path: Path, stop_after_s: float = 60, **env: str):
+        self.log_path = log_path
+        self._log = log_path.open("wb")
+        self.process = subprocess.Popen(
+            [str(VENV_BIN / "dora"), "run", str(dataflow), "--stop-after", f"{stop_after_s:g}s"],
+            cwd=dataflow.parent, stdout=self._log, stderr=subprocess.STDOUT, env=dora_env(**env),
+            start_new_session=True,
+        )
+
+    def log(self) -> str:
+        return self.log_path.read_text(errors="replace")
+
+    def wait_for(self, text: str, timeout_s: float = 30) -> None:
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            if text in self.log():
+                return
+            if self.process.poll() is not None:
+                raise AssertionError(f"dora run exited ({self.process.returncode}) before {text!r}:\n{self.log()[-3000:]}")
+            time.sleep(0.1)
+        raise AssertionError(f"{text!r} not seen in {timeout_s}s:\n{self.log()[-3000:]}")
+
+    def stop(self, timeout_s: float = 20) -> int:
+        if self.process.poll() is None:
+            self.process.send_signal(signal.SIGINT)
+            try:
+                self.process.wait(timeout_s)
+            except subprocess.TimeoutExpired:
+                os.killpg(self.process.pid, signal.SIGKILL)
+                self.process.wait()
+        self._log.close()
+        return self.process.returncode
