@@ -9,6 +9,9 @@ Environment (declared in dataflow.yml):
   SO101_CONTROL     position | servo      (position is the course's POSITION_CONTROL)
   SO101_SERVO_ZETA  damping ratio of the servo model (servo mode only)
   SO101_IMAGE_HZ    rate of the optional `image` output, 0 = off
+  SO101_FAST_STEPS  0 = paced by the tick (default); N > 0 = fast mode for batch use:
+                    no wall-clock pacing, N physics steps per published state
+  SO101_TICK_LOG    file to write per-tick timings to at exit, for `so101 bench`; empty = off
   SO101_LANG        zh | en               (log language)
 """
 
@@ -16,6 +19,8 @@ from __future__ import annotations
 
 import os
 import sys
+import time
+from array import array
 
 import pyarrow as pa
 from dora import Node
@@ -65,12 +70,36 @@ def _number(environ, name: str, default: str, minimum: float) -> float:
     return value
 
 
+def _whole_number(environ, name: str, default: str) -> int:
+    raw = environ.get(name, default)
+    if not raw.strip().isdigit():
+        raise ValueError(f"{name}={raw!r} is not a whole number >= 0")
+    return int(raw)
+
+
+# In fast mode a tick is made up whenever no input is waiting.
+FAST_TICK = {"type": "INPUT", "id": "tick", "value": None, "metadata": {}}
+
+
+def fast_events(node):
+    """The node's events without waiting: FAST_TICK whenever its queue is empty.
+
+    Fast mode polls instead of taking a 0 ms timer: the physics step stays the
+    timer's period (a 0 ms tick would make it 0), and no event has to travel
+    through the daemon per step.
+    """
+    while True:
+        event = node.try_recv()
+        yield FAST_TICK if event is None else event
+
+
 def main() -> int:
     try:
         mode = os.environ.get("SO101_MODE", "auto")
         control_mode = os.environ.get("SO101_CONTROL", "position")
         servo_zeta = _number(os.environ, "SO101_SERVO_ZETA", "0.7", 0.0)
         image_hz = _number(os.environ, "SO101_IMAGE_HZ", "0", 0.0)
+        fast_steps = _whole_number(os.environ, "SO101_FAST_STEPS", "0")
     except ValueError as error:
         print(f"[simulation] cannot start: {error}", file=sys.stderr, flush=True)
         return 2
@@ -94,15 +123,24 @@ def main() -> int:
     log(text["loaded"].format(robot_id=sim.robot_id, mode=sim.mode.upper(), step_ms=tick_s * 1000, control=control_mode))
 
     joint_targets_deg = tuple(HOME_POSE_DEG)
+    steps_per_tick = fast_steps or 1
+    events = fast_events(node) if fast_steps else node
+    # (start, end) of each tick's work in time.monotonic_ns, when asked for; None costs nothing per tick.
+    tick_log_path = os.environ.get("SO101_TICK_LOG", "")
+    tick_times_ns = array("q") if tick_log_path else None
     ticks_per_image = max(1, round(1.0 / (image_hz * tick_s))) if image_hz > 0 else 0
     try:
-        for event in node:
+        for event in events:
             if event["type"] == "INPUT":
                 if event["id"] == "tick":
-                    sim.step()
+                    if tick_times_ns is not None:
+                        tick_times_ns.append(time.monotonic_ns())
+                    sim.step(steps_per_tick)
                     angles_deg = sim.joint_angles_deg()
                     node.send_output("joint_state", pa.array(angles_deg[:NUM_ARM_JOINTS], type=pa.float64()))
                     node.send_output("gripper_state", pa.array(angles_deg[NUM_ARM_JOINTS:], type=pa.float64()))
+                    if tick_times_ns is not None:
+                        tick_times_ns.append(time.monotonic_ns())
                     if ticks_per_image and sim.steps % ticks_per_image == 0:
                         width, height = IMAGE_SIZE
                         rgb = sim.render_rgb(width, height)
@@ -132,6 +170,9 @@ def main() -> int:
         pass  # Ctrl-C on a node run by hand: stop like STOP
     finally:
         sim.close()
+        if tick_times_ns is not None:
+            with open(tick_log_path, "wb") as tick_log:
+                tick_times_ns.tofile(tick_log)
     return 0
 
 

@@ -19,6 +19,10 @@ SUBCOMMANDS = {
     "assets": ("so101.cmd_assets", "fetch the SO-101 model (URDF + meshes) and verify it"),
     "inspect": ("so101.steps", "course step A: load the arm and print its joint table"),
     "joints": ("so101.steps", "course step B: drive joints 0-4 and print the angles reached"),
+    "plot-step": ("so101.cmd_plot", "exercise 2: plot one joint's step response for a few damping values (PNG)"),
+    "bench": ("so101.cmd_bench", "benchmark the simulation node's 4 ms real-time budget against raw PyBullet (JSON + table)"),
+    "snapshot": ("so101.cmd_snapshot", "render the arm in a pose to a PNG, headless (no window needed)"),
+    "teleop": ("so101.teleop", "steps D + exercise 1: the dataflow and the keyboard prompt in one terminal"),
 }
 
 

@@ -42,6 +42,7 @@ def _describe(value: object) -> str:
             text = f"{type(value).__name__}: {value!r}"
     except Exception:  # noqa: BLE001 - describing must never fail
         text = type(value).__name__
+    text = " ".join(text.split())  # a numpy repr spans lines; a log message must not
     return text if len(text) <= 120 else text[:117] + "..."
 
 
@@ -76,7 +77,8 @@ def decode_joint_cmd(value: object, current_targets_deg: Sequence[float]) -> Dec
             return Decoded(error=f"joint_cmd has null values ({_describe(value)}); {ACCEPTED_FORMS}")
         numbers = [float(number) for number in value.to_pylist()]
     except Exception as error:  # noqa: BLE001 - a malformed array must not stop the node
-        return Decoded(error=f"joint_cmd could not be read ({type(error).__name__}: {error}); {ACCEPTED_FORMS}")
+        reason = " ".join(f"{type(error).__name__}: {error}".split())
+        return Decoded(error=f"joint_cmd could not be read ({reason}); {ACCEPTED_FORMS}")
 
     if not all(math.isfinite(number) for number in numbers):
         return Decoded(error=f"joint_cmd has NaN or infinite values ({_describe(value)}); {ACCEPTED_FORMS}")

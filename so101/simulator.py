@@ -17,6 +17,13 @@ import pybullet_data
 
 from so101 import assets
 from so101.display import resolve_mode
+from so101.servo import (
+    DEFAULT_DAMPING_RATIO,
+    DEFAULT_NATURAL_FREQ_RAD_S,
+    SERVO_TORQUE_LIMIT_NM,
+    pd_gains,
+    pd_torque_nm,
+)
 from so101.robot import (
     ACTUATED_JOINTS,
     COURSE_LINK_DAMPING,
@@ -31,6 +38,27 @@ JOINT_TYPE_NAMES = {
     p.JOINT_PLANAR: "planar",
     p.JOINT_FIXED: "fixed",
 }
+
+# "position": the course's POSITION_CONTROL motor. "servo": a PD torque servo, in
+# which the damping ratio decides whether a step overshoots (exercise 2).
+CONTROL_MODES = ("position", "servo")
+
+
+
+@dataclass(frozen=True)
+class Camera:
+    """A camera orbiting `target_xyz_m`, in PyBullet's yaw/pitch terms (degrees)."""
+
+    target_xyz_m: tuple[float, float, float] = (0.1, -0.05, 0.12)
+    distance_m: float = 0.65
+    yaw_deg: float = 35.0
+    pitch_deg: float = -25.0
+    fov_deg: float = 50.0
+
+
+# Frames the whole arm from the front-right and a little above, whether it reaches
+# along +x (home) or is panned ±90° toward ∓y.
+DEFAULT_CAMERA = Camera()
 
 
 @dataclass(frozen=True)
@@ -51,6 +79,11 @@ class SO101Sim:
 
     targets and states are in degrees, in the order of `so101.robot.ACTUATED_JOINTS`:
     the five arm joints, then the gripper.
+
+    control_mode "position" (default) is the course's POSITION_CONTROL, its goal slewed
+    at max_velocity_rad_s; "servo" is a PD torque servo (gains from ζ, ωn and each
+    joint's inertia, torques clipped to servo_torque_limit_nm) that takes the goal as a
+    step, so max_velocity_rad_s does not apply to it.
     """
 
     def __init__(
@@ -61,7 +94,21 @@ class SO101Sim:
         link_damping: float | None = COURSE_LINK_DAMPING,
         max_velocity_rad_s: float = COURSE_MAX_VELOCITY_RAD_S,
         log=print,
+        control_mode: str = "position",
+        servo_damping_ratio: float = DEFAULT_DAMPING_RATIO,
+        servo_natural_freq_rad_s: float = DEFAULT_NATURAL_FREQ_RAD_S,
+        servo_torque_limit_nm: float = SERVO_TORQUE_LIMIT_NM,
     ):
+        if control_mode not in CONTROL_MODES:
+            raise ValueError(f"unknown control mode {control_mode!r}; use one of: {', '.join(CONTROL_MODES)}")
+        if not servo_torque_limit_nm > 0:
+            raise ValueError(f"servo torque limit must be a positive number of N·m, got {servo_torque_limit_nm!r}")
+        # Checks ζ and ωn before anything connects (the inertia here is a stand-in).
+        pd_gains([1.0], servo_natural_freq_rad_s, servo_damping_ratio)
+        self.control_mode = control_mode
+        self.servo_damping_ratio = float(servo_damping_ratio)
+        self.servo_natural_freq_rad_s = float(servo_natural_freq_rad_s)
+        self.servo_torque_limit_nm = float(servo_torque_limit_nm)
         # Resolve the model first: a missing file must give our message, not PyBullet's.
         urdf = assets.urdf_path(assets_dir)
         self.mode, notice = resolve_mode(mode)
@@ -101,6 +148,15 @@ class SO101Sim:
         # (setJointMotorControlArray has no maxVelocity argument).
         self._command_rad = self._goal_rad.copy()
         self.steps = 0
+        # The torques sent on the last step (servo mode; zeros in position mode).
+        self.last_torques_nm = np.zeros(len(self._indices))
+        if self.control_mode == "servo":
+            # The default velocity motors would fight the torques: switch them off once.
+            p.setJointMotorControlArray(
+                self.robot_id, self._indices, p.VELOCITY_CONTROL,
+                targetVelocities=[0.0] * len(self._indices), forces=[0.0] * len(self._indices),
+                physicsClientId=cid,
+            )
 
     # -- set-up helpers --------------------------------------------------------------
     def _joint_info(self, index: int) -> JointInfo:
@@ -109,6 +165,22 @@ class SO101Sim:
             index=info[0], name=info[1].decode(), type=JOINT_TYPE_NAMES.get(info[2], str(info[2])),
             lower_rad=info[8], upper_rad=info[9], max_force=info[10], max_velocity=info[11],
         )
+
+    def effective_inertias_kg_m2(self, angles_deg: Sequence[float] | None = None) -> np.ndarray:
+        """Each actuated joint's inertia about its own axis (the mass matrix diagonal) at a pose.
+
+        It counts everything the joint carries (the outer links through their lever
+        arms), so it depends on the outer joints' angles; default: the current pose.
+        Note PyBullet loads this URDF without URDF_USE_INERTIA_FROM_FILE, so each link's
+        own inertia comes from its collision shape; the masses are the URDF's.
+        """
+        angles_rad = np.radians(self.joint_angles_deg() if angles_deg is None else np.asarray(angles_deg, float))
+        mass_matrix = p.calculateMassMatrix(self.robot_id, angles_rad.tolist(), physicsClientId=self.client)
+        return np.diag(np.asarray(mass_matrix))
+
+    def servo_gains(self) -> tuple[np.ndarray, np.ndarray]:
+        """(Kp, Kd) per actuated joint at the current pose, for the servo mode's ζ and ωn."""
+        return pd_gains(self.effective_inertias_kg_m2(), self.servo_natural_freq_rad_s, self.servo_damping_ratio)
 
     # -- control ---------------------------------------------------------------------
     def set_targets_deg(self, targets_deg: Sequence[float]) -> None:
@@ -122,17 +194,44 @@ class SO101Sim:
         return np.degrees(self._goal_rad)
 
     def step(self, count: int = 1) -> None:
-        """Re-issue the motor targets and advance the physics by `count` time steps."""
+        """Re-issue the motor commands and advance the physics by `count` time steps."""
         max_delta = self.max_velocity_rad_s * self.time_step_s
         for _ in range(count):
-            self._command_rad += np.clip(self._goal_rad - self._command_rad, -max_delta, max_delta)
-            p.setJointMotorControlArray(
-                self.robot_id, self._indices, p.POSITION_CONTROL,
-                targetPositions=self._command_rad.tolist(), forces=self._forces,
-                physicsClientId=self.client,
-            )
+            if self.control_mode == "servo":
+                # A servo gets the goal as a step, as a real one does over its bus; the
+                # torque limit bounds its speed. (A goal slewed at 3 rad/s would hide the
+                # lesson: a PD loop follows a ramp with little overshoot whatever ζ.)
+                self._command_rad = self._goal_rad.copy()
+                self._send_servo_torques()
+            else:
+                self._command_rad += np.clip(self._goal_rad - self._command_rad, -max_delta, max_delta)
+                p.setJointMotorControlArray(
+                    self.robot_id, self._indices, p.POSITION_CONTROL,
+                    targetPositions=self._command_rad.tolist(), forces=self._forces,
+                    physicsClientId=self.client,
+                )
             p.stepSimulation(physicsClientId=self.client)
             self.steps += 1
+
+    def _send_servo_torques(self) -> None:
+        # PyBullet forgets TORQUE_CONTROL torques after each step: they are sent every step.
+        states = p.getJointStates(self.robot_id, self._indices, physicsClientId=self.client)
+        angles_rad = np.array([state[0] for state in states])
+        velocities_rad_s = np.array([state[1] for state in states])
+        zeros = [0.0] * len(self._indices)
+        # With zero velocity and acceleration, inverse dynamics is the torque that holds the pose.
+        gravity_nm = p.calculateInverseDynamics(
+            self.robot_id, angles_rad.tolist(), zeros, zeros, physicsClientId=self.client,
+        )
+        mass_matrix = p.calculateMassMatrix(self.robot_id, angles_rad.tolist(), physicsClientId=self.client)
+        kp, kd = pd_gains(np.diag(np.asarray(mass_matrix)), self.servo_natural_freq_rad_s, self.servo_damping_ratio)
+        self.last_torques_nm = pd_torque_nm(
+            self._command_rad - angles_rad, velocities_rad_s, kp, kd, gravity_nm, self.servo_torque_limit_nm,
+        )
+        p.setJointMotorControlArray(
+            self.robot_id, self._indices, p.TORQUE_CONTROL,
+            forces=self.last_torques_nm.tolist(), physicsClientId=self.client,
+        )
 
     # -- state -----------------------------------------------------------------------
     def joint_angles_deg(self) -> np.ndarray:
@@ -147,6 +246,29 @@ class SO101Sim:
     @property
     def sim_time_s(self) -> float:
         return self.steps * self.time_step_s
+
+    # -- pictures --------------------------------------------------------------------
+    def render_rgb(self, width: int = 640, height: int = 480, camera: Camera = DEFAULT_CAMERA) -> np.ndarray:
+        """The scene as an RGB image, uint8 of shape (height, width, 3).
+
+        Uses the CPU renderer (ER_TINY_RENDERER), so it works in DIRECT mode with no
+        display or GPU.
+        """
+        if width < 1 or height < 1:
+            raise ValueError(f"image size must be at least 1x1 pixels, got {width}x{height}")
+        view = p.computeViewMatrixFromYawPitchRoll(
+            cameraTargetPosition=list(camera.target_xyz_m), distance=camera.distance_m,
+            yaw=camera.yaw_deg, pitch=camera.pitch_deg, roll=0.0, upAxisIndex=2,
+            physicsClientId=self.client,
+        )
+        projection = p.computeProjectionMatrixFOV(
+            fov=camera.fov_deg, aspect=width / height, nearVal=0.01, farVal=10.0, physicsClientId=self.client,
+        )
+        _, _, rgba, _, _ = p.getCameraImage(
+            width, height, viewMatrix=view, projectionMatrix=projection,
+            renderer=p.ER_TINY_RENDERER, physicsClientId=self.client,
+        )
+        return np.asarray(rgba, dtype=np.uint8).reshape(height, width, 4)[:, :, :3].copy()
 
     # -- life cycle ------------------------------------------------------------------
     def close(self) -> None:

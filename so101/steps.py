@@ -24,13 +24,21 @@ TYPE_LABELS = {
 }
 
 
+def _language(value: str) -> str:
+    # A `type`, not `choices`: argparse passes a string default through `type` but
+    # never checks it against `choices`, so a bad $SO101_LANG would crash later.
+    if value not in TYPE_LABELS:
+        raise argparse.ArgumentTypeError(f"unknown language {value!r} (from --lang or $SO101_LANG); use zh or en")
+    return value
+
+
 def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
     parser.add_argument(
         "--mode", choices=MODES, default="auto",
         help="gui opens a window; direct is headless; auto (default) picks gui where a display is available",
     )
     parser.add_argument(
-        "--lang", choices=("zh", "en"), default=os.environ.get("SO101_LANG", "zh"),
+        "--lang", type=_language, metavar="{zh,en}", default=os.environ.get("SO101_LANG", "zh"),
         help="language of the printed text (default: $SO101_LANG, else zh as in the course)",
     )
     parser.add_argument(

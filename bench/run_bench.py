@@ -1,0 +1,549 @@
+"""The simulation node's real-time budget, measured against raw PyBullet (issue 4).
+
+    python bench/run_bench.py [--duration 20] [--out bench/results/latest.json] [--quick]
+    (or: so101 bench ...)
+
+One run on one machine measures:
+  1. raw stepSimulation of the SO-101 in DIRECT mode (the limit), µs per step;
+  2. the node's own work per tick in process (nodes/simulation_node.py under
+     dora.testing.MockNode): targets + step + state read + Arrow arrays + send;
+  3-7. a real headless `dora run` of dataflow.yml, with bench/nodes/prober.py in the
+     place of keyboard_control: joint_state/s against 250, ticks missed, tick interval
+     and per-tick work p50/p99, joint_cmd -> joint_state latency, simulated over wall
+     time, start-up to the first joint_state, peak RSS of the simulation node;
+  8. the node's fast mode (SO101_FAST_STEPS): steps per second against the raw rate.
+It prints a table and writes the figures, the targets and the machine to a JSON file.
+Timings are wall-clock on a shared machine: the load average is recorded with them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import datetime
+import io
+import json
+import os
+import platform
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from array import array
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))  # run as a script: `nodes` and `so101` live at the top
+
+PROBER = ROOT / "bench" / "nodes" / "prober.py"
+DEFAULT_OUT = ROOT / "bench" / "results" / "latest.json"
+TICK_PERIOD_S = 0.004  # dataflow.yml's dora/timer/millis/4
+FIRST_STATE_MARK = "bench: first joint_state"
+# A probe moves a joint by 4° (2° in its first move); the first step after it moves
+# the joint by about 0.07°, the arm at rest drifts by far less than this.
+MOVED_THRESHOLD_DEG = 0.01
+WARMUP_S = 1.0  # left out of the rates: the first second after start-up is not steady
+
+TARGETS = {
+    "node_work_ratio": 1.5,  # per-tick work / raw step, at most
+    "joint_state_per_s": 247.5,  # 99% of 250, at least
+    "latency_p99_ms": 5.0,  # at most
+    "sim_over_wall_error": 0.01,  # |sim/wall - 1|, at most
+    "startup_s": 3.0,  # at most
+    "peak_rss_mb": 250.0,  # at most
+    "fast_ratio": 0.70,  # fast-mode steps/s over raw steps/s, at least
+}
+
+
+# -- pure analysis --------------------------------------------------------------------
+def percentile(values, fraction: float) -> float:
+    """The `fraction` quantile (0..1) by linear interpolation; NaN for no values."""
+    ordered = sorted(values)
+    if not ordered:
+        return float("nan")
+    position = fraction * (len(ordered) - 1)
+    low = int(position)
+    high = min(low + 1, len(ordered) - 1)
+    return ordered[low] + (ordered[high] - ordered[low]) * (position - low)
+
+
+def summary(values, scale: float = 1.0) -> dict:
+    """p50 / p99 / mean / max of `values` times `scale`, and how many there were."""
+    values = [value * scale for value in values]
+    mean = sum(values) / len(values) if values else float("nan")
+    return {
+        "p50": percentile(values, 0.50), "p99": percentile(values, 0.99),
+        "mean": mean, "max": max(values) if values else float("nan"), "count": len(values),
+    }
+
+
+def tick_pairs(raw: bytes) -> list[tuple[int, int]]:
+    """The simulation node's SO101_TICK_LOG file: (start ns, end ns) of each tick's work."""
+    numbers = array("q")
+    numbers.frombytes(raw[: len(raw) - len(raw) % (2 * numbers.itemsize)])
+    return list(zip(numbers[0::2], numbers[1::2]))
+
+
+def tick_figures(ticks: list[tuple[int, int]], period_s: float, steps_per_tick: int = 1) -> dict:
+    """Interval and work statistics of the ticks served, and the ticks missed between them.
+
+    A gap of k periods (rounded) between two served ticks means k - 1 timer ticks were
+    dropped: with queue_size 1 a tick that arrives while the node is busy replaces the
+    waiting one.
+    """
+    starts = [start for start, _ in ticks]
+    intervals_s = [(b - a) / 1e9 for a, b in zip(starts, starts[1:])]
+    missed = sum(max(0, round(interval / period_s) - 1) for interval in intervals_s)
+    span_s = (ticks[-1][1] - ticks[0][0]) / 1e9 if ticks else 0.0
+    return {
+        "ticks_served": len(ticks),
+        "ticks_missed": missed,
+        "span_s": span_s,
+        "served_per_s": (len(ticks) - 1) / ((starts[-1] - starts[0]) / 1e9) if len(ticks) > 1 else float("nan"),
+        "steps_per_s": len(ticks) * steps_per_tick / span_s if span_s > 0 else float("nan"),
+        "interval_ms": summary(intervals_s, 1e3),
+        "work_us": summary([(end - start) / 1e3 for start, end in ticks]),
+    }
+
+
+def reflecting_states(states: list, commands: list, joints: list[int], threshold_deg: float = MOVED_THRESHOLD_DEG) -> list[tuple[int, int]]:
+    """For each joint_cmd probe: (send ns, arrival ns of the first joint_state that shows the joint moving toward it).
+
+    states: [arrival ns, angle of joints[0], angle of joints[1], ...] in arrival order;
+    commands: [send ns, joint, target deg]. "Shows it": the angle differs from the last
+    state received before the send by more than threshold_deg, toward the target.
+    A probe no state reflects (the run ended first) is left out.
+    """
+    pairs = []
+    position = 0
+    for send_ns, joint, target_deg in commands:
+        column = 1 + joints.index(int(joint))
+        while position < len(states) and states[position][0] <= send_ns:
+            position += 1
+        if position == 0:
+            continue
+        before_deg = states[position - 1][column]
+        direction = 1.0 if target_deg > before_deg else -1.0
+        for state in states[position:]:
+            if (state[column] - before_deg) * direction > threshold_deg:
+                pairs.append((send_ns, state[0]))
+                break
+    return pairs
+
+
+def latency_breakdown(pairs: list[tuple[int, int]], tick_starts_ns: list[int]) -> dict:
+    """Where each probe's latency went, with the simulation node's tick starts (same clock).
+
+    wait: from sending to the next tick's start; deliver: from the start of the tick
+    that published the reflecting state to its arrival (the tick's work + transit);
+    a probe "missed its tick" when the state came from a later tick than the first one
+    after sending (the command reached the node after that tick had begun).
+    """
+    import bisect
+
+    latencies, waits, delivers, missed = [], [], [], 0
+    for send_ns, arrival_ns in pairs:
+        next_tick = bisect.bisect_right(tick_starts_ns, send_ns)
+        serving_tick = bisect.bisect_right(tick_starts_ns, arrival_ns) - 1
+        if next_tick >= len(tick_starts_ns) or serving_tick < 0:
+            continue
+        latencies.append((arrival_ns - send_ns) / 1e6)
+        waits.append((tick_starts_ns[next_tick] - send_ns) / 1e6)
+        delivers.append((arrival_ns - tick_starts_ns[serving_tick]) / 1e6)
+        missed += serving_tick > next_tick
+    return {**summary(latencies), "wait_for_next_tick_ms": summary(waits),
+            "tick_start_to_arrival_ms": summary(delivers), "probes_that_missed_the_next_tick": missed}
+
+
+def dropped_tick_warnings(jsonl_text: str, first_state_epoch_s: float) -> tuple[int, int]:
+    """dora's warnings about discarded `tick` events (queue_size 1), before and after the first joint_state.
+
+    jsonl_text: the simulation node's log_simulation.jsonl that `dora run` writes under out/.
+    """
+    before = after = 0
+    for line in jsonl_text.splitlines():
+        with contextlib.suppress(ValueError, KeyError, TypeError):
+            entry = json.loads(line)
+            if entry["level"] == "warn" and "Discarding event for input `tick`" in entry["msg"]:
+                when = datetime.datetime.fromisoformat(entry["ts"].replace("Z", "+00:00")).timestamp()
+                # The log's stamps are whole milliseconds.
+                if when < first_state_epoch_s + 0.001:
+                    before += 1
+                else:
+                    after += 1
+    return before, after
+
+
+def target_rows(figures: dict) -> list[dict]:
+    """Each target with the figure it judges and whether it was met."""
+    rows = []
+
+    def row(name, value, target, met):
+        rows.append({"figure": name, "value": value, "target": target, "met": bool(met)})
+
+    row("per-tick work / raw step (in process, p50)", figures["node_work_in_process"]["ratio_to_raw_p50"],
+        f"<= {TARGETS['node_work_ratio']}", figures["node_work_in_process"]["ratio_to_raw_p50"] <= TARGETS["node_work_ratio"])
+    dataflow = figures["dataflow"]
+    row("joint_state per s (dora run)", dataflow["joint_state_per_s"], f">= {TARGETS['joint_state_per_s']}",
+        dataflow["joint_state_per_s"] >= TARGETS["joint_state_per_s"])
+    latency_p99 = figures["command_latency_ms"]["p99"]
+    row("command latency p99 (ms)", latency_p99, f"<= {TARGETS['latency_p99_ms']}", latency_p99 <= TARGETS["latency_p99_ms"])
+    ratio = dataflow["sim_over_wall"]
+    row("simulated / wall time", ratio, f"1 ± {TARGETS['sim_over_wall_error']}", abs(ratio - 1) <= TARGETS["sim_over_wall_error"])
+    row("start-up to first joint_state (s)", dataflow["startup_s"], f"<= {TARGETS['startup_s']}", dataflow["startup_s"] <= TARGETS["startup_s"])
+    rss = dataflow["peak_rss_mb"]
+    row("peak RSS of the simulation node (MB)", rss, f"<= {TARGETS['peak_rss_mb']}", rss is not None and rss <= TARGETS["peak_rss_mb"])
+    best = max(figures["fast_mode"]["runs"], key=lambda run: run["ratio_to_raw"])
+    row(f"fast mode steps/s / raw (SO101_FAST_STEPS={best['steps_per_state']})", best["ratio_to_raw"],
+        f">= {TARGETS['fast_ratio']}", best["ratio_to_raw"] >= TARGETS["fast_ratio"])
+    return rows
+
+
+# -- machine --------------------------------------------------------------------------
+def machine_facts() -> dict:
+    import importlib.metadata
+
+    cpu = platform.processor() or ""
+    with contextlib.suppress(OSError):
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+
+    def version(name):
+        try:
+            return importlib.metadata.version(name)
+        except importlib.metadata.PackageNotFoundError:
+            return None
+
+    return {
+        "cpu": cpu, "cores": os.cpu_count(), "platform": platform.platform(),
+        "python": platform.python_version(), "dora_rs": version("dora-rs"), "dora_rs_cli": version("dora-rs-cli"),
+        "pybullet": version("pybullet"), "pyarrow": version("pyarrow"), "numpy": version("numpy"),
+        "date": datetime.datetime.now().astimezone().isoformat(timespec="seconds"),
+    }
+
+
+# -- in-process measurements ----------------------------------------------------------
+def measure_raw_step(steps: int, after_sleep_steps: int) -> dict:
+    """stepSimulation alone, the SO-101 holding home under its position motors (as in the node).
+
+    Also the same step taken after a 4 ms sleep, as a paced node takes it: on this kind
+    of machine (a virtual CPU that idles between ticks) that step costs several times
+    more, with no dora involved.
+    """
+    import pybullet as p
+
+    from so101.simulator import SO101Sim
+
+    with SO101Sim(mode="direct", time_step_s=TICK_PERIOD_S, log=lambda message: None) as sim:
+        sim.step(250)  # settle: the arm starts a hair off its resting pose
+        client = sim.client
+        clock = time.monotonic_ns
+        each_ns = []
+        for _ in range(steps):
+            start = clock()
+            p.stepSimulation(physicsClientId=client)
+            each_ns.append(clock() - start)
+        start = clock()
+        for _ in range(steps):
+            p.stepSimulation(physicsClientId=client)
+        loop_us = (clock() - start) / 1e3 / steps
+        after_sleep_ns = []
+        for _ in range(after_sleep_steps):
+            time.sleep(TICK_PERIOD_S)
+            start = clock()
+            p.stepSimulation(physicsClientId=client)
+            after_sleep_ns.append(clock() - start)
+    each = summary(each_ns, 1e-3)
+    after_sleep = summary(after_sleep_ns, 1e-3)
+    return {"us_per_step_p50": each["p50"], "us_per_step_p99": each["p99"], "us_per_step_loop_mean": loop_us,
+            "steps_per_s": 1e6 / loop_us, "steps": steps,
+            "after_4ms_sleep_us_p50": after_sleep["p50"], "after_4ms_sleep_us_p99": after_sleep["p99"]}
+
+
+def measure_node_work_in_process(ticks: int, work_dir: Path) -> dict:
+    """nodes/simulation_node.py's main() over `ticks` timer ticks under MockNode, timed by its own tick log."""
+    import pyarrow as pa
+    from dora.testing import MockNode
+
+    import nodes.simulation_node as simulation_node
+
+    tick_log = work_dir / "in_process_ticks.bin"
+    config = {"inputs": {"tick": {"source": f"dora/timer/millis/{TICK_PERIOD_S * 1000:g}", "queue_size": 1}}}
+    mock = MockNode([("tick", pa.array([], type=pa.null()))] * ticks, node_config=config)
+    env = {"SO101_MODE": "direct", "SO101_LANG": "en", "SO101_TICK_LOG": str(tick_log), "SO101_FAST_STEPS": "0"}
+    saved_env = {name: os.environ.get(name) for name in env}
+    saved_node = simulation_node.Node
+    os.environ.update(env)
+    simulation_node.Node = lambda: mock
+    try:
+        with contextlib.redirect_stdout(io.StringIO()):
+            code = simulation_node.main()
+    finally:
+        simulation_node.Node = saved_node
+        for name, value in saved_env.items():
+            if value is None:
+                os.environ.pop(name, None)
+            else:
+                os.environ[name] = value
+    if code != 0:
+        raise RuntimeError(f"the simulation node exited with {code} in process")
+    pairs = tick_pairs(tick_log.read_bytes())[250:]  # the same settled arm as the raw step
+    return summary([(end - start) / 1e3 for start, end in pairs])
+
+
+# -- dora run -------------------------------------------------------------------------
+def bench_dataflow(path: Path, sim_env: dict, probe_env: dict) -> None:
+    """dataflow.yml as it is, with absolute paths, the simulation headless, and the prober as keyboard_control."""
+    import yaml
+
+    descriptor = yaml.safe_load((ROOT / "dataflow.yml").read_text())
+    for node in descriptor["nodes"]:
+        if node["id"] == "simulation":
+            node["path"] = str(ROOT / node["path"])
+            node["env"] = {**node.get("env", {}), "SO101_MODE": "direct", "SO101_LANG": "en", **sim_env}
+        elif node["id"] == "keyboard_control":
+            node["path"] = str(PROBER)
+            node["env"] = probe_env
+    path.write_text(yaml.safe_dump(descriptor, sort_keys=False))
+
+
+def find_process_with_env(name: str, value: str) -> int | None:
+    """The pid of our process whose environment holds name=value (the node runs under dora's daemon)."""
+    wanted = f"{name}={value}".encode()
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            with contextlib.suppress(OSError):
+                if wanted in (entry / "environ").read_bytes().split(b"\0"):
+                    return int(entry.name)
+    return None
+
+
+def peak_rss_mb(pid: int | None) -> float | None:
+    if pid is None:
+        return None
+    with contextlib.suppress(OSError):
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) / 1024
+    return None
+
+
+def run_dataflow(run_dir: Path, duration_s: float, sim_env: dict, probe_env: dict) -> dict:
+    """`dora run` for duration_s after the first joint_state, then Ctrl-C; the raw records."""
+    run_dir.mkdir(parents=True)
+    tick_log = run_dir / "ticks.bin"
+    probe_log = run_dir / "probe.json"
+    dataflow = run_dir / "dataflow.yml"
+    bench_dataflow(dataflow, {**sim_env, "SO101_TICK_LOG": str(tick_log)}, {**probe_env, "PROBE_LOG": str(probe_log)})
+    venv_bin = Path(sys.executable).parent
+    env = dict(os.environ, PATH=f"{venv_bin}{os.pathsep}{os.environ.get('PATH', '')}")
+    env.pop("DISPLAY", None)
+    dora = shutil.which("dora", path=env["PATH"])
+    if dora is None:
+        raise RuntimeError("the dora CLI is not on PATH: pip install 'dora-rs-cli==1.1.0'")
+    log_path = run_dir / "dora.log"
+    with log_path.open("wb") as log:
+        started_epoch_s = time.time()
+        started_ns = time.monotonic_ns()
+        process = subprocess.Popen(
+            [dora, "run", str(dataflow), "--stop-after", f"{duration_s + 120:g}s"],
+            cwd=run_dir, stdout=log, stderr=subprocess.STDOUT, env=env, start_new_session=True,
+        )
+        try:
+            deadline = time.monotonic() + 60
+            while FIRST_STATE_MARK not in log_path.read_text(errors="replace"):
+                if process.poll() is not None or time.monotonic() > deadline:
+                    raise RuntimeError(f"no joint_state from `dora run` (see {log_path}):\n{log_path.read_text(errors='replace')[-2000:]}")
+                time.sleep(0.05)
+            time.sleep(duration_s)
+            rss_mb = peak_rss_mb(find_process_with_env("SO101_TICK_LOG", str(tick_log)))
+            process.send_signal(signal.SIGINT)
+            process.wait(30)
+        finally:
+            if process.poll() is None:
+                os.killpg(process.pid, signal.SIGKILL)
+                process.wait()
+    if not tick_log.exists() or not probe_log.exists():
+        raise RuntimeError(f"`dora run` stopped without the nodes' records (see {log_path})")
+    node_logs = sorted(run_dir.glob("out/*/log_simulation.jsonl"))
+    return {
+        "started_ns": started_ns, "started_epoch_s": started_epoch_s, "ticks": tick_pairs(tick_log.read_bytes()),
+        "probe": json.loads(probe_log.read_text()), "log": log_path.read_text(errors="replace"),
+        "simulation_log": node_logs[-1].read_text(errors="replace") if node_logs else "",
+        "peak_rss_mb": rss_mb, "exit_code": process.returncode,
+    }
+
+
+def realtime_figures(record: dict, period_s: float) -> dict:
+    """Figures 3-7 from one paced run's records, the first WARMUP_S after the first state left out of the rates."""
+    probe = record["probe"]
+    states = probe["states"]
+    steady_from_ns = states[0][0] + int(WARMUP_S * 1e9)
+    steady_states = [state for state in states if state[0] >= steady_from_ns]
+    steady_ticks = [tick for tick in record["ticks"] if tick[0] >= steady_from_ns]
+    ticks = tick_figures(steady_ticks, period_s)
+    span_s = (steady_states[-1][0] - steady_states[0][0]) / 1e9
+    per_s = (len(steady_states) - 1) / span_s
+    commands = probe["commands"]
+    latency = latency_breakdown(
+        reflecting_states(states, commands, probe["probed_joints"]), [start for start, _ in record["ticks"]],
+    )
+    startup_s = (probe["first_state_ns"] - record["started_ns"]) / 1e9
+    warnings_before, warnings_after = dropped_tick_warnings(record["simulation_log"], record["started_epoch_s"] + startup_s)
+    return {
+        "dataflow": {
+            "measured_s": span_s,
+            "joint_state_per_s": per_s,
+            "expected_per_s": 1.0 / period_s,
+            "ticks_missed": ticks["ticks_missed"],
+            "ticks_served": ticks["ticks_served"],
+            # Ticks discarded while the node loads the model (its Node() is up, so the timer runs).
+            "dora_dropped_tick_warnings_startup": warnings_before,
+            "dora_dropped_tick_warnings_steady": warnings_after,
+            "tick_interval_ms": ticks["interval_ms"],
+            "tick_work_us": ticks["work_us"],
+            # Each joint_state is one physics step of the tick period.
+            "sim_over_wall": per_s * period_s,
+            "startup_s": startup_s,
+            "peak_rss_mb": record["peak_rss_mb"],
+        },
+        "command_latency_ms": {**latency, "probes_sent": len(commands)},
+    }
+
+
+# -- the run --------------------------------------------------------------------------
+def run_benchmark(duration_s: float, fast_s: float, fast_steps: list[int], raw_steps: int, node_ticks: int, after_sleep_steps: int) -> dict:
+    load_start = os.getloadavg()
+    with tempfile.TemporaryDirectory(prefix="so101-bench-") as tmp:
+        work_dir = Path(tmp)
+        print(f"raw stepSimulation ({raw_steps} steps) ...", flush=True)
+        raw = measure_raw_step(raw_steps, after_sleep_steps)
+        print(f"node work in process ({node_ticks} ticks) ...", flush=True)
+        node_work = measure_node_work_in_process(node_ticks, work_dir)
+        node_work["ratio_to_raw_p50"] = node_work["p50"] / raw["us_per_step_p50"]
+        print(f"dora run, paced by the 4 ms tick, {duration_s:g} s ...", flush=True)
+        paced = run_dataflow(
+            work_dir / "paced", duration_s + WARMUP_S, {"SO101_FAST_STEPS": "0"},
+            {"PROBE_PERIOD_S": "0.075", "PROBE_STEP_DEG": "2"},
+        )
+        figures = {"raw_step": raw, "node_work_in_process": node_work, **realtime_figures(paced, TICK_PERIOD_S)}
+        runs = []
+        for steps in fast_steps:
+            print(f"dora run, fast mode SO101_FAST_STEPS={steps}, {fast_s:g} s ...", flush=True)
+            record = run_dataflow(
+                work_dir / f"fast{steps}", fast_s + WARMUP_S, {"SO101_FAST_STEPS": str(steps)},
+                {"PROBE_PERIOD_S": "0", "PROBE_COUNT_ONLY": "1"},
+            )
+            steady_from_ns = record["probe"]["first_state_ns"] + int(WARMUP_S * 1e9)
+            ticks = tick_figures([tick for tick in record["ticks"] if tick[0] >= steady_from_ns], TICK_PERIOD_S, steps)
+            runs.append({
+                "steps_per_state": steps, "steps_per_s": ticks["steps_per_s"],
+                "ratio_to_raw": ticks["steps_per_s"] / raw["steps_per_s"],
+                "states_per_s": ticks["served_per_s"], "sim_over_wall": ticks["steps_per_s"] * TICK_PERIOD_S,
+                "measured_s": ticks["span_s"],
+            })
+        figures["fast_mode"] = {"runs": runs}
+    figures["targets"] = target_rows(figures)
+    return {
+        "machine": machine_facts(),
+        "load_average_1_5_15min": {"start": list(load_start), "end": list(os.getloadavg())},
+        "settings": {"tick_ms": TICK_PERIOD_S * 1e3, "duration_s": duration_s, "fast_mode_s": fast_s,
+                     "raw_steps": raw_steps, "in_process_ticks": node_ticks, "warmup_s": WARMUP_S,
+                     "fast_steps_per_state": fast_steps},
+        **figures,
+    }
+
+
+def table(result: dict) -> str:
+    raw, work, flow, latency = result["raw_step"], result["node_work_in_process"], result["dataflow"], result["command_latency_ms"]
+    machine = result["machine"]
+    lines = [
+        f"SO-101 simulation node benchmark, {machine['date']}",
+        f"{machine['cpu']}, {machine['cores']} cores, Python {machine['python']}, dora-rs {machine['dora_rs']}, "
+        f"pybullet {machine['pybullet']}; load average at start/end "
+        + " / ".join("{:.2f}".format(result['load_average_1_5_15min'][key][0]) for key in ("start", "end")),
+        "",
+        f"{'figure':<52} {'value':>22}",
+        f"{'raw stepSimulation, DIRECT (us/step, p50 | loop mean)':<52} {raw['us_per_step_p50']:>10.1f} | {raw['us_per_step_loop_mean']:<9.1f}",
+        f"{'  the same step after a 4 ms sleep (us, p50 | p99)':<52} {raw['after_4ms_sleep_us_p50']:>10.1f} | {raw['after_4ms_sleep_us_p99']:<9.1f}",
+        f"{'node work per tick in process (us, p50 | p99)':<52} {work['p50']:>10.1f} | {work['p99']:<9.1f}",
+        f"{'  ratio to the raw step (p50)':<52} {work['ratio_to_raw_p50']:>10.2f}",
+        f"{'dora run: joint_state per s (250 expected)':<52} {flow['joint_state_per_s']:>10.2f}",
+        f"{'  ticks missed / served':<52} {flow['ticks_missed']:>10d} / {flow['ticks_served']}",
+        f"{'  dora warnings, dropped ticks (start-up | steady)':<52} {flow['dora_dropped_tick_warnings_startup']:>10d} | {flow['dora_dropped_tick_warnings_steady']}",
+        f"{'  tick interval (ms, p50 | p99)':<52} {flow['tick_interval_ms']['p50']:>10.3f} | {flow['tick_interval_ms']['p99']:<9.3f}",
+        f"{'  per-tick work (us, p50 | p99)':<52} {flow['tick_work_us']['p50']:>10.1f} | {flow['tick_work_us']['p99']:<9.1f}",
+        f"{'  joint_cmd -> joint_state latency (ms, p50 | p99)':<52} {latency['p50']:>10.2f} | {latency['p99']:<9.2f}",
+        f"{'    of which waiting for the next tick (ms, p50 | p99)':<52} {latency['wait_for_next_tick_ms']['p50']:>10.2f} | {latency['wait_for_next_tick_ms']['p99']:<9.2f}",
+        f"{'    from tick start to arrival (ms, p50 | p99)':<52} {latency['tick_start_to_arrival_ms']['p50']:>10.2f} | {latency['tick_start_to_arrival_ms']['p99']:<9.2f}",
+        f"{'    probes that missed the next tick / probes':<52} {latency['probes_that_missed_the_next_tick']:>10d} / {latency['count']}",
+        f"{'  simulated / wall time':<52} {flow['sim_over_wall']:>10.4f}",
+        f"{'  start-up: dora run -> first joint_state (s)':<52} {flow['startup_s']:>10.2f}",
+        f"{'  peak RSS of the simulation node (MB)':<52} {flow['peak_rss_mb'] or float('nan'):>10.1f}",
+    ]
+    for run in result["fast_mode"]["runs"]:
+        label = f"fast mode, SO101_FAST_STEPS={run['steps_per_state']} (steps/s, x raw)"
+        lines.append(f"{label:<52} {run['steps_per_s']:>10.0f} | {run['ratio_to_raw']:<9.2f}")
+    lines += ["", "targets:"]
+    for row in result["targets"]:
+        value = row["value"]
+        shown = "n/a" if value is None else f"{value:.3f}"
+        lines.append(f"  {'met   ' if row['met'] else 'MISSED'} {row['figure']:<58} {shown:>9}  (target {row['target']})")
+    return "\n".join(lines)
+
+
+def parse_args(argv=None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(prog="so101 bench", description=__doc__.splitlines()[0])
+    add_arguments(parser)
+    return parser.parse_args(argv)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--duration", type=_positive_seconds, default=20.0,
+                        help="seconds of the paced `dora run` measurement, after start-up (default 20)")
+    parser.add_argument("--out", type=Path, default=DEFAULT_OUT, help=f"JSON file to write (default {DEFAULT_OUT.relative_to(ROOT)})")
+    parser.add_argument("--quick", action="store_true",
+                        help="a short smoke run (3 s paced, 2 s per fast-mode run, fewer in-process steps; about 20 s in all); not for the README")
+
+
+def _positive_seconds(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not 0 < value <= 3600:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number of seconds above 0 and at most 3600")
+    return value
+
+
+def main(argv=None) -> int:
+    return run(parse_args(argv))
+
+
+def run(args: argparse.Namespace) -> int:
+    """The benchmark for parsed options (`so101 bench` calls this)."""
+    if args.quick:
+        settings = dict(duration_s=3.0, fast_s=2.0, fast_steps=[1, 100], raw_steps=5000, node_ticks=1500, after_sleep_steps=100)
+    else:
+        settings = dict(duration_s=args.duration, fast_s=5.0, fast_steps=[1, 10, 100], raw_steps=40000, node_ticks=10000, after_sleep_steps=1000)
+    try:
+        result = run_benchmark(**settings)
+    except RuntimeError as error:
+        print(f"so101 bench: {error}", file=sys.stderr)
+        return 1
+    result["settings"]["quick"] = args.quick
+    print()
+    print(table(result))
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(result, indent=2) + "\n")
+    print(f"\nwrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,200 @@
+"""`so101 plot-step`: the step response of one joint for a few damping values, as a PNG and a table.
+
+Course exercise 2, measured: in position mode the damping values are the course's
+link damping (`changeDynamics(linearDamping=c, angularDamping=c)`); in servo mode
+they are the PD servo's damping ratio ζ.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from so101.robot import ACTUATED_JOINTS, HOME_POSE_DEG
+from so101.servo import DEFAULT_NATURAL_FREQ_RAD_S, SERVO_TORQUE_LIMIT_NM
+from so101.step_response import SETTLING_BAND, StepMetrics, step_metrics
+
+TIME_STEP_S = 0.004  # the dataflow's tick
+DEFAULT_DAMPING = {"servo": (0.1, 0.2, 0.7), "position": (0.0, 0.2)}
+DAMPING_LABEL = {"servo": "ζ", "position": "link damping"}
+MAX_DURATION_S = 60.0
+MISSED_TARGET_DEG = 2.0
+
+
+@dataclass(frozen=True)
+class StepRun:
+    damping: float
+    times_s: np.ndarray
+    angles_deg: np.ndarray
+    max_abs_torque_nm: float
+    metrics: StepMetrics
+
+
+def _joint(text: str) -> int:
+    if text not in {str(i) for i in range(len(ACTUATED_JOINTS))}:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a joint number: use 0-4 for the arm, 5 for the gripper")
+    return int(text)
+
+
+def _non_negative(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not value >= 0:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a damping value: use numbers >= 0")
+    return value
+
+
+def _duration(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not 0 < value <= MAX_DURATION_S:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a duration: use seconds, more than 0 and at most {MAX_DURATION_S:g}")
+    return value
+
+
+def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
+    parser.add_argument("--joint", type=_joint, default=0, help="joint to step: 0-4 arm, 5 gripper (default 0, as in exercise 2)")
+    parser.add_argument("--target", type=float, default=90.0, metavar="DEG", help="target angle in degrees (default 90)")
+    parser.add_argument(
+        "--mode", choices=("position", "servo"), default="servo",
+        help="servo (default): PD torque servo, damping = ζ; position: the course's POSITION_CONTROL, "
+        "damping = the course's link damping",
+    )
+    parser.add_argument(
+        "--damping", type=_non_negative, nargs="+", metavar="VALUE", default=None,
+        help="one line per value (default: ζ = 0.1 0.2 0.7 in servo mode; link damping 0 0.2 in position mode)",
+    )
+    parser.add_argument("--duration", type=_duration, default=1.5, help="simulated seconds after the step (default 1.5)")
+    parser.add_argument(
+        "--out", type=Path, default=Path("out/step_response.png"), help="PNG to write (default out/step_response.png)",
+    )
+
+
+def record_step(joint: int, target_deg: float, mode: str, damping: float, duration_s: float) -> StepRun:
+    """Start at home, set one joint's goal to target_deg, record its angle every 4 ms step."""
+    from so101.simulator import SO101Sim
+
+    options = {"servo_damping_ratio": damping} if mode == "servo" else {"link_damping": damping}
+    with SO101Sim(mode="direct", time_step_s=TIME_STEP_S, control_mode=mode, log=lambda message: None, **options) as sim:
+        start_deg = float(sim.joint_angles_deg()[joint])
+        goal_deg = list(HOME_POSE_DEG)
+        goal_deg[joint] = target_deg
+        sim.set_targets_deg(goal_deg)
+        count = round(duration_s / TIME_STEP_S)
+        times_s = np.zeros(count + 1)
+        angles_deg = np.zeros(count + 1)
+        angles_deg[0] = start_deg
+        max_torque = 0.0
+        for i in range(1, count + 1):
+            sim.step()
+            times_s[i] = sim.sim_time_s
+            angles_deg[i] = sim.joint_angles_deg()[joint]
+            max_torque = max(max_torque, float(np.abs(sim.last_torques_nm).max()))
+    return StepRun(damping, times_s, angles_deg, max_torque, step_metrics(times_s, angles_deg, start_deg, target_deg))
+
+
+def _settling_text(seconds: float | None) -> str:
+    return "never" if seconds is None else f"{seconds:.2f} s"
+
+
+def format_table(runs: list[StepRun], mode: str) -> str:
+    label = DAMPING_LABEL[mode]
+    lines = [f"  {label:>12}   overshoot   2% settling   final error"]
+    for run in runs:
+        m = run.metrics
+        lines.append(
+            f"  {run.damping:>12g}   {m.overshoot_percent:7.1f} %   {_settling_text(m.settling_time_s):>11}   "
+            f"{m.final_error_deg:+9.2f}°"
+        )
+    return "\n".join(lines)
+
+
+def _mode_description(mode: str) -> str:
+    if mode == "servo":
+        return (
+            f"servo mode: PD torque, ωn = {DEFAULT_NATURAL_FREQ_RAD_S:g} rad/s, "
+            f"torque limit ±{SERVO_TORQUE_LIMIT_NM:g} N·m"
+        )
+    return "position mode: the course's POSITION_CONTROL, maxVelocity 3 rad/s"
+
+
+def write_plot(runs: list[StepRun], joint: int, start_deg: float, target_deg: float, mode: str, out: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    figure, axes = plt.subplots(figsize=(8, 4.8), dpi=100)
+    band_deg = SETTLING_BAND * abs(target_deg - start_deg)
+    axes.axhspan(target_deg - band_deg, target_deg + band_deg, color="0.85", label="target ±2% (settling band)")
+    axes.axhline(target_deg, color="0.4", linewidth=0.8, linestyle="--")
+    # Different dashes, so that lines lying on top of each other (position mode) stay visible.
+    line_styles = ("-", "--", ":", "-.")
+    for number, run in enumerate(runs):
+        m = run.metrics
+        axes.plot(
+            run.times_s, run.angles_deg, linewidth=1.8, linestyle=line_styles[number % len(line_styles)],
+            label=f"{DAMPING_LABEL[mode]} = {run.damping:g}: overshoot {m.overshoot_percent:.1f}%, "
+            f"settles in {_settling_text(m.settling_time_s)}",
+        )
+    joint_info = ACTUATED_JOINTS[joint]
+    axes.set_title(
+        f"Step response of joint {joint} ({joint_info.name}): {start_deg:g}° → {target_deg:g}°\n{_mode_description(mode)}",
+        fontsize=11,
+    )
+    axes.set_xlabel("time after the step (s)")
+    axes.set_ylabel("joint angle (°)")
+    axes.grid(True, alpha=0.3)
+    axes.legend(loc="lower right", fontsize=9)
+    figure.tight_layout()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    figure.savefig(out)
+    plt.close(figure)
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        import matplotlib  # noqa: F401 - checked before minutes of simulation, used in write_plot
+    except ImportError:
+        print(
+            "so101 plot-step: matplotlib is not installed; install it with: pip install -e '.[plot]'",
+            file=sys.stderr,
+        )
+        return 2
+    joint = ACTUATED_JOINTS[args.joint]
+    if not np.isfinite(args.target) or not joint.lower_deg <= args.target <= joint.upper_deg:
+        print(
+            f"so101 plot-step: --target {args.target:g}° is outside joint {args.joint} ({joint.name})'s range "
+            f"[{joint.lower_deg:.1f}°, {joint.upper_deg:.1f}°]",
+            file=sys.stderr,
+        )
+        return 2
+    start_deg = HOME_POSE_DEG[args.joint]
+    if args.target == start_deg:
+        print(f"so101 plot-step: --target must differ from the start angle {start_deg:g}° to make a step", file=sys.stderr)
+        return 2
+    damping_values = args.damping if args.damping is not None else DEFAULT_DAMPING[args.mode]
+    runs = [record_step(args.joint, args.target, args.mode, value, args.duration) for value in damping_values]
+    write_plot(runs, args.joint, start_deg, args.target, args.mode, args.out)
+    print(
+        f"step response: joint {args.joint} ({joint.name}) {start_deg:g}° -> {args.target:g}°, "
+        f"{_mode_description(args.mode)}, {TIME_STEP_S * 1000:g} ms steps, {args.duration:g} s"
+    )
+    print(format_table(runs, args.mode))
+    if args.mode == "servo":
+        print(f"largest torque sent: {max(run.max_abs_torque_nm for run in runs):.2f} N·m")
+    if any(abs(run.metrics.final_error_deg) > MISSED_TARGET_DEG for run in runs):
+        print(
+            "note: the joint ended more than 2° from the target; "
+            "the arm is probably touching the ground or itself on the way"
+        )
+    print(f"wrote {args.out}")
+    return 0

@@ -1,0 +1,302 @@
+"""The keyboard prompt's command language, as a pure parser: a typed line -> a command or an error.
+
+Commands (course step D and exercise 1, plus the gripper):
+  J ANGLE                  one joint: J is 0-4 for the arm, 5 for the gripper; ANGLE in degrees
+  batch a0 a1 a2 a3 a4 [g] all five arm joints at once, optionally the gripper as a sixth value
+  grip ANGLE | open | close
+  home | list | state | save NAME | go NAME | poses | help | quit | exit
+
+Out-of-limit angles are refused, not clamped: at a keyboard a value beyond the
+URDF limits is far more likely a typo (900 for 90) than a wish for the limit.
+All reply texts, in Chinese (the course) and English, live here too, so the
+node only decides what to send and which text to print.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass
+
+from so101.robot import ACTUATED_JOINTS, GRIPPER, GRIPPER_COMMAND_INDEX, NUM_ARM_JOINTS
+
+LANGUAGES = ("zh", "en")
+
+# The gripper's jaw: 0° closes it, 100° (the URDF's upper limit, 1.74533 rad, rounded down) opens it fully.
+GRIPPER_CLOSED_DEG = 0.0
+GRIPPER_OPEN_DEG = float(math.floor(GRIPPER.upper_deg))
+
+MAX_POSE_NAME_CHARS = 40
+
+# Plain decimal numbers only: Python's float() would also take "nan", "inf" and "1_0".
+_NUMBER = re.compile(r"^[+-]?(\d+(\.\d*)?|\.\d+)([eE][+-]?\d+)?$")
+# Spaces or commas (ASCII or full-width) separate words: "batch -30,45,-60,30,0" works too.
+_SEPARATORS = re.compile(r"[\s,,]+")
+
+
+@dataclass(frozen=True)
+class SetJoint:
+    index: int  # 0-4 arm, 5 gripper
+    angle_deg: float
+
+
+@dataclass(frozen=True)
+class Batch:
+    angles_deg: tuple[float, ...]  # five arm angles, or five + the gripper
+
+
+@dataclass(frozen=True)
+class Home:
+    pass
+
+
+@dataclass(frozen=True)
+class ListJoints:
+    pass
+
+
+@dataclass(frozen=True)
+class ShowState:
+    """Print the latest joint_state: headless, the way to see where the arm is."""
+
+
+@dataclass(frozen=True)
+class SavePose:
+    name: str
+
+
+@dataclass(frozen=True)
+class GoPose:
+    name: str
+
+
+@dataclass(frozen=True)
+class ListPoses:
+    pass
+
+
+@dataclass(frozen=True)
+class Help:
+    pass
+
+
+@dataclass(frozen=True)
+class Quit:
+    pass
+
+
+@dataclass(frozen=True)
+class Empty:
+    """A blank line: nothing to do."""
+
+
+@dataclass(frozen=True)
+class ParseError:
+    message: str  # one line, already in the prompt's language, saying what is accepted
+
+
+Command = SetJoint | Batch | Home | ListJoints | ShowState | SavePose | GoPose | ListPoses | Help | Quit | Empty
+
+
+TEXT = {
+    "zh": {
+        "joint_line": "    {index}: {name} ({label})",
+        "sent_joint": "  → 关节 {index} ({name}) → {angle}°",
+        "sent_batch": "  → 全关节 → {angles}°",
+        "sent_batch_gripper": "  → 全关节 → {angles}°,夹爪 → {gripper}°",
+        "sent_home": "  → 回零指令已发送",
+        "saved": "  → 姿态 '{name}' 已保存: {angles}°",
+        "saved_gripper": "  → 姿态 '{name}' 已保存: {angles}°,夹爪 {gripper}°",
+        "saved_not_persisted": "  → 姿态 '{name}' 已保存(仅本次运行有效,写文件失败: {error})",
+        "no_state": "  还没有收到 joint_state(仿真节点在运行吗?),无法保存姿态",
+        "state": "  当前关节角度: {angles}°",
+        "state_gripper": "  当前关节角度: {angles}°,夹爪 {gripper}°",
+        "no_state_yet": "  还没有收到 joint_state(仿真节点在运行吗?)",
+        "go": "  → 移动到姿态 '{name}'",
+        "unknown_pose": "  未找到姿态 '{name}';已保存的姿态: {known}(用 'save 名字' 保存)",
+        "no_poses": "  还没有保存的姿态(用 'save 名字' 保存当前姿态)",
+        "pose_line": "    {name}: {angles}°",
+        "pose_line_gripper": "    {name}: {angles}°,夹爪 {gripper}°",
+        "none": "无",
+        "bye": "  再见",
+        "unknown": "  无法识别 '{text}':可用 '关节号 角度'(如 '0 45')、batch、grip、open、close、home、list、"
+        "state、save、go、poses、help、quit(输入 help 查看)",
+        "joint_form": "  格式错误:关节号 角度(如 '0 45'),关节号 0-5(5 = 夹爪)",
+        "joint_range": "  关节号范围 0-5(0-4 手臂,5 夹爪),收到 '{text}';格式:关节号 角度(如 '0 45')",
+        "bad_angle": "  '{text}' 不是角度:角度是十进制数字,单位度(如 45、-30.5)",
+        "limit": "  {name} 的范围是 {lower:.1f}° 到 {upper:.1f}°,{angle} 超出范围,未发送",
+        "batch_form": "  batch 命令格式:batch a0 a1 a2 a3 a4(可加第 6 个值作为夹爪角度)",
+        "grip_form": "  grip 命令格式:grip 角度(如 'grip 30',范围 {lower:.1f}° 到 {upper:.1f}°)",
+        "name_form": "  {command} 命令格式:{command} 名字(一个词,不含空格,最多 {max} 个字符,如 '{command} a')",
+        "no_args": "  '{command}' 不带参数,收到 '{text}'",
+        "help": [
+            "  命令格式:",
+            "    关节号 角度              如 '0 45'(关节号 0-4 手臂,5 夹爪)",
+            "    batch a0 a1 a2 a3 a4 [夹爪]  5 个关节同时设目标,如 'batch 0 -30 45 -20 10'",
+            "    grip 角度 / open / close  夹爪角度 / 张开 ({open:g}°) / 闭合 ({closed:g}°)",
+            "    home                    回零(手臂 5 个关节)",
+            "    list                    显示关节列表",
+            "    state                   显示当前关节角度(来自 joint_state)",
+            "    save 名字               保存当前姿态(来自 joint_state)",
+            "    go 名字                 移动到已保存的姿态",
+            "    poses                   显示已保存的姿态",
+            "    help                    显示本帮助",
+            "    quit / exit             退出(也可 Ctrl-D、Ctrl-C)",
+            "  超出关节限位的角度不会发送(会提示范围)。",
+        ],
+    },
+    "en": {
+        "joint_line": "    {index}: {name} ({label})",
+        "sent_joint": "  → joint {index} ({name}) → {angle}°",
+        "sent_batch": "  → all joints → {angles}°",
+        "sent_batch_gripper": "  → all joints → {angles}°, gripper → {gripper}°",
+        "sent_home": "  → home command sent",
+        "saved": "  → pose '{name}' saved: {angles}°",
+        "saved_gripper": "  → pose '{name}' saved: {angles}°, gripper {gripper}°",
+        "saved_not_persisted": "  → pose '{name}' saved for this run only (writing the file failed: {error})",
+        "no_state": "  no joint_state received yet (is the simulation running?): cannot save a pose",
+        "state": "  joint angles now: {angles}°",
+        "state_gripper": "  joint angles now: {angles}°, gripper {gripper}°",
+        "no_state_yet": "  no joint_state received yet (is the simulation running?)",
+        "go": "  → moving to pose '{name}'",
+        "unknown_pose": "  no pose '{name}'; saved poses: {known} (save one with 'save NAME')",
+        "no_poses": "  no saved poses yet (save the current pose with 'save NAME')",
+        "pose_line": "    {name}: {angles}°",
+        "pose_line_gripper": "    {name}: {angles}°, gripper {gripper}°",
+        "none": "none",
+        "bye": "  bye",
+        "unknown": "  cannot read '{text}': use 'JOINT ANGLE' (e.g. '0 45'), batch, grip, open, close, home, list, "
+        "state, save, go, poses, help, quit (type help)",
+        "joint_form": "  format: JOINT ANGLE (e.g. '0 45'), JOINT 0-5 (5 = gripper)",
+        "joint_range": "  joints are 0-5 (0-4 arm, 5 gripper), got '{text}'; format: JOINT ANGLE (e.g. '0 45')",
+        "bad_angle": "  '{text}' is not an angle: angles are decimal numbers in degrees (e.g. 45, -30.5)",
+        "limit": "  {name} accepts {lower:.1f}° to {upper:.1f}°; {angle} is out of range: not sent",
+        "batch_form": "  batch format: batch a0 a1 a2 a3 a4 (a sixth value sets the gripper)",
+        "grip_form": "  grip format: grip ANGLE (e.g. 'grip 30', {lower:.1f}° to {upper:.1f}°)",
+        "name_form": "  {command} format: {command} NAME (one word, no spaces, at most {max} characters, e.g. '{command} a')",
+        "no_args": "  '{command}' takes no arguments, got '{text}'",
+        "help": [
+            "  commands:",
+            "    JOINT ANGLE             e.g. '0 45' (JOINT 0-4 arm, 5 gripper)",
+            "    batch a0 a1 a2 a3 a4 [gripper]  all five joints at once, e.g. 'batch 0 -30 45 -20 10'",
+            "    grip ANGLE / open / close  gripper angle / open ({open:g}°) / close ({closed:g}°)",
+            "    home                    all five arm joints to 0°",
+            "    list                    list the joints",
+            "    state                   show the joint angles now (from joint_state)",
+            "    save NAME               save the current pose (from joint_state)",
+            "    go NAME                 move to a saved pose",
+            "    poses                   list the saved poses",
+            "    help                    this help",
+            "    quit / exit             quit (Ctrl-D and Ctrl-C quit too)",
+            "  Angles beyond a joint's limits are not sent (the reply gives the range).",
+        ],
+    },
+}
+
+
+def texts(lang: str) -> dict:
+    return TEXT["en" if lang == "en" else "zh"]
+
+
+def format_angle(angle_deg: float) -> str:
+    """90.0 -> '90', -30.5 -> '-30.5': the course prints '0 90' as '→ 90°'."""
+    return f"{angle_deg:g}"
+
+
+def format_angles(angles_deg) -> str:
+    """The course's list form, '[-30.0, 45.0, -60.0, 30.0, 0.0]', rounded to 0.01° (+ 0.0: no '-0.0')."""
+    return str([round(float(angle), 2) + 0.0 for angle in angles_deg])
+
+
+def help_lines(lang: str) -> list[str]:
+    return [line.format(open=GRIPPER_OPEN_DEG, closed=GRIPPER_CLOSED_DEG) for line in texts(lang)["help"]]
+
+
+def joint_lines(lang: str) -> list[str]:
+    text = texts(lang)
+    return [
+        text["joint_line"].format(index=index, name=joint.name, label=joint.label_zh if lang != "en" else joint.label_en)
+        for index, joint in enumerate(ACTUATED_JOINTS)
+    ]
+
+
+def _angle(word: str, joint_position: int, text: dict) -> float | ParseError:
+    if not _NUMBER.match(word):
+        return ParseError(text["bad_angle"].format(text=word))
+    angle = float(word)
+    if not math.isfinite(angle):  # "1e999"
+        return ParseError(text["bad_angle"].format(text=word))
+    joint = ACTUATED_JOINTS[joint_position]
+    # The limits are shown to 0.1° (110.0° for 1.91986 rad = 109.9999°), so the shown values must be accepted;
+    # the hair beyond the exact URDF limit is then clamped away.
+    if not round(joint.lower_deg, 1) <= angle <= round(joint.upper_deg, 1):
+        return ParseError(
+            text["limit"].format(name=joint.name, lower=joint.lower_deg, upper=joint.upper_deg, angle=word)
+        )
+    return min(max(angle, joint.lower_deg), joint.upper_deg)
+
+
+def _pose_name(command: str, words: list[str], text: dict) -> str | ParseError:
+    if len(words) != 2 or len(words[1]) > MAX_POSE_NAME_CHARS:
+        return ParseError(text["name_form"].format(command=command, max=MAX_POSE_NAME_CHARS))
+    return words[1]
+
+
+NO_ARGUMENT_COMMANDS = {
+    "home": Home(), "list": ListJoints(), "state": ShowState(), "poses": ListPoses(), "help": Help(), "?": Help(),
+    "quit": Quit(), "exit": Quit(),
+    "open": SetJoint(GRIPPER_COMMAND_INDEX, GRIPPER_OPEN_DEG),
+    "close": SetJoint(GRIPPER_COMMAND_INDEX, GRIPPER_CLOSED_DEG),
+}
+
+
+def parse_command(line: str, lang: str = "zh") -> Command | ParseError:
+    """One typed line -> the command it names, or a ParseError whose message gives the valid form."""
+    text = texts(lang)
+    # Pose names keep their case; command words do not ("HOME" works).
+    words = [word for word in _SEPARATORS.split(line.strip()) if word]
+    if not words:
+        return Empty()
+    keyword = words[0].lower()
+    shown = " ".join(words)
+
+    if keyword in NO_ARGUMENT_COMMANDS:
+        if len(words) > 1:
+            return ParseError(text["no_args"].format(command=keyword, text=shown))
+        return NO_ARGUMENT_COMMANDS[keyword]
+
+    if keyword == "batch":
+        values = words[1:]
+        if len(values) not in (NUM_ARM_JOINTS, NUM_ARM_JOINTS + 1):
+            return ParseError(text["batch_form"])
+        angles = []
+        for position, word in enumerate(values):
+            angle = _angle(word, position, text)
+            if isinstance(angle, ParseError):
+                return angle
+            angles.append(angle)
+        return Batch(tuple(angles))
+
+    if keyword == "grip":
+        if len(words) != 2:
+            return ParseError(text["grip_form"].format(lower=GRIPPER.lower_deg, upper=GRIPPER.upper_deg))
+        angle = _angle(words[1], GRIPPER_COMMAND_INDEX, text)
+        return angle if isinstance(angle, ParseError) else SetJoint(GRIPPER_COMMAND_INDEX, angle)
+
+    if keyword in ("save", "go"):
+        name = _pose_name(keyword, words, text)
+        if isinstance(name, ParseError):
+            return name
+        return SavePose(name) if keyword == "save" else GoPose(name)
+
+    if _NUMBER.match(keyword):
+        if len(words) != 2:
+            return ParseError(text["joint_form"])
+        if not keyword.lstrip("+").isdigit() or int(keyword) >= len(ACTUATED_JOINTS):
+            return ParseError(text["joint_range"].format(text=words[0]))
+        index = int(keyword)
+        angle = _angle(words[1], index, text)
+        return angle if isinstance(angle, ParseError) else SetJoint(index, angle)
+
+    return ParseError(text["unknown"].format(text=shown if len(shown) <= 40 else shown[:37] + "..."))
+

@@ -1,0 +1,261 @@
+"""`so101 teleop`: the dataflow and the keyboard prompt in one terminal.
+
+Starts `dora run` in the background with its log in a file, waits until the
+simulation has loaded the arm, runs the prompt (`nodes/keyboard_control.py`) in
+the foreground, and stops the dataflow when the prompt exits (quit, Ctrl-D,
+Ctrl-C), leaving no process behind.
+
+dora gives a node the `env:` of dataflow.yml over the environment it was started
+with, so `--mode` and `--lang` cannot reach the simulation as inherited variables:
+teleop runs a copy of dataflow.yml (in a temporary folder, removed at exit) with
+those two values set and the node paths made absolute. The file itself stays as the course has it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import yaml
+
+from so101.display import MODES, resolve_mode
+from so101.steps import _language
+
+ROOT = Path(__file__).resolve().parents[1]
+DATAFLOW = ROOT / "dataflow.yml"
+PROMPT = ROOT / "nodes" / "keyboard_control.py"
+DEFAULT_LOG = ROOT / "out" / "teleop-dora.log"
+# The simulation node logs this once the arm is loaded, just before it starts publishing joint_state.
+READY_MARK = "robot_id ="
+START_TIMEOUT_S = 90.0
+STOP_TIMEOUT_S = 20.0
+LOG_TAIL_LINES = 15
+
+TEXT = {
+    "zh": {
+        "starting": "启动数据流(dora run,{mode} 模式),日志写入 {log}",
+        "ready": "仿真已就绪,启动键盘控制",
+        "stopping": "停止数据流...",
+        "stopped": "数据流已停止",
+        "exited": "dora run 提前退出(退出码 {code}),日志 {log} 最后几行:",
+        "timeout": "{seconds:g} 秒内仿真未就绪,日志 {log} 最后几行:",
+        "interrupted": "已中断",
+    },
+    "en": {
+        "starting": "starting the dataflow (dora run, {mode} mode), log in {log}",
+        "ready": "simulation ready, starting the keyboard prompt",
+        "stopping": "stopping the dataflow...",
+        "stopped": "dataflow stopped",
+        "exited": "dora run exited early (exit code {code}); last lines of {log}:",
+        "timeout": "the simulation was not ready within {seconds:g} s; last lines of {log}:",
+        "interrupted": "interrupted",
+    },
+}
+
+
+def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
+    parser.add_argument(
+        "--mode", choices=MODES, default=os.environ.get("SO101_MODE", "auto"),
+        help="simulation window: gui, direct (headless) or auto (gui where a display exists; default $SO101_MODE, "
+        "else auto); passed to the simulation as SO101_MODE",
+    )
+    parser.add_argument(
+        "--lang", type=_language, metavar="{zh,en}", default=os.environ.get("SO101_LANG", "zh"),
+        help="language of the prompt and the logs (default: $SO101_LANG, else zh as in the course)",
+    )
+    parser.add_argument(
+        "--log", type=Path, default=DEFAULT_LOG, metavar="FILE",
+        help=f"where the dataflow's log goes (default: {DEFAULT_LOG})",
+    )
+
+
+def write_dataflow_copy(mode: str, lang: str, work_dir: Path) -> Path:
+    """dataflow.yml with SO101_MODE and SO101_LANG set for every node that runs a file, paths absolute."""
+    descriptor = yaml.safe_load(DATAFLOW.read_text(encoding="utf-8"))
+    for node in descriptor["nodes"]:
+        path = node.get("path", "dynamic")
+        if path != "dynamic":
+            node["path"] = str((ROOT / path).resolve())
+            node["env"] = {**(node.get("env") or {}), "SO101_MODE": mode, "SO101_LANG": lang}
+    copy = work_dir / "dataflow.yml"
+    copy.write_text(
+        "# Written by `so101 teleop` from dataflow.yml; edit that file, not this one.\n"
+        + yaml.safe_dump(descriptor, sort_keys=False, allow_unicode=True),
+        encoding="utf-8",
+    )
+    return copy
+
+
+def _dora_executable() -> str:
+    beside_python = Path(sys.executable).parent / "dora"
+    return str(beside_python) if beside_python.exists() else (shutil.which("dora") or "dora")
+
+
+def _descendants(pid: int) -> list[int]:
+    """Every process below `pid` (Linux /proc; elsewhere an empty list)."""
+    children: dict[int, list[int]] = {}
+    for entry in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            # The command name may hold spaces and parentheses: the fields after the last ')' are safe.
+            fields = entry.read_text().rsplit(")", 1)[1].split()
+            children.setdefault(int(fields[1]), []).append(int(entry.parent.name))
+        except (OSError, IndexError, ValueError):
+            continue
+    found, queue = [], [pid]
+    while queue:
+        for child in children.get(queue.pop(), []):
+            found.append(child)
+            queue.append(child)
+    return found
+
+
+def _log_tail(log: Path) -> str:
+    try:
+        lines = log.read_text(encoding="utf-8", errors="replace").splitlines()
+    except OSError:
+        return ""
+    return "\n".join("  " + line for line in lines[-LOG_TAIL_LINES:])
+
+
+class Dataflow:
+    """`dora run` in its own session (so the terminal's Ctrl-C reaches only the prompt), log to a file."""
+
+    def __init__(self, dataflow: Path, log: Path, env: dict[str, str]):
+        log.parent.mkdir(parents=True, exist_ok=True)
+        self.log = log
+        self._log_stream = log.open("wb")
+        self.process = subprocess.Popen(
+            [_dora_executable(), "run", str(dataflow)], cwd=dataflow.parent,
+            stdin=subprocess.DEVNULL, stdout=self._log_stream, stderr=subprocess.STDOUT,
+            env=env, start_new_session=True,
+        )
+
+    def wait_ready(self, timeout_s: float) -> bool | None:
+        """True once the simulation is up; False if dora exited first; None on timeout."""
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            if READY_MARK in self.log.read_text(encoding="utf-8", errors="replace"):
+                return True
+            if self.process.poll() is not None:
+                return False
+            time.sleep(0.2)
+        return None
+
+    def stop(self) -> None:
+        """Ctrl-C for dora (it stops every node), then SIGKILL for anything still alive."""
+        nodes = _descendants(self.process.pid)
+        if self.process.poll() is None:
+            self.process.send_signal(signal.SIGINT)
+            try:
+                self.process.wait(STOP_TIMEOUT_S)
+            except subprocess.TimeoutExpired:
+                self.process.kill()
+                self.process.wait()
+        deadline = time.monotonic() + 5
+        for pid in nodes:
+            while _alive(pid) and time.monotonic() < deadline:
+                time.sleep(0.1)
+            if _alive(pid):
+                try:
+                    os.kill(pid, signal.SIGKILL)
+                except OSError:
+                    pass
+        self._log_stream.close()
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except OSError:
+        return False
+    # A zombie (exited, not yet reaped by its dead parent) counts as gone.
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except (OSError, IndexError):
+        return True
+
+
+def run(args: argparse.Namespace) -> int:
+    text = TEXT[args.lang]
+    try:
+        resolved_mode, notice = resolve_mode(args.mode)  # a GUI without a display fails here, in one line
+    except ValueError as error:  # a bad $SO101_MODE: argparse does not check defaults against choices
+        print(f"so101 teleop: {error} (from --mode or $SO101_MODE)", file=sys.stderr)
+        return 2
+    if notice:
+        print(notice, flush=True)
+    if not DATAFLOW.exists() or not PROMPT.exists():
+        print(f"so101 teleop: {DATAFLOW} or {PROMPT} is missing: run it from a checkout of the project", file=sys.stderr)
+        return 2
+    log = args.log.expanduser().resolve()
+    env = dict(os.environ, SO101_MODE=resolved_mode, SO101_LANG=args.lang)
+    # dora starts `.py` nodes with the `python` found on PATH: make it this one.
+    env["PATH"] = f"{Path(sys.executable).parent}{os.pathsep}{env.get('PATH', '')}"
+
+    print(text["starting"].format(mode=resolved_mode, log=log), flush=True)
+    with tempfile.TemporaryDirectory(prefix="so101-teleop-") as work_dir:
+        dataflow = Dataflow(write_dataflow_copy(resolved_mode, args.lang, Path(work_dir)), log, env)
+        return _run_prompt(dataflow, env, text, log)
+
+
+class _HungUp(Exception):
+    """SIGHUP (the terminal closed) or SIGTERM: stop the dataflow anyway."""
+
+
+def _hang_up(signum, frame):
+    raise _HungUp(signum)
+
+
+def _show(line: str) -> None:
+    try:
+        print(line, flush=True)
+    except OSError:  # the terminal is gone: the clean-up must go on
+        pass
+
+
+def _run_prompt(dataflow: Dataflow, env: dict[str, str], text: dict, log: Path) -> int:
+    # dora runs in a session of its own and gets no hang-up from the terminal: teleop must stop it.
+    signal.signal(signal.SIGHUP, _hang_up)
+    signal.signal(signal.SIGTERM, _hang_up)
+    prompt = None
+    try:
+        ready = dataflow.wait_ready(START_TIMEOUT_S)
+        if not ready:
+            message = (text["exited"].format(code=dataflow.process.returncode, log=log) if ready is False
+                       else text["timeout"].format(seconds=START_TIMEOUT_S, log=log))
+            print(f"so101 teleop: {message}\n{_log_tail(log)}", file=sys.stderr, flush=True)
+            return 1
+        _show(text["ready"])
+        prompt = subprocess.Popen([sys.executable, str(PROMPT)], env=env)
+        # Ctrl-C at the terminal goes to the whole foreground group: the prompt quits on it,
+        # teleop must outlive it to stop the dataflow.
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+        try:
+            prompt_code = prompt.wait()
+        finally:
+            signal.signal(signal.SIGINT, previous)
+        return prompt_code
+    except KeyboardInterrupt:
+        _show(f"\n{text['interrupted']}")
+        return 130
+    except _HungUp as hang_up:
+        return 128 + hang_up.args[0]
+    finally:
+        if prompt is not None and prompt.poll() is None:
+            prompt.terminate()
+            prompt.wait()
+        _show(text["stopping"])
+        # A second Ctrl-C must not cut the clean-up short and leave dora running.
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+        try:
+            dataflow.stop()
+        finally:
+            signal.signal(signal.SIGINT, previous)
+        _show(text["stopped"])

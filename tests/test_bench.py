@@ -1,0 +1,207 @@
+"""The benchmark (`so101 bench`): its analysis, the node's fast mode and tick log, and a smoke run.
+
+No speed targets are asserted here: they are the benchmark's output, not tests.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+from array import array
+from pathlib import Path
+
+import pyarrow as pa
+import pytest
+from dora.testing import MockNode
+
+import nodes.simulation_node as simulation_node
+from bench import run_bench
+
+TIMER_4MS = {"inputs": {"tick": {"source": "dora/timer/millis/4", "queue_size": 1}}}
+TICK = ("tick", pa.array([], type=pa.null()))
+MS = 1_000_000  # ns
+
+
+def run_node(monkeypatch, events, **env):
+    monkeypatch.setenv("SO101_MODE", "direct")
+    monkeypatch.setenv("SO101_LANG", "en")
+    for name, value in env.items():
+        monkeypatch.setenv(name, value)
+    node = MockNode(events, node_config=TIMER_4MS)
+    monkeypatch.setattr(simulation_node, "Node", lambda: node)
+    return simulation_node.main(), node
+
+
+# -- analysis ---------------------------------------------------------------------------
+def test_percentile_interpolates():
+    assert run_bench.percentile([1, 2, 3, 4, 5], 0.5) == 3
+    assert run_bench.percentile([0, 10], 0.99) == pytest.approx(9.9)
+    assert math.isnan(run_bench.percentile([], 0.5))
+
+
+def test_tick_figures_count_missed_ticks_from_the_gaps():
+    starts_ms = [0, 4, 8, 20, 24, 28.7, 32]  # 8 -> 20 ms: the ticks at 12 and 16 were dropped
+    ticks = [(int(start * MS), int(start * MS) + 30_000) for start in starts_ms]
+    figures = run_bench.tick_figures(ticks, 0.004)
+    assert figures["ticks_served"] == 7
+    assert figures["ticks_missed"] == 2
+    assert figures["interval_ms"]["p50"] == pytest.approx(4.0, abs=0.01)
+    assert figures["interval_ms"]["max"] == pytest.approx(12.0)
+    assert figures["work_us"]["p50"] == pytest.approx(30.0)
+
+
+def test_tick_log_bytes_become_start_end_pairs():
+    raw = array("q", [10, 15, 20, 26]).tobytes()
+    assert run_bench.tick_pairs(raw) == [(10, 15), (20, 26)]
+    assert run_bench.tick_pairs(raw + b"\x01\x02") == [(10, 15), (20, 26)]  # a torn write is ignored
+
+
+def test_latency_is_send_to_first_state_moving_toward_the_target():
+    # States every 4 ms; joint 0 rests at 0.0 until the state at 16 ms shows +0.07°.
+    states = [[t * MS, 0.0, 0.0] for t in (0, 4, 8, 12)] + [[16 * MS, 0.07, 0.0], [20 * MS, 0.3, 0.0]]
+    commands = [[5 * MS, 0, 2.0]]
+    pairs = run_bench.reflecting_states(states, commands, [0, 4])
+    assert pairs == [(5 * MS, 16 * MS)]
+    # Ticks start 0.3 ms before each state arrives; the first tick after the send (7.7 ms)
+    # did not carry the command, the one at 15.7 ms did.
+    tick_starts = [int((t - 0.3) * MS) for t in (4, 8, 12, 16, 20)]
+    breakdown = run_bench.latency_breakdown(pairs, tick_starts)
+    assert breakdown["p50"] == pytest.approx(11.0)
+    assert breakdown["wait_for_next_tick_ms"]["p50"] == pytest.approx(2.7)
+    assert breakdown["tick_start_to_arrival_ms"]["p50"] == pytest.approx(0.3)
+    assert breakdown["probes_that_missed_the_next_tick"] == 1
+
+
+def test_motion_away_from_the_target_does_not_count():
+    states = [[0, 0.0, 0.0], [4 * MS, -0.5, 0.0], [8 * MS, 0.2, 0.0]]
+    assert run_bench.reflecting_states(states, [[1 * MS, 0, 2.0]], [0, 4]) == [(1 * MS, 8 * MS)]
+    assert run_bench.reflecting_states(states, [[1 * MS, 4, 2.0]], [0, 4]) == []  # joint 4 never moved
+
+
+def test_dropped_tick_warnings_split_at_the_first_state():
+    def line(ts, level="warn", msg="Discarding event for input `tick` due to queue size limit"):
+        return json.dumps({"ts": ts, "level": level, "node": "simulation", "msg": msg})
+
+    jsonl = "\n".join([
+        line("2026-01-01T00:00:01.000Z"), line("2026-01-01T00:00:01.500Z"),
+        line("2026-01-01T00:00:03.000Z"), line("2026-01-01T00:00:03.000Z", level="stdout", msg="loaded"),
+        "not json",
+    ])
+    first_state = 1767225602.0  # 2026-01-01T00:00:02Z
+    assert run_bench.dropped_tick_warnings(jsonl, first_state) == (2, 1)
+
+
+# -- the node's fast mode and tick log ---------------------------------------------------
+def test_fast_events_make_up_a_tick_whenever_nothing_waits():
+    command = {"type": "INPUT", "id": "joint_cmd", "value": pa.array([0, 10])}
+    stop = {"type": "STOP"}
+
+    class Queue:
+        replies = [None, None, command, None, stop]
+
+        def try_recv(self):
+            return self.replies.pop(0)
+
+    events = simulation_node.fast_events(Queue())
+    got = [next(events) for _ in range(5)]
+    assert got == [simulation_node.FAST_TICK, simulation_node.FAST_TICK, command, simulation_node.FAST_TICK, stop]
+
+
+def test_fast_mode_takes_n_steps_per_published_state(monkeypatch):
+    # 4 ticks of 100 steps each are 1.6 s of simulated time: enough to reach 45°.
+    # Paced, 4 ticks are 16 ms and the joint has barely started.
+    events = [("joint_cmd", pa.array([0, 45]))] + [TICK] * 4
+    code, node = run_node(monkeypatch, events, SO101_FAST_STEPS="100")
+    assert code == 0
+    assert len(node.outputs["joint_state"]) == 4
+    assert node.outputs["joint_state"][-1].to_pylist()[0] == pytest.approx(45.0, abs=1.0)
+    code, node = run_node(monkeypatch, events, SO101_FAST_STEPS="0")
+    assert node.outputs["joint_state"][-1].to_pylist()[0] < 5.0
+
+
+@pytest.mark.parametrize("value", ["-1", "2.5", "fast", ""])
+def test_bad_fast_steps_gives_one_line_and_exit_2(monkeypatch, capsys, value):
+    code, _ = run_node(monkeypatch, [TICK], SO101_FAST_STEPS=value)
+    assert code == 2
+    assert f"SO101_FAST_STEPS={value!r} is not a whole number >= 0" in capsys.readouterr().err
+
+
+def test_tick_log_holds_start_and_end_of_each_tick(monkeypatch, tmp_path):
+    tick_log = tmp_path / "ticks.bin"
+    code, node = run_node(monkeypatch, [TICK] * 30 + [("joint_cmd", pa.array([0, 10]))], SO101_TICK_LOG=str(tick_log))
+    assert code == 0
+    pairs = run_bench.tick_pairs(tick_log.read_bytes())
+    assert len(pairs) == 30  # one per tick, none for the joint_cmd
+    assert all(start < end for start, end in pairs)
+    assert all(end <= next_start for (_, end), (next_start, _) in zip(pairs, pairs[1:]))
+
+
+def test_without_tick_log_no_file_is_written(monkeypatch, tmp_path):
+    monkeypatch.chdir(tmp_path)
+    code, _ = run_node(monkeypatch, [TICK] * 3, SO101_TICK_LOG="")
+    assert code == 0 and list(tmp_path.iterdir()) == []
+
+
+# -- the command -------------------------------------------------------------------------
+def test_bad_duration_gives_one_line_and_exit_2():
+    so101 = Path(sys.executable).parent / "so101"
+    result = subprocess.run([str(so101), "bench", "--duration", "0"], capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2
+    assert "'0' is not a number of seconds above 0 and at most 3600" in result.stderr
+
+
+def _positive(value):
+    return isinstance(value, (int, float)) and math.isfinite(value) and value > 0
+
+
+@pytest.mark.dataflow
+def test_quick_bench_writes_every_figure(tmp_path):
+    out = tmp_path / "bench.json"
+    so101 = Path(sys.executable).parent / "so101"
+    result = subprocess.run(
+        [str(so101), "bench", "--quick", "--out", str(out)], capture_output=True, text=True, timeout=300, cwd=tmp_path,
+    )
+    assert result.returncode == 0, result.stderr[-3000:]
+    assert f"wrote {out}" in result.stdout
+    figures = json.loads(out.read_text())
+
+    machine = figures["machine"]
+    assert machine["cores"] >= 1 and machine["cpu"] and machine["python"].startswith("3.11")
+    assert machine["dora_rs"] == "1.1.0" and machine["pybullet"] == "3.2.7" and machine["date"]
+    assert len(figures["load_average_1_5_15min"]["start"]) == 3
+
+    raw = figures["raw_step"]
+    assert 1 < raw["us_per_step_p50"] < 10_000 and raw["us_per_step_p99"] >= raw["us_per_step_p50"]
+    assert _positive(raw["steps_per_s"]) and _positive(raw["after_4ms_sleep_us_p50"])
+
+    work = figures["node_work_in_process"]
+    assert work["p99"] >= work["p50"] > 0 and _positive(work["ratio_to_raw_p50"])
+
+    flow = figures["dataflow"]
+    assert 100 < flow["joint_state_per_s"] < 300  # a 4 ms timer: 250 when served in full
+    assert flow["expected_per_s"] == pytest.approx(250.0)
+    assert flow["ticks_missed"] >= 0 and flow["ticks_served"] > 300
+    assert flow["tick_interval_ms"]["p99"] >= flow["tick_interval_ms"]["p50"] > 0
+    assert flow["tick_work_us"]["p99"] >= flow["tick_work_us"]["p50"] > 0
+    assert 0.4 < flow["sim_over_wall"] < 1.2
+    assert 0 < flow["startup_s"] < 60
+    assert 30 < flow["peak_rss_mb"] < 4000
+    assert flow["dora_dropped_tick_warnings_startup"] >= 0 and flow["dora_dropped_tick_warnings_steady"] >= 0
+
+    latency = figures["command_latency_ms"]
+    assert latency["count"] >= 10 and latency["probes_sent"] >= latency["count"]
+    assert latency["p99"] >= latency["p50"] > 0
+    assert latency["wait_for_next_tick_ms"]["p50"] >= 0
+
+    runs = figures["fast_mode"]["runs"]
+    assert [run["steps_per_state"] for run in runs] == [1, 100]
+    for run in runs:
+        assert _positive(run["steps_per_s"]) and _positive(run["ratio_to_raw"])
+    # Fewer publications per step can only help: 100 steps per state beat 1.
+    assert runs[1]["steps_per_s"] > runs[0]["steps_per_s"]
+
+    assert len(figures["targets"]) == 7
+    assert all(isinstance(row["met"], bool) for row in figures["targets"])
+    assert "targets:" in result.stdout and "joint_state per s" in result.stdout

@@ -1,0 +1,137 @@
+"""`so101 inspect` and `so101 joints` (course steps A and B), run as a user runs them."""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+SO101 = Path(sys.executable).with_name("so101")
+
+COURSE_TABLE_ZH = [
+    (0, "shoulder_pan", "旋转关节 (Revolute)"),
+    (1, "shoulder_lift", "旋转关节 (Revolute)"),
+    (2, "elbow_flex", "旋转关节 (Revolute)"),
+    (3, "wrist_flex", "旋转关节 (Revolute)"),
+    (4, "wrist_roll", "旋转关节 (Revolute)"),
+    (5, "gripper_frame_joint", "固定关节 (Fixed)"),
+    (6, "gripper", "旋转关节 (Revolute)"),
+]
+# The course's 0.5 rad targets, in degrees: 0.5 rad = 28.65°.
+COURSE_STEP_B_DEG = [28.65, -28.65, 28.65, -28.65, 28.65]
+
+
+def so101(*args: str, **env: str) -> subprocess.CompletedProcess:
+    environ = {key: value for key, value in os.environ.items() if key not in ("SO101_LANG", "SO101_MODE")}
+    environ.update(env)
+    return subprocess.run([str(SO101), *args], capture_output=True, text=True, env=environ, timeout=120)
+
+
+def table_rows(stdout: str, word: str, type_word: str) -> list[tuple[int, str, str]]:
+    pattern = re.compile(rf"^\s+{word} (\d+): (\S+)\s+{type_word}: (.+?)(?:\s+\[.*\])?$")
+    return [
+        (int(match[1]), match[2], match[3])
+        for match in map(pattern.match, stdout.splitlines())
+        if match
+    ]
+
+
+def test_inspect_prints_the_courses_table():
+    result = so101("inspect", "--mode", "direct", "--steps", "1")
+    assert result.returncode == 0, result.stderr
+    assert "SO-101 已加载,robot_id = 1" in result.stdout
+    assert "关节数量: 7" in result.stdout
+    assert table_rows(result.stdout, "关节", "类型") == COURSE_TABLE_ZH
+    assert "Traceback" not in result.stderr
+
+
+def test_inspect_in_english():
+    result = so101("inspect", "--mode", "direct", "--steps", "1", "--lang", "en")
+    assert result.returncode == 0, result.stderr
+    assert "joints: 7" in result.stdout
+    expected = [
+        (index, name, "fixed" if name == "gripper_frame_joint" else "revolute") for index, name, _ in COURSE_TABLE_ZH
+    ]
+    assert table_rows(result.stdout, "joint", "type") == expected
+
+
+def test_language_comes_from_so101_lang():
+    result = so101("inspect", "--mode", "direct", "--steps", "1", SO101_LANG="en")
+    assert result.returncode == 0, result.stderr
+    assert "joints: 7" in result.stdout
+
+
+def test_a_bad_so101_lang_is_a_one_line_error():
+    result = so101("inspect", "--mode", "direct", "--steps", "1", SO101_LANG="fr")
+    assert result.returncode == 2
+    assert "argument --lang: unknown language 'fr' (from --lang or $SO101_LANG); use zh or en" in result.stderr
+    assert "Traceback" not in result.stderr
+
+
+def test_inspect_shows_the_limits_in_degrees():
+    result = so101("inspect", "--mode", "direct", "--steps", "1", "--lang", "en")
+    shoulder_pan = next(line for line in result.stdout.splitlines() if "shoulder_pan" in line)
+    assert re.search(r"\[\s*-110\.0°,\s+110\.0°\]", shoulder_pan), shoulder_pan
+
+
+def reached_angles(stdout: str, word: str) -> list[float]:
+    return [float(match[1]) for match in re.finditer(rf"^\s+{word} \d+: (-?\d+\.\d)°$", stdout, re.MULTILINE)]
+
+
+def test_joints_reaches_the_courses_targets():
+    result = so101("joints", "--mode", "direct", "--steps", "1")
+    assert result.returncode == 0, result.stderr
+    assert "当前关节角度:" in result.stdout
+    angles = reached_angles(result.stdout, "关节")
+    assert len(angles) == 5
+    assert angles == pytest.approx(COURSE_STEP_B_DEG, abs=1.0)
+
+
+def test_joints_takes_other_targets():
+    targets_rad = ["0", "-0.3", "0", "0.2", "0"]
+    result = so101("joints", "--mode", "direct", "--steps", "1", "--lang", "en", "--targets", *targets_rad)
+    assert result.returncode == 0, result.stderr
+    assert reached_angles(result.stdout, "joint") == pytest.approx([0.0, -17.19, 0.0, 11.46, 0.0], abs=1.0)
+
+
+@pytest.mark.skipif(sys.platform in ("darwin", "win32"), reason="macOS and Windows always have a window")
+def test_auto_mode_without_display_runs_headless_with_a_notice():
+    environ = {key: value for key, value in os.environ.items() if key != "DISPLAY"}
+    result = subprocess.run(
+        [str(SO101), "inspect", "--steps", "1"], capture_output=True, text=True, env=environ, timeout=120
+    )
+    assert result.returncode == 0, result.stderr
+    assert "running headless in DIRECT mode" in result.stdout + result.stderr
+    assert "关节数量: 7" in result.stdout
+
+
+@pytest.mark.skipif(sys.platform in ("darwin", "win32"), reason="macOS and Windows always have a window")
+def test_gui_without_display_is_a_one_line_error():
+    environ = {key: value for key, value in os.environ.items() if key != "DISPLAY"}
+    result = subprocess.run(
+        [str(SO101), "inspect", "--mode", "gui", "--steps", "1"], capture_output=True, text=True, env=environ,
+        timeout=120,
+    )
+    assert result.returncode == 2
+    # pybullet prints its build-time banner on import; everything else is our one line.
+    error_lines = [line for line in result.stderr.splitlines() if not line.startswith("pybullet build time")]
+    assert len(error_lines) == 1
+    assert error_lines[0].startswith("so101 inspect: GUI mode needs a display")
+
+
+def test_help_lists_the_subcommands():
+    result = so101("--help")
+    assert result.returncode == 0
+    for name in ("assets", "inspect", "joints"):
+        assert re.search(rf"^\s+{name}\s+\S", result.stdout, re.MULTILINE), name
+
+
+def test_an_unknown_mode_is_refused_with_the_choices():
+    result = so101("inspect", "--mode", "window")
+    assert result.returncode == 2
+    assert "invalid choice: 'window'" in result.stderr
+    assert "Traceback" not in result.stderr

@@ -1,0 +1,166 @@
+"""A bad environment gives one clear message: no display, broken model files, mixed dora versions."""
+
+from __future__ import annotations
+
+import importlib.metadata
+import os
+import shutil
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from so101.assets import default_assets_dir
+from so101.versions import cli_version_from_output, dora_version_problem, version_mismatch
+from tests.dataflow_helpers import VENV_BIN, DoraRun, dora_env, write_test_dataflow
+
+NO_DISPLAY_NOTICE = "no display found"
+LIBRARY_VERSION = importlib.metadata.version("dora-rs")
+
+
+def unused_display() -> str:
+    """A display number with no X server behind it (the variable set, the server gone)."""
+    number = 90
+    while Path(f"/tmp/.X11-unix/X{number}").exists():
+        number += 1
+    return f":{number}"
+
+
+def broken_model_copy(tmp_path: Path, how: str) -> tuple[Path, str]:
+    """A copy of the verified model with one mesh deleted or altered; returns (dir, the bad file)."""
+    copy = tmp_path / "SO101"
+    shutil.copytree(default_assets_dir(), copy)
+    mesh = sorted((copy / "assets").glob("*.stl"))[0]
+    if how == "missing":
+        mesh.unlink()
+    else:
+        with mesh.open("r+b") as handle:  # one flipped byte in the middle of the file
+            handle.seek(mesh.stat().st_size // 2)
+            byte = handle.read(1)
+            handle.seek(-1, os.SEEK_CUR)
+            handle.write(bytes([byte[0] ^ 0xFF]))
+    return copy, str(mesh.relative_to(copy))
+
+
+def run_so101(*args: str, **env: str) -> subprocess.CompletedProcess:
+    environ = dora_env(SO101_LANG="en", **env)
+    return subprocess.run(
+        [str(VENV_BIN / "so101"), *args], capture_output=True, text=True, env=environ, timeout=120,
+    )
+
+
+# -- no display -------------------------------------------------------------------------
+
+@pytest.mark.parametrize("display", [None, "stale"], ids=["DISPLAY unset", "DISPLAY without a server"])
+def test_inspect_without_display_runs_direct_with_one_notice(display):
+    env = {"DISPLAY": unused_display()} if display == "stale" else {}
+    result = run_so101("inspect", "--mode", "auto", "--steps", "1", "--lang", "en", **env)
+    assert result.returncode == 0, result.stderr
+    notices = [line for line in (result.stdout + result.stderr).splitlines() if NO_DISPLAY_NOTICE in line]
+    assert notices == [
+        "no display found (DISPLAY is not set or not reachable): running headless in DIRECT mode"
+    ]
+    assert "joint 0: shoulder_pan" in result.stdout
+
+
+@pytest.mark.dataflow
+def test_dataflow_without_display_runs_direct_with_one_notice(tmp_path):
+    dataflow = write_test_dataflow(tmp_path, sim_env={"SO101_MODE": "auto", "SO101_LANG": "en"})
+    dora = DoraRun(dataflow, tmp_path / "dora.log")  # dora_env() removes DISPLAY
+    try:
+        dora.wait_for("SO-101 loaded", timeout_s=60)
+    finally:
+        exit_code = dora.stop()
+    log = dora.log()
+    assert exit_code == 0, log[-3000:]
+    assert len([line for line in log.splitlines() if NO_DISPLAY_NOTICE in line]) == 1, log[-3000:]
+    assert "(DIRECT mode" in log
+
+
+# -- model files ------------------------------------------------------------------------
+
+@pytest.mark.parametrize("how", ["missing", "corrupt"])
+def test_inspect_with_broken_model_says_which_file_and_exits_2(tmp_path, how):
+    assets_dir, bad_file = broken_model_copy(tmp_path, how)
+    result = run_so101("inspect", "--mode", "direct", "--steps", "1", SO101_ASSETS_DIR=str(assets_dir))
+    assert result.returncode == 2
+    # pybullet prints its build banner on import; everything else is our one line.
+    lines = [line for line in result.stderr.splitlines() if not line.startswith("pybullet build time:")]
+    assert len(lines) == 1, result.stderr
+    assert lines[0].startswith(f"so101 inspect: SO-101 model file {how}: {assets_dir / bad_file}")
+    assert "so101 assets" in lines[0]
+    assert "Traceback" not in result.stdout + result.stderr
+
+
+@pytest.mark.dataflow
+@pytest.mark.parametrize("how", ["missing", "corrupt"])
+def test_simulation_with_broken_model_stops_the_dataflow_with_the_message(tmp_path, how):
+    assets_dir, bad_file = broken_model_copy(tmp_path, how)
+    dataflow = write_test_dataflow(tmp_path, sim_env={"SO101_ASSETS_DIR": str(assets_dir)})
+    dora = DoraRun(dataflow, tmp_path / "dora.log", stop_after_s=120)
+    try:
+        exit_code = dora.process.wait(90)  # the node exits at once, and the dataflow with it
+    finally:
+        dora.stop()
+    log = dora.log()
+    assert exit_code != 0
+    assert f"[simulation] cannot start: SO-101 model file {how}: {assets_dir / bad_file}" in log, log[-3000:]
+    assert "exited with code 2" in log, log[-3000:]
+    assert "Traceback" not in log
+
+
+# -- dora CLI and library versions ------------------------------------------------------
+
+@pytest.mark.parametrize(
+    "output, version",
+    [("dora-cli 1.1.0\n", "1.1.0"), ("dora-cli 0.3.12", "0.3.12"), ("dora-cli 1.2.0-rc.1", "1.2.0-rc.1"),
+     ("", None), ("dora-cli\n", None)],
+)
+def test_cli_version_is_read_from_dora_version_output(output, version):
+    assert cli_version_from_output(output) == version
+
+
+def test_same_versions_are_fine_and_different_ones_named():
+    assert version_mismatch("1.1.0", "1.1.0") is None
+    message = version_mismatch("0.3.12", "1.1.0", "/usr/local/bin/dora")
+    assert message == (
+        "the dora CLI (/usr/local/bin/dora) is version 0.3.12 but the dora-rs library is version 1.1.0; "
+        "they must match: pip install 'dora-rs-cli==1.1.0' (or put the matching `dora` first on PATH)"
+    )
+
+
+def fake_dora(tmp_path: Path, script: str) -> Path:
+    bin_dir = tmp_path / "bin"
+    bin_dir.mkdir()
+    dora = bin_dir / "dora"
+    dora.write_text(f"#!/bin/sh\n{script}\n")
+    dora.chmod(0o755)
+    return bin_dir
+
+
+def test_installed_cli_and_library_match():
+    assert dora_version_problem(str(VENV_BIN / "dora")) is None
+
+
+def test_other_dora_first_on_path_is_named_with_both_versions(tmp_path, monkeypatch):
+    bin_dir = fake_dora(tmp_path, 'echo "dora-cli 1.0.4"')
+    monkeypatch.setenv("PATH", f"{bin_dir}{os.pathsep}{os.environ['PATH']}")
+    message = dora_version_problem()
+    assert message is not None
+    assert f"the dora CLI ({bin_dir / 'dora'}) is version 1.0.4" in message
+    assert f"the dora-rs library is version {LIBRARY_VERSION}" in message
+
+
+def test_dora_that_does_not_run_is_reported(tmp_path, monkeypatch):
+    bin_dir = fake_dora(tmp_path, "exit 3")
+    monkeypatch.setenv("PATH", str(bin_dir))
+    message = dora_version_problem()
+    assert message == (
+        f"could not read the version of the dora CLI ({bin_dir / 'dora'} --version); the dora-rs library "
+        f"is version {LIBRARY_VERSION}: pip install 'dora-rs-cli=={LIBRARY_VERSION}'"
+    )
+
+
+def test_no_dora_on_path_is_reported(tmp_path, monkeypatch):
+    monkeypatch.setenv("PATH", str(tmp_path))
+    assert dora_version_problem() == f"the dora CLI is not on PATH: pip install 'dora-rs-cli=={LIBRARY_VERSION}'"

@@ -1,0 +1,69 @@
+"""The course's two stand-alone scripts in examples/, run headless as a student would."""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
+
+COURSE_TABLE = [
+    ("0", "shoulder_pan", "旋转关节 (Revolute)"),
+    ("1", "shoulder_lift", "旋转关节 (Revolute)"),
+    ("2", "elbow_flex", "旋转关节 (Revolute)"),
+    ("3", "wrist_flex", "旋转关节 (Revolute)"),
+    ("4", "wrist_roll", "旋转关节 (Revolute)"),
+    ("5", "gripper_frame_joint", "固定关节 (Fixed)"),
+    ("6", "gripper", "旋转关节 (Revolute)"),
+]
+
+
+def run_example(script: str, *args: str, **env: str) -> subprocess.CompletedProcess:
+    environ = {key: value for key, value in os.environ.items() if key not in ("DISPLAY", "SO101_MODE")}
+    environ.update(env)
+    return subprocess.run(
+        [sys.executable, str(EXAMPLES / script), *args], capture_output=True, text=True, env=environ,
+        timeout=120, cwd=EXAMPLES.parent,
+    )
+
+
+def test_step_a_prints_the_courses_joint_table():
+    result = run_example("test_so101.py", "--steps", "10", SO101_MODE="direct")
+    assert result.returncode == 0, result.stderr
+    assert "SO-101 已加载,robot_id = 1" in result.stdout
+    assert "关节数量: 7" in result.stdout
+    rows = re.findall(r"^  关节 (\d): (\S+)\s+类型: (.+)$", result.stdout, re.MULTILINE)
+    assert rows == COURSE_TABLE
+
+
+def test_step_b_reaches_the_courses_angles():
+    result = run_example("test_so101_joints.py", SO101_MODE="direct")
+    assert result.returncode == 0, result.stderr
+    angles = [float(angle) for angle in re.findall(r"^  关节 \d: (-?\d+\.\d)°$", result.stdout, re.MULTILINE)]
+    # The course's 0.5 rad targets are ±28.65°.
+    assert angles == pytest.approx([28.65, -28.65, 28.65, -28.65, 28.65], abs=1.0)
+
+
+@pytest.mark.skipif(sys.platform in ("darwin", "win32"), reason="macOS and Windows always have a window")
+def test_without_a_display_auto_runs_headless_and_says_so():
+    result = run_example("test_so101.py")  # SO101_MODE unset: auto
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.splitlines()[0] == (
+        "no display found (DISPLAY is not set or not reachable): running headless in DIRECT mode"
+    )
+    assert "关节数量: 7" in result.stdout
+
+
+@pytest.mark.parametrize("script", ["test_so101.py", "test_so101_joints.py"])
+def test_a_missing_model_is_one_clear_line(script, tmp_path):
+    result = run_example(script, SO101_MODE="direct", SO101_ASSETS_DIR=str(tmp_path / "nowhere"))
+    assert result.returncode == 2
+    error_lines = [line for line in result.stderr.splitlines() if not line.startswith("pybullet build time")]
+    assert len(error_lines) == 1
+    assert error_lines[0].startswith(f"{script}: SO-101 model file missing:")
+    assert "so101 assets" in error_lines[0]

@@ -1,0 +1,169 @@
+"""The real GUI: the simulation node in GUI mode under `dora run`, on an Xvfb display.
+
+Screenshots (ImageMagick `import`) before and after a joint_cmd show that the arm
+is drawn and that it moved. The arm is the only yellow thing in the scene (its
+3D-printed parts, rgba 1.0 0.82 0.12 in the URDF); the floor is a blue-white
+checker and the sky lavender, so yellow pixels are the arm.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import time
+
+import numpy as np
+import pytest
+import yaml
+from PIL import Image
+
+from tests.dataflow_helpers import ROOT, DoraRun, write_test_dataflow
+
+pytestmark = [
+    pytest.mark.person,
+    pytest.mark.skipif(shutil.which("Xvfb") is None, reason="Xvfb is not installed (Debian package xvfb)"),
+    pytest.mark.skipif(shutil.which("import") is None, reason="ImageMagick's `import` is not installed (package imagemagick)"),
+]
+
+SENDER = ROOT / "tests" / "nodes" / "joint_cmd_sender.py"
+# shoulder_pan to 90°: the arm swings to the other side of its base, in full view of the default camera.
+COMMAND_DEG = "90 0 0 0 0"
+MIN_ARM_PIXELS = 2000  # the arm covers about 15,000 pixels of the 1024x768 window
+MAX_OVERLAP_AFTER_MOVE = 0.5  # intersection over union of the arm's pixels before and after
+SAME_FRAME_OVERLAP = 0.98  # two screenshots of an arm at rest
+
+
+@pytest.fixture
+def xvfb_display(tmp_path):
+    """A fresh Xvfb server on a free display number (Xvfb picks it: -displayfd); killed afterwards."""
+    read_end, write_end = os.pipe()
+    server = subprocess.Popen(
+        ["Xvfb", "-displayfd", str(write_end), "-screen", "0", "1280x800x24", "-nolisten", "tcp"],
+        pass_fds=(write_end,), stdout=subprocess.DEVNULL, stderr=(tmp_path / "xvfb.log").open("wb"),
+        start_new_session=True,
+    )
+    os.close(write_end)
+    number = b""
+    with os.fdopen(read_end, "rb") as reader:
+        while not number.endswith(b"\n"):
+            chunk = reader.read(1)
+            if not chunk:
+                break
+            number += chunk
+    try:
+        if not number.strip():
+            pytest.skip(f"Xvfb did not start: {(tmp_path / 'xvfb.log').read_text(errors='replace')[-500:]}")
+        yield f":{number.decode().strip()}"
+    finally:
+        server.terminate()
+        server.wait(10)
+
+
+def screenshot(display: str, path) -> np.ndarray:
+    subprocess.run(["import", "-display", display, "-window", "root", str(path)], check=True, timeout=60)
+    return np.asarray(Image.open(path).convert("RGB")).astype(int)
+
+
+def arm_pixels(rgb: np.ndarray) -> np.ndarray:
+    """Yellow pixels: red and green high, blue low (shaded yellow included, floor and sky excluded)."""
+    red, green, blue = rgb[..., 0], rgb[..., 1], rgb[..., 2]
+    return (red > 120) & (green > 80) & (blue < 0.45 * green) & (green < 0.95 * red)
+
+
+def overlap(mask_a: np.ndarray, mask_b: np.ndarray) -> float:
+    return (mask_a & mask_b).sum() / max(1, (mask_a | mask_b).sum())
+
+
+def gui_dataflow(tmp_path, trigger_file):
+    """dataflow.yml with the simulation in GUI mode and the test's sender in place of the prompt."""
+    path = write_test_dataflow(tmp_path, sim_env={"SO101_MODE": "gui", "SO101_LANG": "en"})
+    descriptor = yaml.safe_load(path.read_text())
+    descriptor["nodes"] = [node for node in descriptor["nodes"] if node["id"] != "keyboard_control"]
+    for node in descriptor["nodes"]:
+        if node["id"] == "simulation":
+            node["inputs"]["joint_cmd"] = "sender/joint_cmd"
+    descriptor["nodes"].append({
+        "id": "sender",
+        "path": str(SENDER),
+        "inputs": {"tick": "dora/timer/millis/50"},
+        "outputs": ["joint_cmd"],
+        "env": {"TRIGGER_FILE": str(trigger_file), "JOINT_CMD": COMMAND_DEG},
+    })
+    path.write_text(yaml.safe_dump(descriptor, sort_keys=False))
+    return path
+
+
+def settled_arm(display, path, accept, timeout_s=60):
+    """Screenshots until the arm looks the same in two in a row and `accept(mask)` holds; returns that mask.
+
+    Two equal frames rule out a scene still loading (links drawn before they are
+    placed) and an arm still on its way.
+    """
+    deadline = time.monotonic() + timeout_s
+    previous = arm_pixels(screenshot(display, path))
+    while True:
+        time.sleep(0.5)
+        mask = arm_pixels(screenshot(display, path))
+        if (overlap(previous, mask) > SAME_FRAME_OVERLAP and accept(mask)) or time.monotonic() > deadline:
+            return mask
+        previous = mask
+
+
+def test_arm_is_drawn_and_moves_in_the_gui_window(tmp_path, xvfb_display):
+    empty = arm_pixels(screenshot(xvfb_display, tmp_path / "empty.png"))
+    assert empty.sum() == 0  # the bare X screen has nothing yellow: a yellow pixel later is the arm
+
+    trigger = tmp_path / "send-now"
+    dora = DoraRun(gui_dataflow(tmp_path, trigger), tmp_path / "dora.log", stop_after_s=300, DISPLAY=xvfb_display)
+    try:
+        dora.wait_for("SO-101 loaded", timeout_s=120)
+        assert "(GUI mode" in dora.log()
+        before = settled_arm(xvfb_display, tmp_path / "before.png", lambda m: m.sum() >= MIN_ARM_PIXELS)
+        assert before.sum() >= MIN_ARM_PIXELS, f"the arm is not drawn: {before.sum()} yellow pixels"
+
+        trigger.touch()
+        dora.wait_for("sent joint_cmd 1")
+        dora.wait_for("all joint targets -> [90.0, 0.0, 0.0, 0.0, 0.0]°")
+        after = settled_arm(
+            xvfb_display, tmp_path / "after.png",
+            lambda m: m.sum() >= MIN_ARM_PIXELS and overlap(before, m) < MAX_OVERLAP_AFTER_MOVE,
+        )
+    finally:
+        exit_code = dora.stop()
+    assert after.sum() >= MIN_ARM_PIXELS, f"the arm is not drawn after the command: {after.sum()} yellow pixels"
+    assert overlap(before, after) < MAX_OVERLAP_AFTER_MOVE, "the arm did not move on screen"
+    assert exit_code == 0, dora.log()[-3000:]
+    assert "Traceback" not in dora.log()
+
+
+@pytest.mark.skipif(shutil.which("xdotool") is None, reason="xdotool is not installed (package xdotool)")
+def test_killed_gui_window_ends_the_simulation_and_is_not_reopened(tmp_path, xvfb_display):
+    """A window manager's forced close cuts the X connection, and Xlib ends the node at once.
+
+    Under the `never` restart policy dora reports it and does not start the
+    simulation again; a restart policy would reopen the window the person closed.
+    (Here the sender's timer keeps the dataflow up until Ctrl-C; in dataflow.yml
+    the prompt is the only other node.)
+    """
+    display_env = dict(os.environ, DISPLAY=xvfb_display)
+    dora = DoraRun(gui_dataflow(tmp_path, tmp_path / "unused"), tmp_path / "dora.log", stop_after_s=300,
+                   DISPLAY=xvfb_display)
+    try:
+        dora.wait_for("SO-101 loaded", timeout_s=120)
+        windows = subprocess.run(
+            ["xdotool", "search", "--name", "Bullet Physics"], capture_output=True, text=True,
+            env=display_env, timeout=30,
+        ).stdout.split()
+        assert len(windows) == 1, windows
+        subprocess.run(["xdotool", "windowkill", windows[0]], check=True, env=display_env, timeout=30)
+        dora.wait_for("X connection to")
+        dora.wait_for("simulation: daemon exited")  # "because of signal SIGSEGV" or "with code 1"
+        time.sleep(2)  # room for a restart, were one configured
+    finally:
+        exit_code = dora.stop()
+    log = dora.log()
+    assert exit_code == 1
+    assert "Node `simulation` failed" in log
+    assert log.count("simulation: spawner spawned node") == 1, "the simulation was started again"
+    assert "restarting node" not in log

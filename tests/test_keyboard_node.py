@@ -1,0 +1,243 @@
+"""The keyboard node's command handling, without a daemon: the joint_cmd arrays it sends and its replies."""
+
+from __future__ import annotations
+
+import io
+import json
+import threading
+
+import pyarrow as pa
+import pytest
+from dora.testing import MockNode
+
+from nodes import keyboard_control
+from nodes.keyboard_control import EventPump, KeyboardControl, joint_cmd_sender, run_prompt
+from so101.poses import PoseStore
+
+STATE_DEG = [-30.004, 44.981, -59.687, 30.0, -0.001]
+GRIPPER_DEG = 12.345
+
+
+def sent(node) -> list[list[float]]:
+    arrays = node.outputs.get("joint_cmd", [])
+    assert all(array.type == pa.float64() for array in arrays)
+    return [array.to_pylist() for array in arrays]
+
+
+def make_control(tmp_path, lang="zh", events=()):
+    """A KeyboardControl sending through a MockNode, fed `events` by the real EventPump."""
+    node = MockNode(list(events))
+    control = KeyboardControl(joint_cmd_sender(node), PoseStore(tmp_path / "poses.json"), lang)
+    stops = []
+    pump = EventPump(node, control, on_stop=lambda: stops.append(True))
+    pump.run()  # in this thread: the MockNode's events end with STOP
+    assert stops == [True]
+    return node, control
+
+
+def state_events():
+    return [("joint_state", pa.array(STATE_DEG)), ("gripper_state", pa.array([GRIPPER_DEG]))]
+
+
+def test_the_course_script_sends_these_arrays_and_replies_these_lines(tmp_path):
+    node, control = make_control(tmp_path, events=state_events())
+    replies = []
+    for line in ["0 90", "1 -45", "batch -30 45 -60 30 0", "save a", "home", "go a", "grip 30", "open", "close"]:
+        lines, quit_now = control.handle_line(line)
+        assert not quit_now
+        replies += lines
+    assert replies == [
+        "  → 关节 0 (shoulder_pan) → 90°",
+        "  → 关节 1 (shoulder_lift) → -45°",
+        "  → 全关节 → [-30.0, 45.0, -60.0, 30.0, 0.0]°",
+        "  → 姿态 'a' 已保存: [-30.0, 44.98, -59.69, 30.0, 0.0]°,夹爪 12.35°",
+        "  → 回零指令已发送",
+        "  → 移动到姿态 'a'",
+        "  → 关节 5 (gripper) → 30°",
+        "  → 关节 5 (gripper) → 100°",
+        "  → 关节 5 (gripper) → 0°",
+    ]
+    assert sent(node) == [
+        [0.0, 90.0],
+        [1.0, -45.0],
+        [-30.0, 45.0, -60.0, 30.0, 0.0],
+        [0.0, 0.0, 0.0, 0.0, 0.0],
+        [-30.0, 44.98, -59.69, 30.0, 0.0, 12.35],
+        [5.0, 30.0],
+        [5.0, 100.0],
+        [5.0, 0.0],
+    ]
+    assert json.loads((tmp_path / "poses.json").read_text()) == {
+        "a": {"joints_deg": [-30.0, 44.98, -59.69, 30.0, 0.0], "gripper_deg": 12.35}
+    }
+
+
+def test_english_replies(tmp_path):
+    node, control = make_control(tmp_path, lang="en", events=state_events())
+    assert control.handle_line("0 90")[0] == ["  → joint 0 (shoulder_pan) → 90°"]
+    assert control.handle_line("batch -30 45 -60 30 0 20")[0] == [
+        "  → all joints → [-30.0, 45.0, -60.0, 30.0, 0.0]°, gripper → 20°"
+    ]
+    assert control.handle_line("home")[0] == ["  → home command sent"]
+    assert control.handle_line("go b")[0] == ["  no pose 'b'; saved poses: none (save one with 'save NAME')"]
+    assert sent(node) == [[0.0, 90.0], [-30.0, 45.0, -60.0, 30.0, 0.0, 20.0], [0.0] * 5]
+
+
+@pytest.mark.parametrize("line", ["abc", "0", "0 abc", "0 nan", "0 inf", "9 10", "0 200", "batch 1 2", "go nowhere",
+                                  "save", "list", "state", "help", "poses", ""])
+def test_lines_that_move_nothing_send_nothing(tmp_path, line):
+    node, control = make_control(tmp_path)
+    replies, quit_now = control.handle_line(line)
+    assert not quit_now
+    assert sent(node) == []
+    assert all("\n" not in reply for reply in replies)
+
+
+def test_invalid_input_gets_one_reply_line_with_the_valid_form(tmp_path):
+    _, control = make_control(tmp_path)
+    assert control.handle_line("9 10")[0] == ["  关节号范围 0-5(0-4 手臂,5 夹爪),收到 '9';格式:关节号 角度(如 '0 45')"]
+    assert control.handle_line("go zz")[0] == ["  未找到姿态 'zz';已保存的姿态: 无(用 'save 名字' 保存)"]
+
+
+def test_state_shows_the_latest_angles(tmp_path):
+    _, control = make_control(tmp_path, events=state_events())
+    assert control.handle_line("state")[0] == ["  当前关节角度: [-30.0, 44.98, -59.69, 30.0, 0.0]°,夹爪 12.35°"]
+    _, without = make_control(tmp_path / "other", lang="en")
+    assert without.handle_line("state", state_wait_s=0)[0] == [
+        "  no joint_state received yet (is the simulation running?)"
+    ]
+
+
+def test_save_without_any_joint_state_says_so_and_writes_nothing(tmp_path):
+    node, control = make_control(tmp_path, lang="en")
+    assert control.handle_line("save a", state_wait_s=0)[0] == [
+        "  no joint_state received yet (is the simulation running?): cannot save a pose"
+    ]
+    assert not (tmp_path / "poses.json").exists()
+
+
+def test_save_waits_for_the_first_joint_state(tmp_path):
+    control = KeyboardControl(lambda angles_deg: None, PoseStore(tmp_path / "poses.json"), "en")
+    arrival = threading.Timer(0.1, control.on_event, [{"type": "INPUT", "id": "joint_state", "value": pa.array([1.0] * 5)}])
+    arrival.start()
+    replies, _ = control.handle_line("save a", state_wait_s=30)
+    arrival.join()
+    assert replies == ["  → pose 'a' saved: [1.0, 1.0, 1.0, 1.0, 1.0]°"]
+
+
+def test_the_latest_state_is_the_one_saved(tmp_path):
+    events = [("joint_state", pa.array([float(i)] * 5)) for i in range(20)]
+    _, control = make_control(tmp_path, lang="en", events=events)
+    control.handle_line("save last")
+    assert control.poses.get("last").joints_deg == (19.0,) * 5
+    assert control.poses.get("last").gripper_deg is None
+
+
+def test_saved_poses_are_there_after_a_restart(tmp_path):
+    _, first = make_control(tmp_path, events=state_events())
+    first.handle_line("save a")
+    node, second = make_control(tmp_path)
+    assert second.handle_line("poses")[0] == ["    a: [-30.0, 44.98, -59.69, 30.0, 0.0]°,夹爪 12.35°"]
+    second.handle_line("go a")
+    assert sent(node) == [[-30.0, 44.98, -59.69, 30.0, 0.0, 12.35]]
+
+
+def test_quit_and_exit_quit(tmp_path):
+    _, control = make_control(tmp_path)
+    assert control.handle_line("quit") == (["  再见"], True)
+    assert control.handle_line("exit") == (["  再见"], True)
+
+
+def test_a_piped_script_runs_in_order_echoes_and_stops_at_quit(tmp_path, monkeypatch, capsys):
+    node, control = make_control(tmp_path, lang="en", events=state_events())
+    monkeypatch.setattr("sys.stdin", io.StringIO("0 90\nbogus\nsave a\nquit\n1 10\n"))
+    run_prompt(control, interactive=False, history_file=tmp_path / "history")
+    assert capsys.readouterr().out.splitlines() == [
+        "> 0 90",
+        "  → joint 0 (shoulder_pan) → 90°",
+        "> bogus",
+        "  cannot read 'bogus': use 'JOINT ANGLE' (e.g. '0 45'), batch, grip, open, close, home, list, state, save, "
+        "go, poses, help, quit (type help)",
+        "> save a",
+        "  → pose 'a' saved: [-30.0, 44.98, -59.69, 30.0, 0.0]°, gripper 12.35°",
+        "> quit",
+        "  bye",
+    ]
+    assert sent(node) == [[0.0, 90.0]]
+    assert not (tmp_path / "history").exists()
+
+
+class FakeNode:
+    """What main() needs of dora.Node: it hands out `events`, then waits (None), and records outputs."""
+
+    def __init__(self, events):
+        self.events = list(events)
+        self.outputs = []
+
+    def next(self, timeout=None):
+        return self.events.pop(0) if self.events else None
+
+    def try_recv(self):
+        return self.next()
+
+    def send_output(self, output_id, data, metadata=None):
+        self.outputs.append((output_id, data))
+
+
+def test_main_joins_as_keyboard_control_and_runs_a_piped_file_to_its_end(tmp_path, monkeypatch, capsys):
+    import dora
+
+    created = []
+
+    def fake_node(node_id):
+        created.append(node_id)
+        node = FakeNode([{"type": "INPUT", "id": "joint_state", "value": pa.array([5.0, 4.0, 3.0, 2.0, 1.0])}])
+        created.append(node)
+        return node
+
+    monkeypatch.setattr(dora, "Node", fake_node)
+    monkeypatch.setenv("SO101_LANG", "en")
+    monkeypatch.setenv("SO101_POSES_FILE", str(tmp_path / "poses.json"))
+    monkeypatch.setattr("sys.stdin", io.StringIO("save p\nhome\ngo p\n"))
+    assert keyboard_control.main([]) == 0
+    assert created[0] == "keyboard_control"
+    outputs = created[1].outputs
+    assert [output_id for output_id, _ in outputs] == ["joint_cmd", "joint_cmd"]
+    assert [data.to_pylist() for _, data in outputs] == [[0.0] * 5, [5.0, 4.0, 3.0, 2.0, 1.0]]
+    assert all(data.type == pa.float64() for _, data in outputs)
+    out = capsys.readouterr().out
+    assert "  → pose 'p' saved: [5.0, 4.0, 3.0, 2.0, 1.0]°" in out and "  → moving to pose 'p'" in out
+    assert json.loads((tmp_path / "poses.json").read_text())["p"]["joints_deg"] == [5.0, 4.0, 3.0, 2.0, 1.0]
+
+
+def test_main_reports_a_corrupt_poses_file_in_one_line(tmp_path, monkeypatch, capsys):
+    import dora
+
+    (tmp_path / "poses.json").write_text("{not json")
+    monkeypatch.setattr(dora, "Node", lambda node_id: FakeNode([]))
+    monkeypatch.setenv("SO101_POSES_FILE", str(tmp_path / "poses.json"))
+    monkeypatch.setattr("sys.stdin", io.StringIO(""))
+    assert keyboard_control.main([]) == 0
+    notice = [line for line in capsys.readouterr().out.splitlines() if "poses file" in line]
+    assert len(notice) == 1 and "moved aside to poses.json.corrupt-" in notice[0]
+
+
+def test_main_refuses_an_unknown_language(monkeypatch, capsys):
+    monkeypatch.setenv("SO101_LANG", "fr")
+    assert keyboard_control.main([]) == 2
+    assert "SO101_LANG='fr' is not one of: zh, en" in capsys.readouterr().err
+
+
+def test_main_without_a_running_dataflow_says_how_to_start_it(monkeypatch, capsys):
+    import dora
+
+    def no_daemon(node_id):
+        raise RuntimeError("Could not setup node from node id.\n\nCaused by:\n   Connection refused\n\nLocation:\n  lib.rs:1")
+
+    monkeypatch.setattr(dora, "Node", no_daemon)
+    monkeypatch.setenv("SO101_LANG", "en")
+    assert keyboard_control.main([]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1
+    assert "start it first in another terminal: `dora run dataflow.yml`" in err and "Connection refused" in err
+    assert "lib.rs" not in err

@@ -1,0 +1,129 @@
+"""A person at a terminal: `so101 teleop --mode direct` in tmux, driven with send-keys, read with capture-pane."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+import subprocess
+import sys
+import time
+import uuid
+from pathlib import Path
+
+import pytest
+
+pytestmark = [
+    pytest.mark.person,
+    pytest.mark.skipif(shutil.which("tmux") is None, reason="tmux is not installed (.ci/run installs it)"),
+]
+
+SO101 = Path(sys.executable).parent / "so101"
+TARGET_DEG = [-30.0, 45.0, -60.0, 30.0, 0.0]
+
+
+class Terminal:
+    """One tmux session of 200x50 running a shell command; the pane stays after the command exits."""
+
+    def __init__(self, command: str, env: dict[str, str]):
+        self.name = f"so101-test-{uuid.uuid4().hex[:8]}"
+        exports = " ".join(f"{key}='{value}'" for key, value in env.items())
+        subprocess.run(
+            ["tmux", "new-session", "-d", "-s", self.name, "-x", "200", "-y", "50",
+             f"env {exports} {command}; echo TELEOP_EXIT=$?; sleep 600"],
+            check=True,
+        )
+
+    def screen(self) -> str:
+        result = subprocess.run(
+            ["tmux", "capture-pane", "-p", "-J", "-S", "-500", "-t", self.name], capture_output=True, text=True,
+        )
+        # -J keeps trailing blanks; a person does not see them
+        return "\n".join(line.rstrip() for line in result.stdout.splitlines())
+
+    def type_line(self, text: str) -> None:
+        # -l: literal text, or tmux reads "home" as the Home key
+        subprocess.run(["tmux", "send-keys", "-t", self.name, "-l", text], check=True)
+        subprocess.run(["tmux", "send-keys", "-t", self.name, "Enter"], check=True)
+
+    def wait_for(self, pattern: str, timeout_s: float = 60, after: int = 0) -> re.Match:
+        """The first match of `pattern` in the screen text past offset `after` (waits for it to appear)."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            screen = self.screen()
+            match = re.compile(pattern, re.M).search(screen, after)
+            if match:
+                return match
+            if time.monotonic() > deadline:
+                raise AssertionError(f"{pattern!r} not on the screen within {timeout_s}s:\n{screen}")
+            time.sleep(0.2)
+
+    def close(self) -> None:
+        subprocess.run(["tmux", "kill-session", "-t", self.name], capture_output=True)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except (OSError, IndexError):
+        return False
+    return state != "Z"
+
+
+def test_a_person_drives_the_arm_from_the_prompt(tmp_path):
+    poses_file = tmp_path / "poses.json"
+    log_file = tmp_path / "dora.log"
+    env = {
+        "SO101_POSES_FILE": str(poses_file), "SO101_HISTORY_FILE": str(tmp_path / "history"),
+        "SO101_LANG": "zh", "PATH": os.environ["PATH"],
+    }
+    terminal = Terminal(f"{SO101} teleop --mode direct --log {log_file}", env)
+    try:
+        end = terminal.wait_for(r"^=+\n>$", timeout_s=120).start()
+
+        def command(text: str, reply: str, timeout_s: float = 20) -> re.Match:
+            nonlocal end
+            terminal.type_line(text)
+            match = terminal.wait_for(rf"^> {re.escape(text)}\n{reply}$", timeout_s, after=end)
+            end = match.end()
+            return match
+
+        command("0 90", re.escape("  → 关节 0 (shoulder_pan) → 90°"))
+        command("batch -30 45 -60 30 0", re.escape("  → 全关节 → [-30.0, 45.0, -60.0, 30.0, 0.0]°"))
+        def state_reaches(target_deg: list[float]) -> None:
+            # the arm needs about half a second to get there: `state` until it has (30 s at most)
+            for _ in range(60):
+                reached = command("state", r"  当前关节角度: \[(.*)\]°.*")
+                angles = [float(word) for word in reached.group(1).split(",")]
+                if all(abs(angle - target) <= 1.0 for angle, target in zip(angles, target_deg)):
+                    return
+                time.sleep(0.5)
+            raise AssertionError(f"the arm did not reach {target_deg}: last state {angles}")
+
+        state_reaches(TARGET_DEG)
+        saved = command("save a", r"  → 姿态 'a' 已保存: \[(.*)\]°.*")
+        saved_deg = [float(word) for word in saved.group(1).split(",")]
+        assert all(abs(angle - target) <= 1.0 for angle, target in zip(saved_deg, TARGET_DEG)), saved_deg
+        command("home", re.escape("  → 回零指令已发送"))
+        state_reaches([0.0] * 5)
+        command("go a", re.escape("  → 移动到姿态 'a'"))
+        state_reaches(saved_deg)
+        command("9 10", re.escape("  关节号范围 0-5(0-4 手臂,5 夹爪),收到 '9';格式:关节号 角度(如 '0 45')"))
+        command("go b", re.escape("  未找到姿态 'b';已保存的姿态: a(用 'save 名字' 保存)"))
+        command("0 nan", re.escape("  'nan' 不是角度:角度是十进制数字,单位度(如 45、-30.5)"))
+        command("quit", re.escape("  再见"))
+        terminal.wait_for(r"^数据流已停止\nTELEOP_EXIT=0$", timeout_s=60, after=end)
+        screen = terminal.screen()
+    finally:
+        terminal.close()
+
+    assert "Traceback" not in screen, screen
+    assert not re.search(r'^\s*\{".*"level"', screen, re.M), f"dora log lines in the prompt:\n{screen}"
+    poses = json.loads(poses_file.read_text())
+    assert list(poses) == ["a"]
+    assert poses["a"]["joints_deg"] == saved_deg
+    # every process dora started is gone
+    spawned = [int(pid) for pid in re.findall(r"spawned node with pid (\d+)", log_file.read_text())]
+    assert spawned, log_file.read_text()[-2000:]
+    assert [pid for pid in spawned if _alive(pid)] == []

@@ -1,0 +1,96 @@
+"""Headless pictures: `render_rgb` shows the arm, follows its pose, and `so101 snapshot` writes a PNG of it."""
+
+from __future__ import annotations
+
+import io
+import struct
+
+import numpy as np
+import pybullet as p
+import pytest
+
+from so101.cli import main
+from so101.png import encode_png
+
+SIZE = (160, 120)
+
+
+def arm_pixels(rgb: np.ndarray) -> np.ndarray:
+    """The SO-101's yellow: the floor is white and pale blue, so only the arm is red+green with little blue."""
+    red, green, blue = (rgb[:, :, channel].astype(int) for channel in range(3))
+    return (red > 150) & (green > 110) & (blue < 90)
+
+
+def test_render_is_an_rgb_uint8_image_of_the_asked_size(shared_sim):
+    rgb = shared_sim.render_rgb(*SIZE)
+    assert rgb.dtype == np.uint8
+    assert rgb.shape == (SIZE[1], SIZE[0], 3)
+
+
+def test_the_image_shows_the_arm_and_not_an_empty_scene(make_sim):
+    sim = make_sim()
+    with_arm = sim.render_rgb(*SIZE)
+    assert np.array_equal(with_arm, sim.render_rgb(*SIZE))  # same scene, same pixels: differences below are real
+    p.resetBasePositionAndOrientation(sim.robot_id, [50, 50, 0], [0, 0, 0, 1], physicsClientId=sim.client)
+    empty = sim.render_rgb(*SIZE)
+    assert arm_pixels(empty).sum() == 0
+    assert arm_pixels(with_arm).sum() > 0.02 * SIZE[0] * SIZE[1]
+    changed = np.abs(with_arm.astype(int) - empty.astype(int)).max(axis=2) > 30
+    assert changed.sum() > 0.02 * SIZE[0] * SIZE[1]
+
+
+def test_the_image_changes_when_the_pose_changes(make_sim):
+    sim = make_sim(time_step_s=0.004)
+    home = sim.render_rgb(*SIZE)
+    sim.set_targets_deg([90.0, -40.0, 40.0, 30.0, 0.0, 30.0])
+    sim.step(400)
+    moved = sim.render_rgb(*SIZE)
+    # The arm's yellow moved: pixels that were arm are floor now, and the other way round.
+    assert (arm_pixels(home) & ~arm_pixels(moved)).sum() > 100
+    assert (arm_pixels(moved) & ~arm_pixels(home)).sum() > 100
+
+
+def test_png_encoder_round_trips_through_matplotlib():
+    image = pytest.importorskip("matplotlib.image")
+    rgb = np.random.default_rng(5).integers(0, 256, size=(7, 11, 3), dtype=np.uint8)
+    decoded = image.imread(io.BytesIO(encode_png(rgb)))
+    assert np.array_equal((decoded[:, :, :3] * 255).round().astype(np.uint8), rgb)
+
+
+def png_size(data: bytes) -> tuple[int, int]:
+    assert data[:8] == b"\x89PNG\r\n\x1a\n"
+    assert data[12:16] == b"IHDR"
+    return struct.unpack(">II", data[16:24])
+
+
+def test_snapshot_command_writes_a_png_of_the_arm_in_the_pose(tmp_path, capsys):
+    image = pytest.importorskip("matplotlib.image")
+    out = tmp_path / "pics" / "arm.png"
+    assert main(["snapshot", "--pose", "45", "-30", "30", "20", "0", "--out", str(out), "--width", "200", "--height", "150"]) == 0
+    printed = capsys.readouterr().out
+    assert f"wrote {out} (200x150)" in printed
+    assert "pose reached (deg, joints 0-4 and gripper): 45.0 -30.0 30.0 20.0" in printed
+    data = out.read_bytes()
+    assert png_size(data) == (200, 150)
+    rgb = (image.imread(io.BytesIO(data))[:, :, :3] * 255).round().astype(np.uint8)
+    assert arm_pixels(rgb).sum() > 0.02 * 200 * 150
+
+
+def test_snapshot_says_when_the_pose_cannot_be_reached(tmp_path, capsys):
+    # Shoulder_lift at 90° from home drives the gripper into the floor; it stops near 38°.
+    assert main(["snapshot", "--pose", "0", "90", "0", "0", "0", "--out", str(tmp_path / "a.png"), "--width", "32", "--height", "32"]) == 0
+    assert "note: shoulder_lift did not reach the asked angle" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(
+    "pose, message",
+    [
+        (["1", "2"], "--pose takes 5 angles (joints 0-4) or 6 (with the gripper), got 2"),
+        (["0", "400", "0", "0", "0"], "--pose angle 1 (shoulder_lift) is 400°, outside its range [-100.0°, 100.0°]"),
+    ],
+)
+def test_snapshot_refuses_a_bad_pose_in_one_line(tmp_path, capsys, pose, message):
+    out = tmp_path / "never.png"
+    assert main(["snapshot", "--pose", *pose, "--out", str(out)]) == 2
+    assert capsys.readouterr().err == f"so101 snapshot: {message}\n"
+    assert not out.exists()
