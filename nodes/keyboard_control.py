@@ -41,6 +41,7 @@ from so101.commands import (  # noqa: E402
 )
 from so101.poses import Pose, PoseStore  # noqa: E402
 from so101.robot import ACTUATED_JOINTS, NUM_ARM_JOINTS  # noqa: E402
+from so101.versions import dora_version_problem  # noqa: E402
 
 NODE_ID = "keyboard_control"
 DEFAULT_POSES_FILE = ROOT / "saved_poses.json"
@@ -348,6 +349,9 @@ def main(argv: list[str] | None = None) -> int:
         except Exception as error:  # noqa: BLE001 - dora raises a bare RuntimeError with a multi-line chain
             reason = " ".join(str(error).split("Location:")[0].split())  # drop the Rust backtrace
             print(TEXT[lang]["join_failed"].format(node_id=NODE_ID, error=reason), file=sys.stderr)
+            version_problem = dora_version_problem()  # the likeliest cause once the dataflow is known to run
+            if version_problem:
+                print(f"keyboard_control: {version_problem}", file=sys.stderr)
             return 1
         control.send_joint_cmd = joint_cmd_sender(node)
         pump = EventPump(node, control, on_stop=_interrupt_main_thread)

@@ -105,6 +105,16 @@ def main() -> int:
         return 2
     text = TEXT["en" if os.environ.get("SO101_LANG", "zh") == "en" else "zh"]
 
+    # Load the arm before joining the dataflow: ticks that arrive while the URDF loads
+    # would only be discarded, one warning each.
+    try:
+        sim = SO101Sim(
+            mode=mode, time_step_s=DEFAULT_TICK_S, control_mode=control_mode,
+            servo_damping_ratio=servo_zeta, log=log,
+        )
+    except (ModelFilesError, DisplayError, ValueError) as error:
+        print(f"[simulation] cannot start: {error}", file=sys.stderr, flush=True)
+        return 2
     node = Node()
     # The physics step equals the tick period, so simulated time keeps pace with the
     # wall clock (the course's default 1/240 s step on a 4 ms tick runs 4% fast).
@@ -112,14 +122,7 @@ def main() -> int:
     if tick_s is None:
         tick_s = DEFAULT_TICK_S
         log(text["no_timer"].format(step_ms=tick_s * 1000))
-    try:
-        sim = SO101Sim(
-            mode=mode, time_step_s=tick_s, control_mode=control_mode,
-            servo_damping_ratio=servo_zeta, log=log,
-        )
-    except (ModelFilesError, DisplayError, ValueError) as error:
-        print(f"[simulation] cannot start: {error}", file=sys.stderr, flush=True)
-        return 2
+    sim.set_time_step_s(tick_s)
     log(text["loaded"].format(robot_id=sim.robot_id, mode=sim.mode.upper(), step_ms=tick_s * 1000, control=control_mode))
 
     joint_targets_deg = tuple(HOME_POSE_DEG)

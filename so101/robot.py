@@ -45,8 +45,9 @@ ACTUATED_JOINTS: tuple[Joint, ...] = ARM_JOINTS + (GRIPPER,)
 NUM_ARM_JOINTS = len(ARM_JOINTS)
 GRIPPER_COMMAND_INDEX = NUM_ARM_JOINTS
 
-# `so101_new_calib` puts each joint's zero in the middle of its range, so the
-# course's `home` (all zeros) is a valid, upright pose.
+# `so101_new_calib` puts each joint's zero near the middle of its range. The
+# course's `home` (all zeros) stands the upper arm up and holds the forearm and
+# gripper out level, forward: an "L" (see `so101 snapshot`, which renders it by default).
 HOME_POSE_DEG: tuple[float, ...] = (0.0,) * len(ACTUATED_JOINTS)
 
 # The joint table PyBullet reports for this URDF (course step A), index -> (name, type).

@@ -63,7 +63,7 @@ DEFAULT_CAMERA = Camera()
 
 @dataclass(frozen=True)
 class JointInfo:
-    """A row of `getJointInfo`, limits in degrees for revolute joints (radians as PyBullet reports them too)."""
+    """A row of `getJointInfo`, as PyBullet reports it: limits in radians, max_velocity in rad/s, max_force in N·m."""
 
     index: int
     name: str
@@ -189,6 +189,13 @@ class SO101Sim:
         if goal.shape != (len(ACTUATED_JOINTS),) or not np.all(np.isfinite(goal)):
             raise ValueError(f"expected {len(ACTUATED_JOINTS)} finite angles in degrees, got {targets_deg!r}")
         self._goal_rad = np.radians(goal)
+
+    def set_time_step_s(self, time_step_s: float) -> None:
+        """Change the physics step (before the first step: `sim_time_s` assumes one step size)."""
+        if not time_step_s > 0:
+            raise ValueError(f"time step must be a positive number of seconds, got {time_step_s!r}")
+        self.time_step_s = float(time_step_s)
+        p.setPhysicsEngineParameter(fixedTimeStep=self.time_step_s, physicsClientId=self.client)
 
     def targets_deg(self) -> np.ndarray:
         return np.degrees(self._goal_rad)

@@ -27,6 +27,7 @@ import yaml
 
 from so101.display import MODES, resolve_mode
 from so101.steps import _language
+from so101.versions import dora_version_problem
 
 ROOT = Path(__file__).resolve().parents[1]
 DATAFLOW = ROOT / "dataflow.yml"
@@ -193,6 +194,11 @@ def run(args: argparse.Namespace) -> int:
         print(notice, flush=True)
     if not DATAFLOW.exists() or not PROMPT.exists():
         print(f"so101 teleop: {DATAFLOW} or {PROMPT} is missing: run it from a checkout of the project", file=sys.stderr)
+        return 2
+    # A CLI and library of different versions fail deep in the daemon; say it here, in one line.
+    version_problem = dora_version_problem(_dora_executable())
+    if version_problem:
+        print(f"so101 teleop: {version_problem}", file=sys.stderr)
         return 2
     log = args.log.expanduser().resolve()
     env = dict(os.environ, SO101_MODE=resolved_mode, SO101_LANG=args.lang)

@@ -164,3 +164,17 @@ def test_dora_that_does_not_run_is_reported(tmp_path, monkeypatch):
 def test_no_dora_on_path_is_reported(tmp_path, monkeypatch):
     monkeypatch.setenv("PATH", str(tmp_path))
     assert dora_version_problem() == f"the dora CLI is not on PATH: pip install 'dora-rs-cli=={LIBRARY_VERSION}'"
+
+
+def test_teleop_with_mismatched_dora_stops_before_starting_anything(tmp_path, monkeypatch, capsys):
+    from so101 import cli, teleop
+
+    bin_dir = fake_dora(tmp_path, 'echo "dora-cli 1.0.4"')
+    monkeypatch.setattr(teleop, "_dora_executable", lambda: str(bin_dir / "dora"))
+    log_file = tmp_path / "dora.log"
+    assert cli.main(["teleop", "--mode", "direct", "--lang", "en", "--log", str(log_file)]) == 2
+    error = capsys.readouterr().err.strip()
+    assert error.startswith(f"so101 teleop: the dora CLI ({bin_dir / 'dora'}) is version 1.0.4")
+    assert f"the dora-rs library is version {LIBRARY_VERSION}" in error
+    assert len(error.splitlines()) == 1
+    assert not log_file.exists()  # no dataflow was started
