@@ -1,4 +1,4 @@
-"""Faults on a real `dora run`, headless: the simulation node killed mid-run.
+"""Faults on a real `dora run`, headless: the prompt or the simulation node killed mid-run.
 
 dataflow.yml leaves the simulation under dora 1.1's default restart policy
 (`never`): a killed simulation stops the whole dataflow with the node, the
@@ -9,16 +9,19 @@ person had just closed, and loop on a missing model file.
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import signal
+import subprocess
+import sys
 import time
 import uuid
 from pathlib import Path
 
 import pytest
 
-from tests.dataflow_helpers import DoraRun, write_test_dataflow
+from tests.dataflow_helpers import ROOT, DoraRun, dora_env, write_test_dataflow
 
 pytestmark = pytest.mark.dataflow
 
@@ -86,3 +89,47 @@ def test_killed_simulation_stops_the_dataflow_with_a_clear_report(tmp_path):
     assert "recorder finished successfully" in log
     assert record_file.exists()
     assert left == [], [command_line(pid) for pid in left]
+
+
+def test_killed_prompt_leaves_the_simulation_running_and_a_new_prompt_drives_it(tmp_path):
+    record_file = tmp_path / "joint_state.json"
+    dataflow = write_test_dataflow(tmp_path, sim_env={"SO101_LANG": "en"}, record_file=record_file)
+    prompt_env = dora_env(
+        SO101_LANG="en", SO101_POSES_FILE=str(tmp_path / "poses.json"), SO101_HISTORY_FILE=str(tmp_path / "history"),
+    )
+    prompt_command = [sys.executable, str(ROOT / "nodes" / "keyboard_control.py")]
+    dora = DoraRun(dataflow, tmp_path / "dora.log", stop_after_s=120)
+    try:
+        dora.wait_for("SO-101 loaded", timeout_s=60)
+        first = subprocess.Popen(
+            prompt_command, stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+            text=True, env=prompt_env,
+        )
+        first.stdin.write("0 45\n")
+        first.stdin.flush()  # stdin stays open: the prompt waits for more, as at a keyboard
+        dora.wait_for("joint 0 target -> 45°", timeout_s=30)
+        time.sleep(1.0)  # 45° at 3 rad/s takes 0.26 s
+        first.kill()
+        first.wait(10)
+        killed_at = time.monotonic()
+        time.sleep(1.0)
+        second = subprocess.run(
+            prompt_command, input="0 -45\n", capture_output=True, text=True, env=prompt_env, timeout=60,
+        )
+        dora.wait_for("joint 0 target -> -45°", timeout_s=30)
+        time.sleep(1.5)
+    finally:
+        exit_code = dora.stop()
+    log = plain(dora.log())
+
+    assert second.returncode == 0, second.stdout + second.stderr
+    assert "  → joint 0 (shoulder_pan) → -45°" in second.stdout, second.stdout
+    assert exit_code == 0, log[-3000:]
+    samples = json.loads(record_file.read_text())["samples"]
+    # While no prompt is connected the simulation keeps stepping at 250 Hz, holding the first prompt's target.
+    alone = [state for t, state in samples if killed_at < t < killed_at + 1.0]
+    assert len(alone) >= 200, len(alone)
+    assert all(abs(state[0] - 45.0) <= 1.0 for state in alone), alone[-1]
+    # The new prompt's command reached the arm.
+    assert abs(samples[-1][1][0] - (-45.0)) <= 1.0, samples[-1]
+    assert "Traceback" not in log

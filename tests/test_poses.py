@@ -4,6 +4,11 @@ from __future__ import annotations
 
 import json
 import os
+import random
+import signal
+import subprocess
+import sys
+import time
 
 import pytest
 
@@ -98,3 +103,36 @@ def test_a_failed_write_is_reported_and_the_pose_kept_in_memory(tmp_path):
     problem = store.save("a", Pose((0.0,) * 5))
     assert problem and str(path) in problem
     assert store.get("a") == Pose((0.0,) * 5)
+
+
+SAVE_FOREVER = """
+import sys
+from so101.poses import Pose, PoseStore
+store = PoseStore(sys.argv[1])
+count = 0
+while True:
+    count += 1
+    store.save(f"extra{count % 50}", Pose((float(count),) * 5))
+    if count == 1:
+        print("saving", flush=True)
+"""
+
+
+def test_a_prompt_killed_mid_save_leaves_the_file_whole(tmp_path):
+    path = tmp_path / "poses.json"
+    store = PoseStore(path)
+    for index in range(500):  # a file of ~70 kB: each write takes long enough to be cut in the middle
+        store.save(f"kept{index}", Pose((float(index),) * 5))
+    chance = random.Random(101)
+    for _ in range(10):
+        saver = subprocess.Popen(
+            [sys.executable, "-c", SAVE_FOREVER, str(path)], stdout=subprocess.PIPE, text=True,
+            cwd=os.path.dirname(os.path.dirname(__file__)),
+        )
+        assert saver.stdout.readline() == "saving\n"
+        time.sleep(chance.uniform(0.0, 0.03))
+        saver.send_signal(signal.SIGKILL)
+        saver.wait()
+        reloaded = PoseStore(path)
+        assert reloaded.load_notice is None
+        assert {f"kept{index}" for index in range(500)} <= set(reloaded.names())

@@ -127,3 +127,33 @@ def test_a_person_drives_the_arm_from_the_prompt(tmp_path):
     spawned = [int(pid) for pid in re.findall(r"spawned node with pid (\d+)", log_file.read_text())]
     assert spawned, log_file.read_text()[-2000:]
     assert [pid for pid in spawned if _alive(pid)] == []
+
+
+def test_ctrl_c_on_teleop_stops_everything_and_keeps_the_saved_poses(tmp_path):
+    poses_file = tmp_path / "poses.json"
+    log_file = tmp_path / "dora.log"
+    env = {
+        "SO101_POSES_FILE": str(poses_file), "SO101_HISTORY_FILE": str(tmp_path / "history"),
+        "SO101_LANG": "en", "PATH": os.environ["PATH"],
+    }
+    terminal = Terminal(f"{SO101} teleop --mode direct --lang en --log {log_file}", env)
+    try:
+        end = terminal.wait_for(r"^=+\n>$", timeout_s=120).start()
+        terminal.type_line("save b")
+        end = terminal.wait_for(r"^  → pose 'b' saved: .*$", timeout_s=20, after=end).end()
+        subprocess.run(["tmux", "send-keys", "-t", terminal.name, "C-c"], check=True)
+        pressed_at = time.monotonic()
+        exit_code = int(terminal.wait_for(r"^TELEOP_EXIT=(\d+)$", timeout_s=30, after=end).group(1))
+        # Measured by polling the screen every 0.2 s: an upper bound on the real time.
+        stopped_within_s = time.monotonic() - pressed_at
+        screen = terminal.screen()
+    finally:
+        terminal.close()
+
+    assert exit_code in (0, 130), screen
+    assert stopped_within_s <= 3.0, f"{stopped_within_s:.1f} s from Ctrl-C to the shell prompt"
+    assert "Traceback" not in screen, screen
+    assert list(json.loads(poses_file.read_text())) == ["b"]
+    spawned = [int(pid) for pid in re.findall(r"spawned node with pid (\d+)", log_file.read_text())]
+    assert spawned, log_file.read_text()[-2000:]
+    assert [pid for pid in spawned if _alive(pid)] == []
