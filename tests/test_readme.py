@@ -1,0 +1,52 @@
+"""The README tells the truth about the tree: every file it names exists, every `so101` subcommand is real."""
+
+from __future__ import annotations
+
+import re
+
+from so101.cli import SUBCOMMANDS
+from tests.dataflow_helpers import ROOT
+
+README = (ROOT / "README.md").read_text(encoding="utf-8")
+
+# The project's folders (and the set-up's): a path in the README that starts with one must exist.
+PROJECT_FOLDERS = ("so101", "nodes", "tests", "examples", "bench", "docs", "assets", ".ci", ".venv")
+# path, or path::test_name
+TOKEN = re.compile(r"[\w.*/-]+(?:::\w+)?")
+
+
+def code_spans() -> list[str]:
+    """Inline code, indented blocks and image links: where the README names files and commands."""
+    indented = re.compile(r"^ {4,}(\S.*)$", re.M)  # quoted output may hold backticks of its own
+    return (re.findall(r"`([^`]+)`", indented.sub("", README)) + indented.findall(README)
+            + re.findall(r"\]\(([^)#]+)\)", README))
+
+
+def named_paths() -> list[tuple[str, str | None]]:
+    found = []
+    for code in code_spans():
+        for token in TOKEN.findall(code):
+            path, _, test_name = token.partition("::")
+            if "/" in path and path.split("/")[0] in PROJECT_FOLDERS:
+                found.append((path.rstrip("."), test_name or None))
+    return found
+
+
+def test_the_readme_names_files_that_exist():
+    paths = named_paths()
+    assert len(paths) > 30  # the pattern still finds them
+    missing = sorted({path for path, _ in paths if not list(ROOT.glob(path.rstrip("/")))})
+    assert missing == []
+
+
+def test_the_tests_the_readme_cites_exist():
+    cited = [(path, name) for path, name in named_paths() if name]
+    assert cited
+    for path, name in cited:
+        assert re.search(rf"^def {name}\(", (ROOT / path).read_text(), re.M), f"{path}::{name}"
+
+
+def test_every_so101_command_in_the_readme_exists():
+    used = {name for code in code_spans() for name in re.findall(r"(?:^|\s)so101 ([a-z][a-z-]*)", code)}
+    assert {"assets", "inspect", "joints", "teleop", "plot-step", "snapshot", "bench"} <= used
+    assert used <= set(SUBCOMMANDS), used - set(SUBCOMMANDS)
