@@ -8,18 +8,16 @@ visible. Differences from the course's script: the model comes from this repo's
 assets/SO101 (verified first, so a missing file gives a clear message, not
 "Cannot load URDF file"), and a machine without a display runs DIRECT and stops
 after a bounded number of steps instead of dying on "cannot connect to X server".
+Those two checks, and the course's connect/gravity/ground calls, are in
+open_course_world (so101/steps.py), shared with step B.
 """
 
 import argparse
-import os
 import sys
-import time
 
 import pybullet as p
-import pybullet_data
 
-from so101.assets import ModelFilesError, urdf_path
-from so101.display import DisplayError, resolve_mode
+from so101.steps import open_course_world, step_course_world
 
 JOINT_TYPE_LABELS = {
     p.JOINT_REVOLUTE: "旋转关节 (Revolute)",
@@ -34,19 +32,7 @@ def main() -> int:
                         "with a window, 240 headless)")
     args = parser.parse_args()
 
-    try:
-        urdf = urdf_path()
-        mode, notice = resolve_mode(os.environ.get("SO101_MODE", "auto"))
-    except (ModelFilesError, DisplayError, ValueError) as error:
-        print(f"test_so101.py: {error}", file=sys.stderr)
-        return 2
-    if notice:
-        print(notice)
-
-    p.connect(p.GUI if mode == "gui" else p.DIRECT)
-    p.setAdditionalSearchPath(pybullet_data.getDataPath())  # where plane.urdf lives
-    p.setGravity(0, 0, -9.81)
-    p.loadURDF("plane.urdf")
+    mode, urdf = open_course_world("test_so101.py")  # SO101_MODE=gui|direct|auto picks the mode
     # The URDF's mesh paths (assets/*.stl) are relative to the URDF file itself,
     # so loading it by its full path is enough.
     robot_id = p.loadURDF(str(urdf), basePosition=[0, 0, 0], baseOrientation=[0, 0, 0, 1], useFixedBase=True)
@@ -61,16 +47,7 @@ def main() -> int:
         print(f"  关节 {index}: {name:22s} 类型: {label}")
 
     steps = args.steps if args.steps is not None else (None if mode == "gui" else 240)
-    if steps is None:
-        print("\n运行中... 按 Ctrl+C 退出", flush=True)
-    try:
-        count = 0
-        while steps is None or count < steps:
-            p.stepSimulation()
-            count += 1
-            if mode == "gui":
-                time.sleep(1 / 240)  # real time for the viewer; headless runs flat out
-    except KeyboardInterrupt:
+    if step_course_world(mode, steps, waiting="\n运行中... 按 Ctrl+C 退出"):
         print("\n停止仿真")
     p.disconnect()
     return 0

@@ -8,20 +8,18 @@ step re-sends the five targets with setJointMotorControl2 (PyBullet would keep
 them anyway: a POSITION_CONTROL target holds until replaced). Differences from
 the course's script: the model comes from this repo's assets/SO101, a headless
 machine runs DIRECT and stops, and radians become degrees with math.degrees
-rather than 180 / 3.14159.
+rather than 180 / 3.14159. The set-up (model and display checks, connect,
+gravity, ground) is open_course_world in so101/steps.py, as in step A.
 """
 
 import argparse
 import math
-import os
 import sys
 import time
 
 import pybullet as p
-import pybullet_data
 
-from so101.assets import ModelFilesError, urdf_path
-from so101.display import DisplayError, resolve_mode
+from so101.steps import open_course_world, step_course_world
 
 ARM_JOINT_INDICES = [0, 1, 2, 3, 4]  # index 5 is the fixed gripper_frame_joint, 6 the gripper
 TARGETS_RAD = [0.5, -0.5, 0.5, -0.5, 0.5]  # PyBullet works in radians: 0.5 rad = 28.6°
@@ -34,19 +32,7 @@ def main() -> int:
                         "(default: until Ctrl+C with a window, 0 headless)")
     args = parser.parse_args()
 
-    try:
-        urdf = urdf_path()
-        mode, notice = resolve_mode(os.environ.get("SO101_MODE", "auto"))
-    except (ModelFilesError, DisplayError, ValueError) as error:
-        print(f"test_so101_joints.py: {error}", file=sys.stderr)
-        return 2
-    if notice:
-        print(notice)
-
-    p.connect(p.GUI if mode == "gui" else p.DIRECT)
-    p.setAdditionalSearchPath(pybullet_data.getDataPath())
-    p.setGravity(0, 0, -9.81)
-    p.loadURDF("plane.urdf")
+    mode, urdf = open_course_world("test_so101_joints.py")  # SO101_MODE=gui|direct|auto picks the mode
     robot_id = p.loadURDF(str(urdf), useFixedBase=True)
 
     for _ in range(DRIVE_STEPS):
@@ -68,17 +54,7 @@ def main() -> int:
         print(f"  关节 {joint_index}: {math.degrees(angle_rad):.1f}°")
 
     steps = args.steps if args.steps is not None else (None if mode == "gui" else 0)
-    if steps is None:
-        print("\n观察机械臂姿态,按 Ctrl+C 退出", flush=True)
-    try:
-        count = 0
-        while steps is None or count < steps:
-            p.stepSimulation()
-            count += 1
-            if mode == "gui":
-                time.sleep(1 / 240)
-    except KeyboardInterrupt:
-        pass
+    step_course_world(mode, steps, waiting="\n观察机械臂姿态,按 Ctrl+C 退出")
     p.disconnect()
     return 0
 

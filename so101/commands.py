@@ -236,6 +236,11 @@ def _angle(word: str, joint_position: int, text: dict) -> float | ParseError:
     return min(max(angle, joint.lower_deg), joint.upper_deg)
 
 
+def _set_joint(index: int, word: str, text: dict) -> SetJoint | ParseError:
+    angle = _angle(word, index, text)
+    return angle if isinstance(angle, ParseError) else SetJoint(index, angle)
+
+
 def _pose_name(command: str, words: list[str], text: dict) -> str | ParseError:
     if len(words) != 2 or len(words[1]) > MAX_POSE_NAME_CHARS:
         return ParseError(text["name_form"].format(command=command, max=MAX_POSE_NAME_CHARS))
@@ -280,8 +285,7 @@ def parse_command(line: str, lang: str = "zh") -> Command | ParseError:
     if keyword == "grip":
         if len(words) != 2:
             return ParseError(text["grip_form"].format(lower=GRIPPER.lower_deg, upper=GRIPPER.upper_deg))
-        angle = _angle(words[1], GRIPPER_COMMAND_INDEX, text)
-        return angle if isinstance(angle, ParseError) else SetJoint(GRIPPER_COMMAND_INDEX, angle)
+        return _set_joint(GRIPPER_COMMAND_INDEX, words[1], text)
 
     if keyword in ("save", "go"):
         name = _pose_name(keyword, words, text)
@@ -294,9 +298,7 @@ def parse_command(line: str, lang: str = "zh") -> Command | ParseError:
             return ParseError(text["joint_form"])
         if not keyword.lstrip("+").isdigit() or int(keyword) >= len(ACTUATED_JOINTS):
             return ParseError(text["joint_range"].format(text=words[0]))
-        index = int(keyword)
-        angle = _angle(words[1], index, text)
-        return angle if isinstance(angle, ParseError) else SetJoint(index, angle)
+        return _set_joint(int(keyword), words[1], text)
 
     return ParseError(text["unknown"].format(text=shown if len(shown) <= 40 else shown[:37] + "..."))
 

@@ -1,7 +1,8 @@
 """Course steps A and B as commands: `so101 inspect` and `so101 joints`.
 
 The course runs these as `test_so101.py` and `test_so101_joints.py`; the same
-scripts, readable, are in examples/.
+scripts, readable, are in examples/, and share the set-up and stepping at the
+end of this file.
 """
 
 from __future__ import annotations
@@ -9,10 +10,13 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import sys
 import time
+from pathlib import Path
 
+from so101.assets import ModelFilesError, urdf_path
 from so101.robot import ACTUATED_JOINTS, NUM_ARM_JOINTS
-from so101.display import MODES
+from so101.display import MODE_ENV_VAR, MODES, DisplayError, resolve_mode
 
 COURSE_STEP_B_TARGETS_RAD = (0.5, -0.5, 0.5, -0.5, 0.5)
 COURSE_STEP_B_STEPS = 500
@@ -111,3 +115,52 @@ def run(args: argparse.Namespace) -> int:
             print_angles(sim, args.lang)
         keep_running(sim, args.steps, args.lang)
     return 0
+
+
+# -- for the course scripts in examples/, which use PyBullet's default client directly ------------
+
+
+def open_course_world(script: str) -> tuple[str, Path]:
+    """Check the model and the display, then connect and lay the course's ground: (mode, URDF path).
+
+    The PyBullet calls are the course's: connect, setAdditionalSearchPath, setGravity
+    and loadURDF("plane.urdf"). A missing model or display is one line on stderr,
+    naming `script`, and exit status 2.
+    """
+    import pybullet as p  # here, as in run(): pybullet prints a banner on import
+    import pybullet_data
+
+    try:
+        urdf = urdf_path()
+        mode, notice = resolve_mode(os.environ.get(MODE_ENV_VAR, "auto"))
+    except (ModelFilesError, DisplayError, ValueError) as error:
+        print(f"{script}: {error}", file=sys.stderr)
+        raise SystemExit(2) from None
+    if notice:
+        print(notice)
+    p.connect(p.GUI if mode == "gui" else p.DIRECT)
+    p.setAdditionalSearchPath(pybullet_data.getDataPath())  # where plane.urdf lives
+    p.setGravity(0, 0, -9.81)
+    p.loadURDF("plane.urdf")
+    return mode, urdf
+
+
+def step_course_world(mode: str, steps: int | None, waiting: str) -> bool:
+    """Step `steps` times, or with None until Ctrl-C after printing `waiting`; True if Ctrl-C stopped it.
+
+    Real time (1/240 s a step) only with a window: headless runs flat out.
+    """
+    import pybullet as p
+
+    if steps is None:
+        print(waiting, flush=True)
+    count = 0
+    try:
+        while steps is None or count < steps:
+            p.stepSimulation()
+            count += 1
+            if mode == "gui":
+                time.sleep(COURSE_TIME_STEP_S)
+    except KeyboardInterrupt:
+        return True
+    return False

@@ -46,3 +46,28 @@ def make_sim():
     yield make
     for sim in made:
         sim.close()
+
+
+# -- the course's joint table --------------------------------------------------------------
+# The independent oracle for robot.JOINT_TABLE and every printed table: what the
+# course shows for step A, stated here once and not derived from the code.
+COURSE_JOINT_NAMES = (
+    "shoulder_pan", "shoulder_lift", "elbow_flex", "wrist_flex", "wrist_roll", "gripper_frame_joint", "gripper",
+)
+COURSE_FIXED_JOINTS = {"gripper_frame_joint"}
+COURSE_TYPE_WORDS_ZH = {"revolute": "旋转关节 (Revolute)", "fixed": "固定关节 (Fixed)"}
+
+
+@pytest.fixture(scope="session")
+def course_joint_table() -> list[tuple[int, str, str]]:
+    """Course step A's seven joints as (PyBullet index, name, type)."""
+    return [
+        (index, name, "fixed" if name in COURSE_FIXED_JOINTS else "revolute")
+        for index, name in enumerate(COURSE_JOINT_NAMES)
+    ]
+
+
+@pytest.fixture(scope="session")
+def course_printed_table(course_joint_table) -> list[tuple[int, str, str]]:
+    """The same rows as course step A prints them: (index, name, type in the course's Chinese words)."""
+    return [(index, name, COURSE_TYPE_WORDS_ZH[kind]) for index, name, kind in course_joint_table]

@@ -1,4 +1,6 @@
-"""Running the real dataflow.yml under `dora run` in tests: a copy with absolute paths and extra nodes."""
+"""Running the dataflow in tests: the simulation node in-process under MockNode, and the
+real dataflow.yml under `dora run` (a copy with absolute paths and extra nodes).
+"""
 
 from __future__ import annotations
 
@@ -9,11 +11,31 @@ import sys
 import time
 from pathlib import Path
 
+import pyarrow as pa
 import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 VENV_BIN = Path(sys.executable).parent
 RECORDER = ROOT / "tests" / "nodes" / "state_recorder.py"
+
+# The simulation node's input as dataflow.yml declares it, and one tick of that timer.
+TIMER_4MS = {"inputs": {"tick": {"source": "dora/timer/millis/4", "queue_size": 1}}}
+TICK = ("tick", pa.array([], type=pa.null()))
+
+
+def run_simulation_node(monkeypatch, events, node_config=TIMER_4MS, **env):
+    """Run nodes/simulation_node.py's main() headless over `events`; returns (exit code, the MockNode)."""
+    from dora.testing import MockNode
+
+    import nodes.simulation_node as simulation_node
+
+    monkeypatch.setenv("SO101_MODE", "direct")
+    monkeypatch.setenv("SO101_LANG", "en")
+    for name, value in env.items():
+        monkeypatch.setenv(name, value)
+    node = MockNode(events, node_config=node_config)
+    monkeypatch.setattr(simulation_node, "Node", lambda: node)
+    return simulation_node.main(), node
 
 
 def dora_env(**extra: str) -> dict[str, str]:

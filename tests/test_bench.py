@@ -14,24 +14,12 @@ from pathlib import Path
 
 import pyarrow as pa
 import pytest
-from dora.testing import MockNode
 
 import nodes.simulation_node as simulation_node
 from bench import run_bench
+from tests.dataflow_helpers import TICK, run_simulation_node
 
-TIMER_4MS = {"inputs": {"tick": {"source": "dora/timer/millis/4", "queue_size": 1}}}
-TICK = ("tick", pa.array([], type=pa.null()))
 MS = 1_000_000  # ns
-
-
-def run_node(monkeypatch, events, **env):
-    monkeypatch.setenv("SO101_MODE", "direct")
-    monkeypatch.setenv("SO101_LANG", "en")
-    for name, value in env.items():
-        monkeypatch.setenv(name, value)
-    node = MockNode(events, node_config=TIMER_4MS)
-    monkeypatch.setattr(simulation_node, "Node", lambda: node)
-    return simulation_node.main(), node
 
 
 # -- analysis ---------------------------------------------------------------------------
@@ -113,24 +101,25 @@ def test_fast_mode_takes_n_steps_per_published_state(monkeypatch):
     # 4 ticks of 100 steps each are 1.6 s of simulated time: enough to reach 45°.
     # Paced, 4 ticks are 16 ms and the joint has barely started.
     events = [("joint_cmd", pa.array([0, 45]))] + [TICK] * 4
-    code, node = run_node(monkeypatch, events, SO101_FAST_STEPS="100")
+    code, node = run_simulation_node(monkeypatch, events, SO101_FAST_STEPS="100")
     assert code == 0
     assert len(node.outputs["joint_state"]) == 4
     assert node.outputs["joint_state"][-1].to_pylist()[0] == pytest.approx(45.0, abs=1.0)
-    code, node = run_node(monkeypatch, events, SO101_FAST_STEPS="0")
+    code, node = run_simulation_node(monkeypatch, events, SO101_FAST_STEPS="0")
     assert node.outputs["joint_state"][-1].to_pylist()[0] < 5.0
 
 
 @pytest.mark.parametrize("value", ["-1", "2.5", "fast", ""])
 def test_bad_fast_steps_gives_one_line_and_exit_2(monkeypatch, capsys, value):
-    code, _ = run_node(monkeypatch, [TICK], SO101_FAST_STEPS=value)
+    code, _ = run_simulation_node(monkeypatch, [TICK], SO101_FAST_STEPS=value)
     assert code == 2
     assert f"SO101_FAST_STEPS={value!r} is not a whole number >= 0" in capsys.readouterr().err
 
 
 def test_tick_log_holds_start_and_end_of_each_tick(monkeypatch, tmp_path):
     tick_log = tmp_path / "ticks.bin"
-    code, node = run_node(monkeypatch, [TICK] * 30 + [("joint_cmd", pa.array([0, 10]))], SO101_TICK_LOG=str(tick_log))
+    events = [TICK] * 30 + [("joint_cmd", pa.array([0, 10]))]
+    code, node = run_simulation_node(monkeypatch, events, SO101_TICK_LOG=str(tick_log))
     assert code == 0
     pairs = run_bench.tick_pairs(tick_log.read_bytes())
     assert len(pairs) == 30  # one per tick, none for the joint_cmd
@@ -140,7 +129,7 @@ def test_tick_log_holds_start_and_end_of_each_tick(monkeypatch, tmp_path):
 
 def test_without_tick_log_no_file_is_written(monkeypatch, tmp_path):
     monkeypatch.chdir(tmp_path)
-    code, _ = run_node(monkeypatch, [TICK] * 3, SO101_TICK_LOG="")
+    code, _ = run_simulation_node(monkeypatch, [TICK] * 3, SO101_TICK_LOG="")
     assert code == 0 and list(tmp_path.iterdir()) == []
 
 

@@ -12,15 +12,6 @@ import pytest
 
 SO101 = Path(sys.executable).with_name("so101")
 
-COURSE_TABLE_ZH = [
-    (0, "shoulder_pan", "旋转关节 (Revolute)"),
-    (1, "shoulder_lift", "旋转关节 (Revolute)"),
-    (2, "elbow_flex", "旋转关节 (Revolute)"),
-    (3, "wrist_flex", "旋转关节 (Revolute)"),
-    (4, "wrist_roll", "旋转关节 (Revolute)"),
-    (5, "gripper_frame_joint", "固定关节 (Fixed)"),
-    (6, "gripper", "旋转关节 (Revolute)"),
-]
 # The course's 0.5 rad targets, in degrees: 0.5 rad = 28.65°.
 COURSE_STEP_B_DEG = [28.65, -28.65, 28.65, -28.65, 28.65]
 
@@ -40,23 +31,20 @@ def table_rows(stdout: str, word: str, type_word: str) -> list[tuple[int, str, s
     ]
 
 
-def test_inspect_prints_the_courses_table():
+def test_inspect_prints_the_courses_table(course_printed_table):
     result = so101("inspect", "--mode", "direct", "--steps", "1")
     assert result.returncode == 0, result.stderr
     assert "SO-101 已加载,robot_id = 1" in result.stdout
     assert "关节数量: 7" in result.stdout
-    assert table_rows(result.stdout, "关节", "类型") == COURSE_TABLE_ZH
+    assert table_rows(result.stdout, "关节", "类型") == course_printed_table
     assert "Traceback" not in result.stderr
 
 
-def test_inspect_in_english():
+def test_inspect_in_english(course_joint_table):
     result = so101("inspect", "--mode", "direct", "--steps", "1", "--lang", "en")
     assert result.returncode == 0, result.stderr
     assert "joints: 7" in result.stdout
-    expected = [
-        (index, name, "fixed" if name == "gripper_frame_joint" else "revolute") for index, name, _ in COURSE_TABLE_ZH
-    ]
-    assert table_rows(result.stdout, "joint", "type") == expected
+    assert table_rows(result.stdout, "joint", "type") == course_joint_table
 
 
 def test_language_comes_from_so101_lang():

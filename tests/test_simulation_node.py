@@ -6,23 +6,8 @@ import math
 
 import pyarrow as pa
 import pytest
-from dora.testing import MockNode
 
-import nodes.simulation_node as simulation_node
-
-TIMER_4MS = {"inputs": {"tick": {"source": "dora/timer/millis/4", "queue_size": 1}}}
-TICK = ("tick", pa.array([], type=pa.null()))
-
-
-def run_node(monkeypatch, events, node_config=TIMER_4MS, **env):
-    """Run main() over `events`; returns (exit code, the mock node)."""
-    monkeypatch.setenv("SO101_MODE", "direct")
-    monkeypatch.setenv("SO101_LANG", "en")
-    for name, value in env.items():
-        monkeypatch.setenv(name, value)
-    node = MockNode(events, node_config=node_config)
-    monkeypatch.setattr(simulation_node, "Node", lambda: node)
-    return simulation_node.main(), node
+from tests.dataflow_helpers import TICK, run_simulation_node
 
 
 def ticks(count):
@@ -34,7 +19,7 @@ def last_state(node, output="joint_state"):
 
 
 def test_each_tick_publishes_five_arm_angles_and_the_gripper(monkeypatch):
-    code, node = run_node(monkeypatch, ticks(25))
+    code, node = run_simulation_node(monkeypatch, ticks(25))
     assert code == 0
     assert len(node.outputs["joint_state"]) == 25
     assert len(node.outputs["gripper_state"]) == 25
@@ -51,7 +36,7 @@ def test_each_tick_publishes_five_arm_angles_and_the_gripper(monkeypatch):
     ids=["int64", "int8", "float32"],
 )
 def test_single_joint_command_is_reached(monkeypatch, command):
-    code, node = run_node(monkeypatch, [("joint_cmd", command)] + ticks(300))
+    code, node = run_simulation_node(monkeypatch, [("joint_cmd", command)] + ticks(300))
     assert code == 0
     assert math.isclose(last_state(node)[0], 45.0, abs_tol=1.0)
     assert all(abs(angle) < 1.0 for angle in last_state(node)[1:])
@@ -59,7 +44,7 @@ def test_single_joint_command_is_reached(monkeypatch, command):
 
 def test_course_batch_is_reached(monkeypatch, capsys):
     batch = [-30.0, 45.0, -60.0, 30.0, 0.0]
-    code, node = run_node(monkeypatch, [("joint_cmd", pa.array(batch, type=pa.float32()))] + ticks(400))
+    code, node = run_simulation_node(monkeypatch, [("joint_cmd", pa.array(batch, type=pa.float32()))] + ticks(400))
     assert code == 0
     for reached, target in zip(last_state(node), batch):
         assert math.isclose(reached, target, abs_tol=1.0)
@@ -85,7 +70,7 @@ BAD_COMMANDS = {
 @pytest.mark.parametrize("bad", list(BAD_COMMANDS.values()), ids=list(BAD_COMMANDS))
 def test_bad_joint_cmd_is_logged_and_targets_stay(monkeypatch, capsys, bad):
     events = [("joint_cmd", pa.array([1, 30]))] + ticks(200) + [("joint_cmd", bad)] + ticks(100)
-    code, node = run_node(monkeypatch, events)
+    code, node = run_simulation_node(monkeypatch, events)
     assert code == 0
     assert len(node.outputs["joint_state"]) == 300  # kept stepping
     state = last_state(node)
@@ -97,42 +82,42 @@ def test_bad_joint_cmd_is_logged_and_targets_stay(monkeypatch, capsys, bad):
 
 
 def test_angle_beyond_limit_is_clamped_and_logged(monkeypatch, capsys):
-    code, node = run_node(monkeypatch, [("joint_cmd", pa.array([0, 500]))] + ticks(400))
+    code, node = run_simulation_node(monkeypatch, [("joint_cmd", pa.array([0, 500]))] + ticks(400))
     assert code == 0
     assert math.isclose(last_state(node)[0], 110.0, abs_tol=1.0)  # shoulder_pan's URDF limit
     assert "shoulder_pan 500° is beyond its limits [-110.0°, 110.0°]: clamped to 110.0°" in capsys.readouterr().out
 
 
 def test_gripper_single_and_six_value_batch(monkeypatch):
-    code, node = run_node(monkeypatch, [("joint_cmd", pa.array([5, 30]))] + ticks(200))
+    code, node = run_simulation_node(monkeypatch, [("joint_cmd", pa.array([5, 30]))] + ticks(200))
     assert math.isclose(last_state(node, "gripper_state")[0], 30.0, abs_tol=1.0)
-    code, node = run_node(monkeypatch, [("joint_cmd", pa.array([10, 0, 0, 0, 0, 60]))] + ticks(250))
+    code, node = run_simulation_node(monkeypatch, [("joint_cmd", pa.array([10, 0, 0, 0, 0, 60]))] + ticks(250))
     assert math.isclose(last_state(node)[0], 10.0, abs_tol=1.0)
     assert math.isclose(last_state(node, "gripper_state")[0], 60.0, abs_tol=1.0)
 
 
 def test_physics_step_follows_the_tick_period(monkeypatch, capsys):
     config = {"inputs": {"tick": "dora/timer/millis/10"}}
-    run_node(monkeypatch, ticks(1), node_config=config)
+    run_simulation_node(monkeypatch, ticks(1), node_config=config)
     assert "step 10 ms" in capsys.readouterr().out
-    run_node(monkeypatch, ticks(1), node_config={"inputs": {"tick": "other/output"}})
+    run_simulation_node(monkeypatch, ticks(1), node_config={"inputs": {"tick": "other/output"}})
     assert "tick is not a dora timer; physics step set to 4 ms" in capsys.readouterr().out
 
 
 def test_unknown_events_are_ignored(monkeypatch):
     events = [{"type": "INPUT_CLOSED", "id": "joint_cmd"}, {"type": "ERROR", "error": "x"}, ("other", pa.array([1]))]
-    code, node = run_node(monkeypatch, events + ticks(3))
+    code, node = run_simulation_node(monkeypatch, events + ticks(3))
     assert code == 0 and len(node.outputs["joint_state"]) == 3
 
 
 def test_bad_environment_value_gives_one_line_and_exit_2(monkeypatch, capsys):
-    code, _ = run_node(monkeypatch, ticks(1), SO101_IMAGE_HZ="fast")
+    code, _ = run_simulation_node(monkeypatch, ticks(1), SO101_IMAGE_HZ="fast")
     assert code == 2
     assert "SO101_IMAGE_HZ='fast' is not a number >= 0" in capsys.readouterr().err
 
 
 def test_missing_model_gives_one_line_and_exit_2(monkeypatch, capsys, tmp_path):
-    code, _ = run_node(monkeypatch, ticks(1), SO101_ASSETS_DIR=str(tmp_path))
+    code, _ = run_simulation_node(monkeypatch, ticks(1), SO101_ASSETS_DIR=str(tmp_path))
     assert code == 2
     err = capsys.readouterr().err
     assert "model file missing" in err and "so101 assets" in err

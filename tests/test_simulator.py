@@ -30,18 +30,10 @@ def steps_to_reach(sim, joint_position: int, target_deg: float, budget: int) -> 
     return None
 
 
-def test_joint_table_is_the_courses(shared_sim):
+def test_joint_table_is_the_courses(shared_sim, course_joint_table):
     table = [(joint.index, joint.name, joint.type) for joint in shared_sim.joints]
-    assert table == [
-        (0, "shoulder_pan", "revolute"),
-        (1, "shoulder_lift", "revolute"),
-        (2, "elbow_flex", "revolute"),
-        (3, "wrist_flex", "revolute"),
-        (4, "wrist_roll", "revolute"),
-        (5, "gripper_frame_joint", "fixed"),
-        (6, "gripper", "revolute"),
-    ]
-    assert table == list(JOINT_TABLE)
+    assert table == course_joint_table
+    assert list(JOINT_TABLE) == course_joint_table
 
 
 def test_joint_types_and_limits_equal_the_urdf(shared_sim):
@@ -59,6 +51,8 @@ def test_joint_types_and_limits_equal_the_urdf(shared_sim):
 
 def test_robot_constants_equal_the_urdf():
     declared = urdf_joints()
+    urdf_types = {name: joint.get("type") for name, joint in declared.items()}
+    assert {name: kind for _, name, kind in JOINT_TABLE} == urdf_types
     for joint in ACTUATED_JOINTS:
         limit = declared[joint.name].find("limit")
         assert joint.lower_deg == pytest.approx(math.degrees(float(limit.get("lower"))), abs=1e-9), joint.name
