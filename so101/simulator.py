@@ -147,6 +147,9 @@ class SO101Sim:
         # than max_velocity, which is what the course's `maxVelocity=3.0` gives
         # (setJointMotorControlArray has no maxVelocity argument).
         self._command_rad = self._goal_rad.copy()
+        # The command as a list, ready for PyBullet; recomputed only while slewing toward the goal.
+        self._command_list = self._command_rad.tolist()
+        self._slewing = False
         self.steps = 0
         # The torques sent on the last step (servo mode; zeros in position mode).
         self.last_torques_nm = np.zeros(len(self._indices))
@@ -189,6 +192,7 @@ class SO101Sim:
         if goal.shape != (len(ACTUATED_JOINTS),) or not np.all(np.isfinite(goal)):
             raise ValueError(f"expected {len(ACTUATED_JOINTS)} finite angles in degrees, got {targets_deg!r}")
         self._goal_rad = np.radians(goal)
+        self._slewing = True
 
     def set_time_step_s(self, time_step_s: float) -> None:
         """Change the physics step (before the first step: `sim_time_s` assumes one step size)."""
@@ -211,10 +215,17 @@ class SO101Sim:
                 self._command_rad = self._goal_rad.copy()
                 self._send_servo_torques()
             else:
-                self._command_rad += np.clip(self._goal_rad - self._command_rad, -max_delta, max_delta)
+                if self._slewing:
+                    error_rad = self._goal_rad - self._command_rad
+                    if np.all(np.abs(error_rad) <= max_delta):  # the last bit: land exactly on the goal
+                        self._command_rad = self._goal_rad.copy()
+                        self._slewing = False
+                    else:
+                        self._command_rad += np.clip(error_rad, -max_delta, max_delta)
+                    self._command_list = self._command_rad.tolist()
                 p.setJointMotorControlArray(
                     self.robot_id, self._indices, p.POSITION_CONTROL,
-                    targetPositions=self._command_rad.tolist(), forces=self._forces,
+                    targetPositions=self._command_list, forces=self._forces,
                     physicsClientId=self.client,
                 )
             p.stepSimulation(physicsClientId=self.client)

@@ -162,3 +162,16 @@ def test_position_control_targets_persist_without_re_issuing(make_sim):
     for _ in range(500):
         p.stepSimulation(physicsClientId=cid)
     assert p.getJointState(sim.robot_id, 0, physicsClientId=cid)[0] == pytest.approx(0.5, abs=0.002)
+
+
+def test_position_mode_moves_at_the_courses_max_velocity_and_stops_on_each_new_goal(make_sim):
+    sim = make_sim()
+    for goal_deg in (90.0, -45.0):  # the second goal comes after the first has been reached and held
+        sim.set_targets_deg([goal_deg, 0, 0, 0, 0, 0])
+        speeds_rad_s = []
+        for _ in range(REACH_STEP_BUDGET):
+            sim.step()
+            speeds_rad_s.append(abs(math.radians(sim.joint_velocities_deg_s()[0])))
+        assert max(speeds_rad_s) <= 3.0 * 1.02  # maxVelocity=3.0 rad/s, as the course sets it
+        assert max(speeds_rad_s) >= 3.0 * 0.9  # and it does move that fast on the way
+        assert sim.joint_angles_deg()[0] == pytest.approx(goal_deg, abs=REACH_TOLERANCE_DEG)
