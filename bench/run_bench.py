@@ -509,6 +509,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT, help=f"JSON file to write (default {DEFAULT_OUT.relative_to(ROOT)})")
     parser.add_argument("--quick", action="store_true",
                         help="a short smoke run (3 s paced, 2 s per fast-mode run, fewer in-process steps; about 20 s in all); not for the README")
+    parser.add_argument("--show", type=Path, metavar="JSON",
+                        help="print the table of a saved result (e.g. bench/results/latest.json) and measure nothing")
 
 
 def _positive_seconds(text: str) -> float:
@@ -527,6 +529,16 @@ def main(argv=None) -> int:
 
 def run(args: argparse.Namespace) -> int:
     """The benchmark for parsed options (`so101 bench` calls this)."""
+    if args.show is not None:
+        try:
+            print(table(json.loads(args.show.read_text(encoding="utf-8"))))
+        except OSError as error:
+            print(f"so101 bench: cannot read {args.show}: {error.strerror or error}", file=sys.stderr)
+            return 2
+        except (ValueError, KeyError, TypeError) as error:
+            print(f"so101 bench: {args.show} is not a result of so101 bench ({type(error).__name__}: {error})", file=sys.stderr)
+            return 2
+        return 0
     if args.quick:
         settings = dict(duration_s=3.0, fast_s=2.0, fast_steps=[1, 100], raw_steps=5000, node_ticks=1500, after_sleep_steps=100)
     else:

@@ -194,3 +194,18 @@ def test_quick_bench_writes_every_figure(tmp_path):
     assert len(figures["targets"]) == 7
     assert all(isinstance(row["met"], bool) for row in figures["targets"])
     assert "targets:" in result.stdout and "joint_state per s" in result.stdout
+
+
+def test_show_prints_a_saved_result_and_refuses_what_is_not_one(tmp_path, capsys):
+    latest = run_bench.ROOT / "bench" / "results" / "latest.json"
+    assert run_bench.main(["--show", str(latest)]) == 0
+    shown = capsys.readouterr().out
+    assert shown.startswith("SO-101 simulation node benchmark, ")
+    assert f"{json.loads(latest.read_text())['dataflow']['joint_state_per_s']:.2f}" in shown
+
+    not_json = tmp_path / "notes.txt"
+    not_json.write_text("hello")
+    assert run_bench.main(["--show", str(not_json)]) == 2
+    assert capsys.readouterr().err.startswith(f"so101 bench: {not_json} is not a result of so101 bench (JSONDecodeError")
+    assert run_bench.main(["--show", str(tmp_path / "missing.json")]) == 2
+    assert capsys.readouterr().err == f"so101 bench: cannot read {tmp_path / 'missing.json'}: No such file or directory\n"
