@@ -71,14 +71,19 @@ def _alive(pid: int) -> bool:
     return state != "Z"
 
 
-def test_a_person_drives_the_arm_from_the_prompt(tmp_path):
+def start_teleop(tmp_path: Path, lang: str) -> tuple[Terminal, Path, Path]:
+    """`so101 teleop` headless in a new terminal; returns it, the poses file and the dataflow's log."""
     poses_file = tmp_path / "poses.json"
     log_file = tmp_path / "dora.log"
     env = {
         "SO101_POSES_FILE": str(poses_file), "SO101_HISTORY_FILE": str(tmp_path / "history"),
-        "SO101_LANG": "zh", "PATH": os.environ["PATH"],
+        "SO101_LANG": lang, "PATH": os.environ["PATH"],
     }
-    terminal = Terminal(f"{SO101} teleop --mode direct --log {log_file}", env)
+    return Terminal(f"{SO101} teleop --mode direct --lang {lang} --log {log_file}", env), poses_file, log_file
+
+
+def test_a_person_drives_the_arm_from_the_prompt(tmp_path):
+    terminal, poses_file, log_file = start_teleop(tmp_path, "zh")
     try:
         end = terminal.wait_for(r"^=+\n>$", timeout_s=120).start()
 
@@ -130,13 +135,7 @@ def test_a_person_drives_the_arm_from_the_prompt(tmp_path):
 
 
 def test_ctrl_c_on_teleop_stops_everything_and_keeps_the_saved_poses(tmp_path):
-    poses_file = tmp_path / "poses.json"
-    log_file = tmp_path / "dora.log"
-    env = {
-        "SO101_POSES_FILE": str(poses_file), "SO101_HISTORY_FILE": str(tmp_path / "history"),
-        "SO101_LANG": "en", "PATH": os.environ["PATH"],
-    }
-    terminal = Terminal(f"{SO101} teleop --mode direct --lang en --log {log_file}", env)
+    terminal, poses_file, log_file = start_teleop(tmp_path, "en")
     try:
         end = terminal.wait_for(r"^=+\n>$", timeout_s=120).start()
         terminal.type_line("save b")
