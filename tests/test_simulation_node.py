@@ -121,3 +121,35 @@ def test_missing_model_gives_one_line_and_exit_2(monkeypatch, capsys, tmp_path):
     assert code == 2
     err = capsys.readouterr().err
     assert "model file missing" in err and "so101 assets" in err
+
+
+def test_image_output_shows_the_arm_at_the_asked_rate(monkeypatch):
+    import numpy as np
+    from dora.testing import MockNode
+
+    from tests.test_snapshot import arm_pixels
+
+    metadata_sent = []
+    send_output = MockNode.send_output
+
+    def send_and_keep_metadata(self, output_id, data, metadata=None):
+        if output_id == "image":
+            metadata_sent.append(metadata)
+        send_output(self, output_id, data, metadata)
+
+    monkeypatch.setattr(MockNode, "send_output", send_and_keep_metadata)
+    # 25 Hz on a 4 ms tick: one image every 10 ticks.
+    code, node = run_simulation_node(monkeypatch, ticks(30), SO101_IMAGE_HZ="25")
+    assert code == 0
+    assert len(node.outputs["image"]) == 3
+    assert metadata_sent[-1] == {"width": 320, "height": 240, "encoding": "rgb8"}
+    image = node.outputs["image"][-1]
+    assert image.type == pa.uint8()
+    rgb = np.asarray(image.to_numpy()).reshape(240, 320, 3)
+    assert arm_pixels(rgb).sum() > 0.02 * 320 * 240
+
+
+def test_no_image_output_by_default(monkeypatch):
+    code, node = run_simulation_node(monkeypatch, ticks(30))
+    assert code == 0
+    assert "image" not in node.outputs
