@@ -2,7 +2,7 @@
 
 Hypothesis profiles: `ci` (the default, a few hundred examples per property) and
 `soak` (10,000 per property, run by hand):
-    HYPOTHESIS_PROFILE=soak .venv/bin/python -m pytest tests/test_properties.py
+    HYPOTHESIS_PROFILE=soak .venv/bin/python -m pytest tests/test_properties.py tests/test_command_properties.py
 No deadline in either: the suite has no timed tests, and a loaded CI machine
 must not turn a slow example into a failure.
 """
