@@ -32,7 +32,7 @@ def _image_side(text: str) -> int:
 
 
 def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
-    from so101.simulator import DEFAULT_CAMERA
+    from so101.camera import DEFAULT_CAMERA
 
     parser.add_argument(
         "--pose", type=float, nargs="+", metavar="DEG", default=None,

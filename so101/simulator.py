@@ -16,6 +16,7 @@ import pybullet as p
 import pybullet_data
 
 from so101 import assets
+from so101.camera import DEFAULT_CAMERA, Camera
 from so101.display import resolve_mode
 from so101.servo import (
     DEFAULT_DAMPING_RATIO,
@@ -44,21 +45,6 @@ JOINT_TYPE_NAMES = {
 CONTROL_MODES = ("position", "servo")
 
 
-
-@dataclass(frozen=True)
-class Camera:
-    """A camera orbiting `target_xyz_m`, in PyBullet's yaw/pitch terms (degrees)."""
-
-    target_xyz_m: tuple[float, float, float] = (0.1, -0.05, 0.12)
-    distance_m: float = 0.65
-    yaw_deg: float = 35.0
-    pitch_deg: float = -25.0
-    fov_deg: float = 50.0
-
-
-# Frames the whole arm from the front-right and a little above, whether it reaches
-# along +x (home) or is panned ±90° toward ∓y.
-DEFAULT_CAMERA = Camera()
 
 
 @dataclass(frozen=True)
