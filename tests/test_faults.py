@@ -133,3 +133,37 @@ def test_killed_prompt_leaves_the_simulation_running_and_a_new_prompt_drives_it(
     # The new prompt's command reached the arm.
     assert abs(samples[-1][1][0] - (-45.0)) <= 1.0, samples[-1]
     assert "Traceback" not in log
+
+
+# Joins as the prompt and sends a burst of commands, faster than the simulation logs them.
+BURST_SENDER = """
+import sys
+import pyarrow as pa
+from dora import Node
+
+node = Node("keyboard_control")
+for number in range(int(sys.argv[1])):
+    node.send_output("joint_cmd", pa.array([0.0, float(number % 90)]))
+print("burst sent", flush=True)
+"""
+
+
+def test_a_burst_of_commands_is_not_dropped(tmp_path):
+    burst = 5000
+    dataflow = write_test_dataflow(tmp_path, sim_env={"SO101_LANG": "en"})
+    dora = DoraRun(dataflow, tmp_path / "dora.log", stop_after_s=120)
+    try:
+        dora.wait_for("SO-101 loaded", timeout_s=60)
+        sender = subprocess.run(
+            [sys.executable, "-c", BURST_SENDER, str(burst)], capture_output=True, text=True,
+            env=dora_env(), timeout=60,
+        )
+        assert "burst sent" in sender.stdout, sender.stdout + sender.stderr
+        deadline = time.monotonic() + 30
+        while plain(dora.log()).count("joint 0 target -> ") < burst and time.monotonic() < deadline:
+            time.sleep(0.2)
+    finally:
+        dora.stop()
+    log = plain(dora.log())
+    assert log.count("joint 0 target -> ") == burst
+    assert "Discarding event for input `joint_cmd`" not in log

@@ -96,10 +96,22 @@ def test_gripper_single_and_six_value_batch(monkeypatch):
     assert math.isclose(last_state(node, "gripper_state")[0], 60.0, abs_tol=1.0)
 
 
-def test_physics_step_follows_the_tick_period(monkeypatch, capsys):
-    config = {"inputs": {"tick": "dora/timer/millis/10"}}
-    run_simulation_node(monkeypatch, ticks(1), node_config=config)
-    assert "step 10 ms" in capsys.readouterr().out
+@pytest.mark.parametrize("period_ms", [4, 10])
+def test_physics_step_follows_the_tick_period(monkeypatch, capsys, make_sim, period_ms):
+    config = {"inputs": {"tick": f"dora/timer/millis/{period_ms}"}}
+    code, node = run_simulation_node(monkeypatch, [("joint_cmd", pa.array([0, 90]))] + ticks(20), node_config=config)
+    assert code == 0
+    assert f"step {period_ms} ms" in capsys.readouterr().out
+    # The same 20 steps of a simulator built with that step give the same angle (PyBullet is
+    # deterministic); 20 ticks of 4 ms and of 10 ms end about 8° and 21° along the way to 90°.
+    reference = make_sim(time_step_s=period_ms / 1000)
+    reference.set_targets_deg([90, 0, 0, 0, 0, 0])
+    reference.step(20)
+    assert last_state(node)[0] == pytest.approx(reference.joint_angles_deg()[0], abs=1e-6)
+    assert last_state(node)[0] == pytest.approx(8.3 if period_ms == 4 else 20.8, abs=0.5)
+
+
+def test_a_tick_that_is_not_a_timer_gets_the_courses_4_ms(monkeypatch, capsys):
     run_simulation_node(monkeypatch, ticks(1), node_config={"inputs": {"tick": "other/output"}})
     assert "tick is not a dora timer; physics step set to 4 ms" in capsys.readouterr().out
 
@@ -114,6 +126,48 @@ def test_bad_environment_value_gives_one_line_and_exit_2(monkeypatch, capsys):
     code, _ = run_simulation_node(monkeypatch, ticks(1), SO101_IMAGE_HZ="fast")
     assert code == 2
     assert "SO101_IMAGE_HZ='fast' is not a number >= 0" in capsys.readouterr().err
+
+
+def test_servo_mode_is_chosen_by_the_environment_and_low_damping_overshoots(monkeypatch, capsys):
+    step = [("joint_cmd", pa.array([0, 90]))] + ticks(200)
+    _, servo = run_simulation_node(monkeypatch, step, SO101_CONTROL="servo", SO101_SERVO_ZETA="0.2")
+    assert "servo control" in capsys.readouterr().out
+    peak_deg = max(state.to_pylist()[0] for state in servo.outputs["joint_state"])
+    assert peak_deg > 100.0  # about 23% over 90°
+    _, position = run_simulation_node(monkeypatch, step, SO101_CONTROL="position")
+    assert max(state.to_pylist()[0] for state in position.outputs["joint_state"]) < 90.5
+
+
+def test_unknown_control_mode_gives_one_line_and_exit_2(monkeypatch, capsys):
+    code, _ = run_simulation_node(monkeypatch, ticks(1), SO101_CONTROL="torque")
+    assert code == 2
+    assert "unknown control mode 'torque'; use one of: position, servo" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("ending", ["STOP", "Ctrl-C"])
+def test_stop_and_ctrl_c_close_the_physics_client_and_exit_0(monkeypatch, ending):
+    import pybullet as p
+    from dora.testing import MockNode
+
+    from so101.simulator import SO101Sim
+
+    closed = []
+    close = SO101Sim.close
+    monkeypatch.setattr(SO101Sim, "close", lambda self: (closed.append(self.client), close(self)))
+    if ending == "Ctrl-C":
+        next_event = MockNode.__next__
+
+        def interrupted_after_five_ticks(self):
+            if len(self.outputs.get("joint_state", [])) == 5:
+                raise KeyboardInterrupt
+            return next_event(self)
+
+        monkeypatch.setattr(MockNode, "__next__", interrupted_after_five_ticks)
+    code, node = run_simulation_node(monkeypatch, ticks(10))
+    assert code == 0
+    assert len(node.outputs["joint_state"]) == (5 if ending == "Ctrl-C" else 10)
+    assert len(closed) == 1
+    assert not p.isConnected(physicsClientId=closed[0])
 
 
 def test_missing_model_gives_one_line_and_exit_2(monkeypatch, capsys, tmp_path):

@@ -1,0 +1,42 @@
+"""dataflow.yml keeps the course's contract: node ids, inputs, outputs, and the queues the nodes rely on."""
+
+from __future__ import annotations
+
+import yaml
+
+from so101.dataflow import timer_period_s
+from tests.dataflow_helpers import ROOT
+
+DATAFLOW = yaml.safe_load((ROOT / "dataflow.yml").read_text(encoding="utf-8"))
+NODES = {node["id"]: node for node in DATAFLOW["nodes"]}
+
+
+def test_the_two_course_nodes_and_nothing_else():
+    assert list(NODES) == ["keyboard_control", "simulation"]
+    assert NODES["keyboard_control"]["path"] == "dynamic"  # `dora run` gives started nodes no keyboard
+    assert NODES["simulation"]["path"] == "nodes/simulation_node.py"
+    assert (ROOT / NODES["simulation"]["path"]).is_file()
+
+
+def test_the_simulation_is_stepped_by_a_fresh_4_ms_tick_and_keeps_every_command():
+    inputs = NODES["simulation"]["inputs"]
+    assert inputs["tick"] == {"source": "dora/timer/millis/4", "queue_size": 1}
+    assert timer_period_s({"inputs": inputs}) == 0.004
+    assert inputs["joint_cmd"]["source"] == "keyboard_control/joint_cmd"
+    assert inputs["joint_cmd"]["queue_policy"] == "backpressure"
+    assert NODES["simulation"]["outputs"] == ["joint_state", "gripper_state", "image"]
+    assert NODES["simulation"]["restart_policy"] == "never"
+
+
+def test_the_prompt_sends_joint_cmd_and_hears_the_state():
+    prompt = NODES["keyboard_control"]
+    assert prompt["outputs"] == ["joint_cmd"]
+    assert prompt["inputs"] == {"joint_state": "simulation/joint_state", "gripper_state": "simulation/gripper_state"}
+
+
+def test_every_simulation_setting_is_declared_with_its_default():
+    env = NODES["simulation"]["env"]
+    assert env == {
+        "SO101_MODE": "auto", "SO101_CONTROL": "position", "SO101_SERVO_ZETA": "0.7", "SO101_IMAGE_HZ": "0",
+        "SO101_FAST_STEPS": "0", "SO101_TICK_LOG": "", "SO101_LANG": "zh",
+    }
