@@ -12,6 +12,8 @@ Any further arguments go to the command that runs (so101 teleop or pytest).
 
 from __future__ import annotations
 
+import hashlib
+import json
 import os
 import subprocess
 import sys
@@ -22,6 +24,7 @@ ROOT = Path(__file__).resolve().parent
 VENV = ROOT / ".venv"
 BIN = VENV / ("Scripts" if os.name == "nt" else "bin")
 PYTHON = BIN / ("python.exe" if os.name == "nt" else "python")
+STAMP = VENV / "so101-installed.json"  # what the last successful pip install was for
 
 
 def run(*command: str | Path) -> None:
@@ -38,9 +41,25 @@ def set_up(with_tests: bool) -> None:
     if not PYTHON.exists():
         print(f"creating virtual environment {VENV}", flush=True)
         venv.EnvBuilder(with_pip=True).create(VENV)
-    extras = "[test]" if with_tests else ""
-    run(PYTHON, "-m", "pip", "install", "--quiet", "--disable-pip-version-check", "-e", f".{extras}")
+    # pip is run again only when pyproject.toml changed or test tools are newly wanted:
+    # a second run stays instant and works offline.
+    wanted = {"pyproject_sha256": hashlib.sha256((ROOT / "pyproject.toml").read_bytes()).hexdigest(),
+              "with_tests": with_tests}
+    installed = _read_stamp()
+    if not (installed.get("pyproject_sha256") == wanted["pyproject_sha256"]
+            and (installed.get("with_tests") or not with_tests)):
+        extras = "[test]" if with_tests else ""
+        run(PYTHON, "-m", "pip", "install", "--quiet", "--disable-pip-version-check", "-e", f".{extras}")
+        STAMP.write_text(json.dumps(wanted))
     run(BIN / "so101", "assets")
+
+
+def _read_stamp() -> dict:
+    try:
+        stamp = json.loads(STAMP.read_text())
+    except (OSError, ValueError):
+        return {}
+    return stamp if isinstance(stamp, dict) else {}
 
 
 def main(argv: list[str]) -> int:
