@@ -131,7 +131,9 @@ def main() -> int:
     # (start, end) of each tick's work in time.monotonic_ns, when asked for; None costs nothing per tick.
     tick_log_path = os.environ.get("SO101_TICK_LOG", "")
     tick_times_ns = array("q") if tick_log_path else None
-    ticks_per_image = max(1, round(1.0 / (image_hz * tick_s))) if image_hz > 0 else 0
+    # Counted in physics steps, so fast mode (several steps per tick) keeps the simulated rate.
+    steps_per_image = max(1, round(1.0 / (image_hz * tick_s))) if image_hz > 0 else 0
+    next_image_step = steps_per_image
     try:
         for event in events:
             if event["type"] == "INPUT":
@@ -144,7 +146,8 @@ def main() -> int:
                     node.send_output("gripper_state", pa.array(angles_deg[NUM_ARM_JOINTS:], type=pa.float64()))
                     if tick_times_ns is not None:
                         tick_times_ns.append(time.monotonic_ns())
-                    if ticks_per_image and sim.steps % ticks_per_image == 0:
+                    if steps_per_image and sim.steps >= next_image_step:
+                        next_image_step += steps_per_image * ((sim.steps - next_image_step) // steps_per_image + 1)
                         width, height = IMAGE_SIZE
                         rgb = sim.render_rgb(width, height)
                         node.send_output(

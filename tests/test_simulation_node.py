@@ -203,6 +203,13 @@ def test_image_output_shows_the_arm_at_the_asked_rate(monkeypatch):
     assert arm_pixels(rgb).sum() > 0.02 * 320 * 240
 
 
+def test_fast_mode_keeps_the_image_rate_in_simulated_time(monkeypatch):
+    # 30 ticks of 7 steps are 210 steps of 4 ms; at 25 Hz an image is due every 10 steps.
+    code, node = run_simulation_node(monkeypatch, ticks(30), SO101_FAST_STEPS="7", SO101_IMAGE_HZ="25")
+    assert code == 0
+    assert 19 <= len(node.outputs["image"]) <= 21
+
+
 def test_no_image_output_by_default(monkeypatch):
     code, node = run_simulation_node(monkeypatch, ticks(30))
     assert code == 0
