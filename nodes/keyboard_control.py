@@ -26,6 +26,7 @@ import argparse
 import contextlib
 import os
 import signal
+import subprocess
 import sys
 import threading
 from pathlib import Path
@@ -37,11 +38,12 @@ if str(ROOT) not in sys.path:  # run as a script from anywhere: the so101 packag
 
 from so101.commands import (  # noqa: E402
     LANGUAGES, Batch, Empty, GoPose, Help, Home, ListJoints, ListPoses, ParseError, Quit, SavePose, SetJoint, ShowState,
+    Snapshot,
     format_angle, format_angles, help_lines, joint_lines, parse_command, texts,
 )
 from so101.poses import Pose, PoseStore  # noqa: E402
 from so101.robot import ACTUATED_JOINTS, NUM_ARM_JOINTS  # noqa: E402
-from so101.versions import dora_version_problem  # noqa: E402
+from so101.versions import dora_version_mismatch  # noqa: E402
 
 NODE_ID = "keyboard_control"
 DEFAULT_POSES_FILE = ROOT / "saved_poses.json"
@@ -146,6 +148,8 @@ class KeyboardControl:
             return [text["go"].format(name=command.name)], False
         if isinstance(command, ListPoses):
             return self._pose_lines(), False
+        if isinstance(command, Snapshot):
+            return [self._snapshot(command.path, state_wait_s)], False
         raise AssertionError(f"unhandled command {command!r}")
 
     def _batch_line(self, angles_deg: Sequence[float]) -> str:
@@ -180,6 +184,22 @@ class KeyboardControl:
         return self.text["saved_gripper"].format(
             name=name, angles=format_angles(pose.joints_deg), gripper=format_angle(pose.gripper_deg)
         )
+
+    def _snapshot(self, path: str, state_wait_s: float) -> str:
+        joints_deg, gripper_deg = self._wait_for_state(state_wait_s)
+        if joints_deg is None:
+            return self.text["no_state_snapshot"]
+        pose_deg = list(joints_deg) + ([] if gripper_deg is None else [gripper_deg])
+        # `so101 snapshot` in its own process: PyBullet stays out of the prompt, and so does its banner.
+        result = subprocess.run(
+            [sys.executable, "-m", "so101.cli", "snapshot", "--out", path, "--pose", *(f"{angle:.2f}" for angle in pose_deg)],
+            capture_output=True, text=True, cwd=os.getcwd(),
+            env=dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))),
+        )
+        if result.returncode != 0:
+            lines = (result.stderr or result.stdout).strip().splitlines()
+            return self.text["snapshot_failed"].format(error=lines[-1] if lines else f"exit code {result.returncode}")
+        return self.text["snapshot"].format(path=path)
 
     def _pose_lines(self) -> list[str]:
         if not self.poses.names():
@@ -349,9 +369,9 @@ def main(argv: list[str] | None = None) -> int:
         except Exception as error:  # noqa: BLE001 - dora raises a bare RuntimeError with a multi-line chain
             reason = " ".join(str(error).split("Location:")[0].split())  # drop the Rust backtrace
             print(TEXT[lang]["join_failed"].format(node_id=NODE_ID, error=reason), file=sys.stderr)
-            version_problem = dora_version_problem()  # the likeliest cause once the dataflow is known to run
-            if version_problem:
-                print(f"keyboard_control: {version_problem}", file=sys.stderr)
+            mismatch = dora_version_mismatch()  # the likeliest cause when the dataflow does run
+            if mismatch:
+                print(f"keyboard_control: {mismatch}", file=sys.stderr)
             return 1
         control.send_joint_cmd = joint_cmd_sender(node)
         pump = EventPump(node, control, on_stop=_interrupt_main_thread)

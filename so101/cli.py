@@ -47,6 +47,10 @@ def main(argv: list[str] | None = None) -> int:
     except (ModelFilesError, DisplayError) as error:
         print(f"so101 {args.command}: {error}", file=sys.stderr)
         return 2
+    except OSError as error:  # a file that cannot be written or read (--out in a folder that is a file, ...)
+        where = f"{error.filename}: " if error.filename else ""
+        print(f"so101 {args.command}: cannot use {where}{error.strerror or error}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         return 130
 

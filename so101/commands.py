@@ -76,6 +76,13 @@ class ListPoses:
 
 
 @dataclass(frozen=True)
+class Snapshot:
+    """A PNG of the arm as it is now (from joint_state), drawn headless."""
+
+    path: str = "out/snapshot.png"
+
+
+@dataclass(frozen=True)
 class Help:
     pass
 
@@ -95,7 +102,9 @@ class ParseError:
     message: str  # one line, already in the prompt's language, saying what is accepted
 
 
-Command = SetJoint | Batch | Home | ListJoints | ShowState | SavePose | GoPose | ListPoses | Help | Quit | Empty
+Command = (
+    SetJoint | Batch | Home | ListJoints | ShowState | SavePose | GoPose | ListPoses | Snapshot | Help | Quit | Empty
+)
 
 
 TEXT = {
@@ -120,7 +129,7 @@ TEXT = {
         "none": "无",
         "bye": "  再见",
         "unknown": "  无法识别 '{text}':可用 '关节号 角度'(如 '0 45')、batch、grip、open、close、home、list、"
-        "state、save、go、poses、help、quit(输入 help 查看)",
+        "state、save、go、poses、snapshot、help、quit(输入 help 查看)",
         "joint_form": "  格式错误:关节号 角度(如 '0 45'),关节号 0-5(5 = 夹爪)",
         "joint_range": "  关节号范围 0-5(0-4 手臂,5 夹爪),收到 '{text}';格式:关节号 角度(如 '0 45')",
         "bad_angle": "  '{text}' 不是角度:角度是十进制数字,单位度(如 45、-30.5)",
@@ -129,6 +138,10 @@ TEXT = {
         "grip_form": "  grip 命令格式:grip 角度(如 'grip 30',范围 {lower:.1f}° 到 {upper:.1f}°)",
         "name_form": "  {command} 命令格式:{command} 名字(一个词,不含空格,最多 {max} 个字符,如 '{command} a')",
         "no_args": "  '{command}' 不带参数,收到 '{text}'",
+        "snapshot_form": "  snapshot 命令格式:snapshot [文件](默认 out/snapshot.png)",
+        "snapshot": "  → 快照已写入 {path}",
+        "snapshot_failed": "  快照失败: {error}",
+        "no_state_snapshot": "  还没有收到 joint_state(仿真节点在运行吗?),无法拍快照",
         "help": [
             "  命令格式:",
             "    关节号 角度              如 '0 45'(关节号 0-4 手臂,5 夹爪)",
@@ -140,6 +153,7 @@ TEXT = {
             "    save 名字               保存当前姿态(来自 joint_state)",
             "    go 名字                 移动到已保存的姿态",
             "    poses                   显示已保存的姿态",
+            "    snapshot [文件]          把当前姿态画成 PNG(无需窗口,默认 out/snapshot.png)",
             "    help                    显示本帮助",
             "    quit / exit             退出(也可 Ctrl-D、Ctrl-C)",
             "  超出关节限位的角度不会发送(会提示范围)。",
@@ -166,7 +180,7 @@ TEXT = {
         "none": "none",
         "bye": "  bye",
         "unknown": "  cannot read '{text}': use 'JOINT ANGLE' (e.g. '0 45'), batch, grip, open, close, home, list, "
-        "state, save, go, poses, help, quit (type help)",
+        "state, save, go, poses, snapshot, help, quit (type help)",
         "joint_form": "  format: JOINT ANGLE (e.g. '0 45'), JOINT 0-5 (5 = gripper)",
         "joint_range": "  joints are 0-5 (0-4 arm, 5 gripper), got '{text}'; format: JOINT ANGLE (e.g. '0 45')",
         "bad_angle": "  '{text}' is not an angle: angles are decimal numbers in degrees (e.g. 45, -30.5)",
@@ -175,6 +189,10 @@ TEXT = {
         "grip_form": "  grip format: grip ANGLE (e.g. 'grip 30', {lower:.1f}° to {upper:.1f}°)",
         "name_form": "  {command} format: {command} NAME (one word, no spaces, at most {max} characters, e.g. '{command} a')",
         "no_args": "  '{command}' takes no arguments, got '{text}'",
+        "snapshot_form": "  snapshot format: snapshot [FILE] (default out/snapshot.png)",
+        "snapshot": "  → snapshot written to {path}",
+        "snapshot_failed": "  snapshot failed: {error}",
+        "no_state_snapshot": "  no joint_state received yet (is the simulation running?): no snapshot",
         "help": [
             "  commands:",
             "    JOINT ANGLE             e.g. '0 45' (JOINT 0-4 arm, 5 gripper)",
@@ -186,6 +204,7 @@ TEXT = {
             "    save NAME               save the current pose (from joint_state)",
             "    go NAME                 move to a saved pose",
             "    poses                   list the saved poses",
+            "    snapshot [FILE]         draw the arm as it is now to a PNG (no window needed; default out/snapshot.png)",
             "    help                    this help",
             "    quit / exit             quit (Ctrl-D and Ctrl-C quit too)",
             "  Angles beyond a joint's limits are not sent (the reply gives the range).",
@@ -292,6 +311,11 @@ def parse_command(line: str, lang: str = "zh") -> Command | ParseError:
         if isinstance(name, ParseError):
             return name
         return SavePose(name) if keyword == "save" else GoPose(name)
+
+    if keyword == "snapshot":
+        if len(words) > 2:
+            return ParseError(text["snapshot_form"])
+        return Snapshot(*words[1:])
 
     if _NUMBER.match(keyword):
         if len(words) != 2:

@@ -68,3 +68,13 @@ def dora_version_problem(dora_executable: str | None = None) -> str | None:
             f"the dora-rs library is version {library}: pip install '{CLI_DISTRIBUTION}=={library}'"
         )
     return version_mismatch(cli, library, dora_executable)
+
+
+def dora_version_mismatch(dora_executable: str | None = None) -> str | None:
+    """Only a proven mismatch: both versions read and different (for hints after another error)."""
+    dora_executable = dora_executable or shutil.which("dora")
+    library = library_version()
+    cli = cli_version(dora_executable) if dora_executable else None
+    if library is None or cli is None:
+        return None
+    return version_mismatch(cli, library, dora_executable)

@@ -6,7 +6,7 @@ import pytest
 
 from so101.commands import (
     GRIPPER_CLOSED_DEG, GRIPPER_OPEN_DEG, Batch, Empty, GoPose, Help, Home, ListJoints, ListPoses, ParseError,
-    Quit, SavePose, SetJoint, ShowState, format_angle, format_angles, help_lines, joint_lines, parse_command,
+    Quit, SavePose, SetJoint, ShowState, Snapshot, format_angle, format_angles, help_lines, joint_lines, parse_command,
 )
 
 
@@ -28,6 +28,8 @@ from so101.commands import (
         ("close", SetJoint(5, GRIPPER_CLOSED_DEG)),
         ("home", Home()),
         ("HOME", Home()),
+        ("snapshot", Snapshot("out/snapshot.png")),
+        ("snapshot arm.png", Snapshot("arm.png")),
         ("list", ListJoints()),
         ("state", ShowState()),
         ("save a", SavePose("a")),
@@ -76,6 +78,7 @@ def test_valid_lines(line, command):
         ("go", "go 命令格式:go 名字", "go format: go NAME"),
         ("save " + "x" * 41, "最多 40 个字符", "at most 40 characters"),
         ("home now", "'home' 不带参数", "'home' takes no arguments"),
+        ("snapshot a.png b.png", "snapshot 命令格式:snapshot [文件]", "snapshot format: snapshot [FILE]"),
     ],
 )
 def test_invalid_lines_get_one_line_saying_the_valid_form(line, expected_zh, expected_en):

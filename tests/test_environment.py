@@ -178,3 +178,19 @@ def test_teleop_with_mismatched_dora_stops_before_starting_anything(tmp_path, mo
     assert f"the dora-rs library is version {LIBRARY_VERSION}" in error
     assert len(error.splitlines()) == 1
     assert not log_file.exists()  # no dataflow was started
+
+
+def test_a_prompt_that_cannot_join_names_a_dora_of_another_version(tmp_path):
+    bin_dir = fake_dora(tmp_path, 'echo "dora-cli 1.0.4"')
+    result = subprocess.run(
+        [str(VENV_BIN / "python"), str(Path(__file__).parents[1] / "nodes" / "keyboard_control.py")],
+        input="", capture_output=True, text=True, timeout=60,
+        env=dict(os.environ, PATH=f"{bin_dir}{os.pathsep}{os.environ['PATH']}", SO101_LANG="en"),
+    )
+    assert result.returncode == 1
+    lines = result.stderr.strip().splitlines()
+    assert lines[0].startswith("cannot join the dataflow as keyboard_control (start it first in another terminal")
+    assert lines[1] == (
+        f"keyboard_control: the dora CLI ({bin_dir / 'dora'}) is version 1.0.4 but the dora-rs library is version "
+        f"{LIBRARY_VERSION}; they must match: pip install 'dora-rs-cli=={LIBRARY_VERSION}' (or put the matching `dora` first on PATH)"
+    )

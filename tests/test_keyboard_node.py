@@ -157,7 +157,7 @@ def test_a_piped_script_runs_in_order_echoes_and_stops_at_quit(tmp_path, monkeyp
         "  → joint 0 (shoulder_pan) → 90°",
         "> bogus",
         "  cannot read 'bogus': use 'JOINT ANGLE' (e.g. '0 45'), batch, grip, open, close, home, list, state, save, "
-        "go, poses, help, quit (type help)",
+        "go, poses, snapshot, help, quit (type help)",
         "> save a",
         "  → pose 'a' saved: [-30.0, 44.98, -59.69, 30.0, 0.0]°, gripper 12.35°",
         "> quit",
@@ -241,3 +241,30 @@ def test_main_without_a_running_dataflow_says_how_to_start_it(monkeypatch, capsy
     assert err.count("\n") == 1
     assert "start it first in another terminal: `dora run dataflow.yml`" in err and "Connection refused" in err
     assert "lib.rs" not in err
+
+
+def test_snapshot_draws_the_arm_as_it_is_now(tmp_path, monkeypatch):
+    import numpy as np
+    from matplotlib import image
+
+    from tests.test_snapshot import arm_pixels
+
+    monkeypatch.chdir(tmp_path)
+    _, control = make_control(tmp_path, lang="en", events=state_events())
+    lines, _ = control.handle_line("snapshot now.png")
+    assert lines == ["  → snapshot written to now.png"]
+    rgb = (image.imread(tmp_path / "now.png")[:, :, :3] * 255).round().astype(np.uint8)
+    assert arm_pixels(rgb).sum() > 0.02 * rgb.shape[0] * rgb.shape[1]
+
+
+def test_snapshot_without_state_or_with_a_bad_file_says_so_in_one_line(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    _, control = make_control(tmp_path, lang="en")
+    assert control.handle_line("snapshot", state_wait_s=0.0)[0] == [
+        "  no joint_state received yet (is the simulation running?): no snapshot"
+    ]
+    _, control = make_control(tmp_path, lang="en", events=state_events())
+    (tmp_path / "taken").write_text("a file, not a folder")
+    (lines,), _ = control.handle_line("snapshot taken/now.png")
+    assert lines.startswith("  snapshot failed: ")
+    assert not (tmp_path / "taken" / "now.png").exists()

@@ -94,3 +94,9 @@ def test_snapshot_refuses_a_bad_pose_in_one_line(tmp_path, capsys, pose, message
     assert main(["snapshot", "--pose", *pose, "--out", str(out)]) == 2
     assert capsys.readouterr().err == f"so101 snapshot: {message}\n"
     assert not out.exists()
+
+
+def test_an_output_path_that_cannot_be_written_gives_one_line_and_exit_1(tmp_path, capsys):
+    (tmp_path / "taken").write_text("a file where a folder is asked for")
+    assert main(["snapshot", "--out", str(tmp_path / "taken" / "arm.png"), "--width", "32", "--height", "32"]) == 1
+    assert capsys.readouterr().err == f"so101 snapshot: cannot use {tmp_path / 'taken'}: File exists\n"
