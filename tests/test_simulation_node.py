@@ -78,7 +78,8 @@ def test_bad_joint_cmd_is_logged_and_targets_stay(monkeypatch, capsys, bad):
     assert math.isclose(state[1], 30.0, abs_tol=1.0)  # the previous target still holds
     rejected = [line for line in capsys.readouterr().out.splitlines() if "ignored invalid joint_cmd" in line]
     assert len(rejected) == 1
-    assert "accepted:" in rejected[0]
+    assert f"array of length {len(bad)}" in rejected[0]  # what arrived
+    assert "; accepted: a numeric array in degrees, [joint_idx, angle]" in rejected[0]
 
 
 def test_angle_beyond_limit_is_clamped_and_logged(monkeypatch, capsys):
