@@ -134,13 +134,17 @@ def test_a_person_drives_the_arm_from_the_prompt(tmp_path):
     assert [pid for pid in spawned if _alive(pid)] == []
 
 
-def test_ctrl_c_on_teleop_stops_everything_and_keeps_the_saved_poses(tmp_path):
+@pytest.mark.parametrize("key", ["C-c", "C-d"], ids=["Ctrl-C", "Ctrl-D"])
+def test_ctrl_c_or_d_on_teleop_stops_everything_and_keeps_poses_and_history(tmp_path, key):
     terminal, poses_file, log_file = start_teleop(tmp_path, "en")
     try:
         end = terminal.wait_for(r"^=+\n>$", timeout_s=120).start()
         terminal.type_line("save b")
         end = terminal.wait_for(r"^  → pose 'b' saved: .*$", timeout_s=20, after=end).end()
-        subprocess.run(["tmux", "send-keys", "-t", terminal.name, "C-c"], check=True)
+        # Line editing: the up arrow brings back the last line, Enter runs it again.
+        subprocess.run(["tmux", "send-keys", "-t", terminal.name, "Up", "Enter"], check=True)
+        end = terminal.wait_for(r"^> save b\n  → pose 'b' saved: .*$", timeout_s=20, after=end).end()
+        subprocess.run(["tmux", "send-keys", "-t", terminal.name, key], check=True)
         pressed_at = time.monotonic()
         exit_code = int(terminal.wait_for(r"^TELEOP_EXIT=(\d+)$", timeout_s=30, after=end).group(1))
         # Measured by polling the screen every 0.2 s: an upper bound on the real time.
@@ -150,9 +154,10 @@ def test_ctrl_c_on_teleop_stops_everything_and_keeps_the_saved_poses(tmp_path):
         terminal.close()
 
     assert exit_code in (0, 130), screen
-    assert stopped_within_s <= 3.0, f"{stopped_within_s:.1f} s from Ctrl-C to the shell prompt"
+    assert stopped_within_s <= 3.0, f"{stopped_within_s:.1f} s from {key} to the shell prompt"
     assert "Traceback" not in screen, screen
     assert list(json.loads(poses_file.read_text())) == ["b"]
+    assert (tmp_path / "history").read_text().splitlines()[-1] == "save b"  # kept for the next session
     spawned = [int(pid) for pid in re.findall(r"spawned node with pid (\d+)", log_file.read_text())]
     assert spawned, log_file.read_text()[-2000:]
     assert [pid for pid in spawned if _alive(pid)] == []
