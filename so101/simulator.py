@@ -45,8 +45,6 @@ JOINT_TYPE_NAMES = {
 CONTROL_MODES = ("position", "servo")
 
 
-
-
 @dataclass(frozen=True)
 class JointInfo:
     """A row of `getJointInfo`, as PyBullet reports it: limits in radians, max_velocity in rad/s, max_force in N·m."""
@@ -129,7 +127,7 @@ class SO101Sim:
                 )
         self.max_velocity_rad_s = float(max_velocity_rad_s)
         self._goal_rad = np.radians(np.asarray(HOME_POSE_DEG, dtype=float))
-        # The target actually sent to the motors: it moves toward the goal at no more
+        # Position mode: the target actually sent to the motors. It moves toward the goal at no more
         # than max_velocity, which is what the course's `maxVelocity=3.0` gives
         # (setJointMotorControlArray has no maxVelocity argument).
         self._command_rad = self._goal_rad.copy()
@@ -164,12 +162,11 @@ class SO101Sim:
         own inertia comes from its collision shape; the masses are the URDF's.
         """
         angles_rad = np.radians(self.joint_angles_deg() if angles_deg is None else np.asarray(angles_deg, float))
+        return self._inertias_at(angles_rad)
+
+    def _inertias_at(self, angles_rad: np.ndarray) -> np.ndarray:
         mass_matrix = p.calculateMassMatrix(self.robot_id, angles_rad.tolist(), physicsClientId=self.client)
         return np.diag(np.asarray(mass_matrix))
-
-    def servo_gains(self) -> tuple[np.ndarray, np.ndarray]:
-        """(Kp, Kd) per actuated joint at the current pose, for the servo mode's ζ and ωn."""
-        return pd_gains(self.effective_inertias_kg_m2(), self.servo_natural_freq_rad_s, self.servo_damping_ratio)
 
     # -- control ---------------------------------------------------------------------
     def set_targets_deg(self, targets_deg: Sequence[float]) -> None:
@@ -198,7 +195,6 @@ class SO101Sim:
                 # A servo gets the goal as a step, as a real one does over its bus; the
                 # torque limit bounds its speed. (A goal slewed at 3 rad/s would hide the
                 # lesson: a PD loop follows a ramp with little overshoot whatever ζ.)
-                self._command_rad = self._goal_rad.copy()
                 self._send_servo_torques()
             else:
                 if self._slewing:
@@ -227,10 +223,9 @@ class SO101Sim:
         gravity_nm = p.calculateInverseDynamics(
             self.robot_id, angles_rad.tolist(), zeros, zeros, physicsClientId=self.client,
         )
-        mass_matrix = p.calculateMassMatrix(self.robot_id, angles_rad.tolist(), physicsClientId=self.client)
-        kp, kd = pd_gains(np.diag(np.asarray(mass_matrix)), self.servo_natural_freq_rad_s, self.servo_damping_ratio)
+        kp, kd = pd_gains(self._inertias_at(angles_rad), self.servo_natural_freq_rad_s, self.servo_damping_ratio)
         self.last_torques_nm = pd_torque_nm(
-            self._command_rad - angles_rad, velocities_rad_s, kp, kd, gravity_nm, self.servo_torque_limit_nm,
+            self._goal_rad - angles_rad, velocities_rad_s, kp, kd, gravity_nm, self.servo_torque_limit_nm,
         )
         p.setJointMotorControlArray(
             self.robot_id, self._indices, p.TORQUE_CONTROL,
