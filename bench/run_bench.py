@@ -38,9 +38,10 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))  # run as a script: `nodes` and `so101` live at the top
 
+from so101.dataflow import TICK_PERIOD_S, dataflow_copy, write_dataflow  # noqa: E402
+
 PROBER = ROOT / "bench" / "nodes" / "prober.py"
 DEFAULT_OUT = ROOT / "bench" / "results" / "latest.json"
-TICK_PERIOD_S = 0.004  # dataflow.yml's dora/timer/millis/4
 FIRST_STATE_MARK = "bench: first joint_state"
 # A probe moves a joint by 4° (2° in its first move); the first step after it moves
 # the joint by about 0.07°, the arm at rest drifts by far less than this.
@@ -299,17 +300,12 @@ def measure_node_work_in_process(ticks: int, work_dir: Path) -> dict:
 # -- dora run -------------------------------------------------------------------------
 def bench_dataflow(path: Path, sim_env: dict, probe_env: dict) -> None:
     """dataflow.yml as it is, with absolute paths, the simulation headless, and the prober as keyboard_control."""
-    import yaml
-
-    descriptor = yaml.safe_load((ROOT / "dataflow.yml").read_text())
+    descriptor = dataflow_copy({"SO101_MODE": "direct", "SO101_LANG": "en", **sim_env})
     for node in descriptor["nodes"]:
-        if node["id"] == "simulation":
-            node["path"] = str(ROOT / node["path"])
-            node["env"] = {**node.get("env", {}), "SO101_MODE": "direct", "SO101_LANG": "en", **sim_env}
-        elif node["id"] == "keyboard_control":
+        if node["id"] == "keyboard_control":
             node["path"] = str(PROBER)
             node["env"] = probe_env
-    path.write_text(yaml.safe_dump(descriptor, sort_keys=False))
+    write_dataflow(descriptor, path)
 
 
 def find_process_with_env(name: str, value: str) -> int | None:

@@ -26,13 +26,12 @@ import pyarrow as pa
 from dora import Node
 
 from so101.assets import ModelFilesError
-from so101.dataflow import timer_period_s
+from so101.dataflow import TICK_PERIOD_S, timer_period_s
 from so101.display import DisplayError
 from so101.joint_cmd import decode_joint_cmd
 from so101.robot import GRIPPER_COMMAND_INDEX, HOME_POSE_DEG, NUM_ARM_JOINTS
 from so101.simulator import SO101Sim
 
-DEFAULT_TICK_S = 0.004
 IMAGE_SIZE = (320, 240)
 
 TEXT = {
@@ -109,7 +108,7 @@ def main() -> int:
     # would only be discarded, one warning each.
     try:
         sim = SO101Sim(
-            mode=mode, time_step_s=DEFAULT_TICK_S, control_mode=control_mode,
+            mode=mode, time_step_s=TICK_PERIOD_S, control_mode=control_mode,
             servo_damping_ratio=servo_zeta, log=log,
         )
     except (ModelFilesError, DisplayError, ValueError) as error:
@@ -120,7 +119,7 @@ def main() -> int:
     # wall clock (the course's default 1/240 s step on a 4 ms tick runs 4% fast).
     tick_s = timer_period_s(node.node_config())
     if tick_s is None:
-        tick_s = DEFAULT_TICK_S
+        tick_s = TICK_PERIOD_S
         log(text["no_timer"].format(step_ms=tick_s * 1000))
     sim.set_time_step_s(tick_s)
     log(text["loaded"].format(robot_id=sim.robot_id, mode=sim.mode.upper(), step_ms=tick_s * 1000, control=control_mode))

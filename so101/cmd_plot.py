@@ -14,11 +14,11 @@ from pathlib import Path
 
 import numpy as np
 
+from so101.dataflow import TICK_PERIOD_S
 from so101.robot import ACTUATED_JOINTS, HOME_POSE_DEG
 from so101.servo import DEFAULT_NATURAL_FREQ_RAD_S, SERVO_TORQUE_LIMIT_NM
 from so101.step_response import SETTLING_BAND, StepMetrics, step_metrics
 
-TIME_STEP_S = 0.004  # the dataflow's tick
 DEFAULT_DAMPING = {"servo": (0.1, 0.2, 0.7), "position": (0.0, 0.2)}
 DAMPING_LABEL = {"servo": "ζ", "position": "link damping"}
 MAX_DURATION_S = 60.0
@@ -83,12 +83,12 @@ def record_step(joint: int, target_deg: float, mode: str, damping: float, durati
     from so101.simulator import SO101Sim
 
     options = {"servo_damping_ratio": damping} if mode == "servo" else {"link_damping": damping}
-    with SO101Sim(mode="direct", time_step_s=TIME_STEP_S, control_mode=mode, log=lambda message: None, **options) as sim:
+    with SO101Sim(mode="direct", time_step_s=TICK_PERIOD_S, control_mode=mode, log=lambda message: None, **options) as sim:
         start_deg = float(sim.joint_angles_deg()[joint])
         goal_deg = list(HOME_POSE_DEG)
         goal_deg[joint] = target_deg
         sim.set_targets_deg(goal_deg)
-        count = round(duration_s / TIME_STEP_S)
+        count = round(duration_s / TICK_PERIOD_S)
         times_s = np.zeros(count + 1)
         angles_deg = np.zeros(count + 1)
         angles_deg[0] = start_deg
@@ -186,7 +186,7 @@ def run(args: argparse.Namespace) -> int:
     write_plot(runs, args.joint, start_deg, args.target, args.mode, args.out)
     print(
         f"step response: joint {args.joint} ({joint.name}) {start_deg:g}° -> {args.target:g}°, "
-        f"{_mode_description(args.mode)}, {TIME_STEP_S * 1000:g} ms steps, {args.duration:g} s"
+        f"{_mode_description(args.mode)}, {TICK_PERIOD_S * 1000:g} ms steps, {args.duration:g} s"
     )
     print(format_table(runs, args.mode))
     if args.mode == "servo":

@@ -11,10 +11,10 @@ from pathlib import Path
 
 import numpy as np
 
+from so101.dataflow import TICK_PERIOD_S
 from so101.png import encode_png
 from so101.robot import ACTUATED_JOINTS, HOME_POSE_DEG, NUM_ARM_JOINTS
 
-TIME_STEP_S = 0.004  # the dataflow's tick
 REACHED_TOLERANCE_DEG = 0.5
 STILL_DEG_S = 0.5
 SETTLE_BUDGET_S = 5.0
@@ -79,9 +79,9 @@ def run(args: argparse.Namespace) -> int:
         target_xyz_m=DEFAULT_CAMERA.target_xyz_m, distance_m=args.distance,
         yaw_deg=args.yaw, pitch_deg=args.pitch, fov_deg=DEFAULT_CAMERA.fov_deg,
     )
-    with SO101Sim(mode="direct", time_step_s=TIME_STEP_S, log=lambda message: None) as sim:
+    with SO101Sim(mode="direct", time_step_s=TICK_PERIOD_S, log=lambda message: None) as sim:
         sim.set_targets_deg(targets_deg)
-        for _ in range(round(SETTLE_BUDGET_S / TIME_STEP_S)):
+        for _ in range(round(SETTLE_BUDGET_S / TICK_PERIOD_S)):
             sim.step()
             # Reached and still: a picture mid-swing would not show the asked pose.
             if (

@@ -1,8 +1,16 @@
-"""Facts read from the dataflow description, as plain functions."""
+"""The dataflow description (dataflow.yml at the top of the project): its facts and its copies."""
 
 from __future__ import annotations
 
 import re
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+DATAFLOW_FILE = ROOT / "dataflow.yml"
+# The period of dataflow.yml's `dora/timer/millis/4` tick, and so of the physics step
+# (tests/test_dataflow_file.py holds the two equal). Tools that simulate without the
+# dataflow (plot-step, snapshot, bench) step with it too.
+TICK_PERIOD_S = 0.004
 
 _TIMER = re.compile(r"^dora/timer/(millis|secs)/(\d+(?:\.\d+)?)$")
 
@@ -19,3 +27,27 @@ def timer_period_s(node_config: dict, input_id: str = "tick") -> float | None:
         return None
     unit, amount = match.groups()
     return float(amount) / (1000.0 if unit == "millis" else 1.0)
+
+
+def dataflow_copy(node_env: dict[str, str]) -> dict:
+    """dataflow.yml as a dict to run from elsewhere: every node that runs a file gets its
+    path made absolute and `node_env` over its own `env:` (which dora ranks above the shell's)."""
+    import yaml
+
+    descriptor = yaml.safe_load(DATAFLOW_FILE.read_text(encoding="utf-8"))
+    for node in descriptor["nodes"]:
+        if node.get("path", "dynamic") != "dynamic":
+            node["path"] = str((ROOT / node["path"]).resolve())
+            node["env"] = {**(node.get("env") or {}), **node_env}
+    return descriptor
+
+
+def write_dataflow(descriptor: dict, path: Path) -> Path:
+    import yaml
+
+    path.write_text(
+        "# Written from dataflow.yml; edit that file, not this one.\n"
+        + yaml.safe_dump(descriptor, sort_keys=False, allow_unicode=True),
+        encoding="utf-8",
+    )
+    return path

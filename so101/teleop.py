@@ -23,14 +23,12 @@ import tempfile
 import time
 from pathlib import Path
 
-import yaml
-
+from so101.dataflow import DATAFLOW_FILE, dataflow_copy, write_dataflow
 from so101.display import MODES, resolve_mode
 from so101.steps import _language
 from so101.versions import dora_version_problem
 
 ROOT = Path(__file__).resolve().parents[1]
-DATAFLOW = ROOT / "dataflow.yml"
 PROMPT = ROOT / "nodes" / "keyboard_control.py"
 DEFAULT_LOG = ROOT / "out" / "teleop-dora.log"
 # The simulation node logs this once the arm is loaded, just before it starts publishing joint_state.
@@ -75,23 +73,6 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
         "--log", type=Path, default=DEFAULT_LOG, metavar="FILE",
         help=f"where the dataflow's log goes (default: {DEFAULT_LOG})",
     )
-
-
-def write_dataflow_copy(mode: str, lang: str, work_dir: Path) -> Path:
-    """dataflow.yml with SO101_MODE and SO101_LANG set for every node that runs a file, paths absolute."""
-    descriptor = yaml.safe_load(DATAFLOW.read_text(encoding="utf-8"))
-    for node in descriptor["nodes"]:
-        path = node.get("path", "dynamic")
-        if path != "dynamic":
-            node["path"] = str((ROOT / path).resolve())
-            node["env"] = {**(node.get("env") or {}), "SO101_MODE": mode, "SO101_LANG": lang}
-    copy = work_dir / "dataflow.yml"
-    copy.write_text(
-        "# Written by `so101 teleop` from dataflow.yml; edit that file, not this one.\n"
-        + yaml.safe_dump(descriptor, sort_keys=False, allow_unicode=True),
-        encoding="utf-8",
-    )
-    return copy
 
 
 def _dora_executable() -> str:
@@ -192,8 +173,8 @@ def run(args: argparse.Namespace) -> int:
         return 2
     if notice:
         print(notice, flush=True)
-    if not DATAFLOW.exists() or not PROMPT.exists():
-        print(f"so101 teleop: {DATAFLOW} or {PROMPT} is missing: run it from a checkout of the project", file=sys.stderr)
+    if not DATAFLOW_FILE.exists() or not PROMPT.exists():
+        print(f"so101 teleop: {DATAFLOW_FILE} or {PROMPT} is missing: run it from a checkout of the project", file=sys.stderr)
         return 2
     # A CLI and library of different versions fail deep in the daemon; say it here, in one line.
     version_problem = dora_version_problem(_dora_executable())
@@ -207,7 +188,10 @@ def run(args: argparse.Namespace) -> int:
 
     print(text["starting"].format(mode=resolved_mode, log=log), flush=True)
     with tempfile.TemporaryDirectory(prefix="so101-teleop-") as work_dir:
-        dataflow = Dataflow(write_dataflow_copy(resolved_mode, args.lang, Path(work_dir)), log, env)
+        copy = write_dataflow(
+            dataflow_copy({"SO101_MODE": resolved_mode, "SO101_LANG": args.lang}), Path(work_dir) / "dataflow.yml",
+        )
+        dataflow = Dataflow(copy, log, env)
         return _run_prompt(dataflow, env, text, log)
 
 

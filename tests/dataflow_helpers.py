@@ -12,7 +12,8 @@ import time
 from pathlib import Path
 
 import pyarrow as pa
-import yaml
+
+from so101.dataflow import dataflow_copy, write_dataflow
 
 ROOT = Path(__file__).resolve().parents[1]
 VENV_BIN = Path(sys.executable).parent
@@ -48,12 +49,7 @@ def dora_env(**extra: str) -> dict[str, str]:
 
 def write_test_dataflow(tmp_path: Path, sim_env: dict[str, str] | None = None, record_file: Path | None = None) -> Path:
     """dataflow.yml with absolute node paths, the simulation forced headless, and optionally a recorder node."""
-    descriptor = yaml.safe_load((ROOT / "dataflow.yml").read_text())
-    for node in descriptor["nodes"]:
-        if node.get("path", "dynamic") != "dynamic":
-            node["path"] = str(ROOT / node["path"])
-        if node["id"] == "simulation":
-            node["env"] = {**node.get("env", {}), "SO101_MODE": "direct", **(sim_env or {})}
+    descriptor = dataflow_copy({"SO101_MODE": "direct", **(sim_env or {})})
     if record_file is not None:
         descriptor["nodes"].append(
             {
@@ -63,9 +59,7 @@ def write_test_dataflow(tmp_path: Path, sim_env: dict[str, str] | None = None, r
                 "env": {"RECORD_FILE": str(record_file)},
             }
         )
-    path = tmp_path / "dataflow.yml"
-    path.write_text(yaml.safe_dump(descriptor, sort_keys=False))
-    return path
+    return write_dataflow(descriptor, tmp_path / "dataflow.yml")
 
 
 class DoraRun:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import yaml
 
-from so101.dataflow import timer_period_s
+from so101.dataflow import TICK_PERIOD_S, timer_period_s
 from tests.dataflow_helpers import ROOT
 
 DATAFLOW = yaml.safe_load((ROOT / "dataflow.yml").read_text(encoding="utf-8"))
@@ -21,7 +21,7 @@ def test_the_two_course_nodes_and_nothing_else():
 def test_the_simulation_is_stepped_by_a_fresh_4_ms_tick_and_keeps_every_command():
     inputs = NODES["simulation"]["inputs"]
     assert inputs["tick"] == {"source": "dora/timer/millis/4", "queue_size": 1}
-    assert timer_period_s({"inputs": inputs}) == 0.004
+    assert timer_period_s({"inputs": inputs}) == 0.004 == TICK_PERIOD_S  # the tools that step without dora use it
     assert inputs["joint_cmd"]["source"] == "keyboard_control/joint_cmd"
     assert inputs["joint_cmd"]["queue_policy"] == "backpressure"
     assert NODES["simulation"]["outputs"] == ["joint_state", "gripper_state", "image"]
