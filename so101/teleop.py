@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import shutil
 import signal
 import subprocess
 import sys
@@ -26,6 +25,7 @@ from pathlib import Path
 from so101.dataflow import DATAFLOW_FILE, dataflow_copy, write_dataflow
 from so101.display import MODES, resolve_mode
 from so101.steps import _language
+from so101.venv import env_with_bin_first, executable
 from so101.versions import dora_version_problem
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -76,8 +76,7 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
 
 
 def _dora_executable() -> str:
-    beside_python = Path(sys.executable).parent / "dora"
-    return str(beside_python) if beside_python.exists() else (shutil.which("dora") or "dora")
+    return executable("dora") or "dora"
 
 
 def _descendants(pid: int) -> list[int]:
@@ -182,9 +181,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"so101 teleop: {version_problem}", file=sys.stderr)
         return 2
     log = args.log.expanduser().resolve()
-    env = dict(os.environ, SO101_MODE=resolved_mode, SO101_LANG=args.lang)
-    # dora starts `.py` nodes with the `python` found on PATH: make it this one.
-    env["PATH"] = f"{Path(sys.executable).parent}{os.pathsep}{env.get('PATH', '')}"
+    env = env_with_bin_first(dict(os.environ, SO101_MODE=resolved_mode, SO101_LANG=args.lang))
 
     print(text["starting"].format(mode=resolved_mode, log=log), flush=True)
     with tempfile.TemporaryDirectory(prefix="so101-teleop-") as work_dir:

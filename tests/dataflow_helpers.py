@@ -7,16 +7,15 @@ from __future__ import annotations
 import os
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
 import pyarrow as pa
 
 from so101.dataflow import dataflow_copy, write_dataflow
+from so101.venv import BIN as VENV_BIN, env_with_bin_first
 
 ROOT = Path(__file__).resolve().parents[1]
-VENV_BIN = Path(sys.executable).parent
 RECORDER = ROOT / "tests" / "nodes" / "state_recorder.py"
 
 # The simulation node's input as dataflow.yml declares it, and one tick of that timer.
@@ -41,7 +40,7 @@ def run_simulation_node(monkeypatch, events, node_config=TIMER_4MS, **env):
 
 def dora_env(**extra: str) -> dict[str, str]:
     """The environment for dora: this interpreter's bin first on PATH (dora starts nodes with that python)."""
-    env = dict(os.environ, PATH=f"{VENV_BIN}{os.pathsep}{os.environ.get('PATH', '')}")
+    env = env_with_bin_first()
     env.pop("DISPLAY", None)
     env.update(extra)
     return env
