@@ -62,13 +62,9 @@ TARGETS = {
 # -- pure analysis --------------------------------------------------------------------
 def percentile(values, fraction: float) -> float:
     """The `fraction` quantile (0..1) by linear interpolation; NaN for no values."""
-    ordered = sorted(values)
-    if not ordered:
-        return float("nan")
-    position = fraction * (len(ordered) - 1)
-    low = int(position)
-    high = min(low + 1, len(ordered) - 1)
-    return ordered[low] + (ordered[high] - ordered[low]) * (position - low)
+    import numpy as np
+
+    return float(np.quantile(values, fraction)) if len(values) else float("nan")
 
 
 def summary(values, scale: float = 1.0) -> dict:

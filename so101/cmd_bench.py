@@ -7,6 +7,7 @@ dataflow.yml, which it runs; this command loads it and passes the options on.
 from __future__ import annotations
 
 import argparse
+import functools
 import importlib.util
 import sys
 from pathlib import Path
@@ -14,6 +15,7 @@ from pathlib import Path
 BENCH_SCRIPT = Path(__file__).resolve().parents[1] / "bench" / "run_bench.py"
 
 
+@functools.cache  # `so101` builds every subcommand's parser: load the script once
 def _bench_module():
     spec = importlib.util.spec_from_file_location("so101_bench_script", BENCH_SCRIPT)
     module = importlib.util.module_from_spec(spec)
