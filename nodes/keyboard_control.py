@@ -38,8 +38,7 @@ if str(ROOT) not in sys.path:  # run as a script from anywhere: the so101 packag
 
 from so101.commands import (  # noqa: E402
     LANGUAGES, Batch, Empty, GoPose, Help, Home, ListJoints, ListPoses, ParseError, Quit, SavePose, SetJoint, ShowState,
-    Snapshot,
-    format_angle, format_angles, help_lines, joint_lines, parse_command, texts,
+    Snapshot, format_angle, format_angles, help_lines, joint_lines, parse_command, texts,
 )
 from so101.poses import Pose, PoseStore  # noqa: E402
 from so101.robot import ACTUATED_JOINTS, NUM_ARM_JOINTS  # noqa: E402
@@ -193,7 +192,7 @@ class KeyboardControl:
         # `so101 snapshot` in its own process: PyBullet stays out of the prompt, and so does its banner.
         result = subprocess.run(
             [sys.executable, "-m", "so101.cli", "snapshot", "--out", path, "--pose", *(f"{angle:.2f}" for angle in pose_deg)],
-            capture_output=True, text=True, cwd=os.getcwd(),
+            capture_output=True, text=True,
             env=dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))),
         )
         if result.returncode != 0:

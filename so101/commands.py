@@ -4,7 +4,7 @@ Commands (course step D and exercise 1, plus the gripper):
   J ANGLE                  one joint: J is 0-4 for the arm, 5 for the gripper; ANGLE in degrees
   batch a0 a1 a2 a3 a4 [g] all five arm joints at once, optionally the gripper as a sixth value
   grip ANGLE | open | close
-  home | list | state | save NAME | go NAME | poses | help | quit | exit
+  home | list | state | save NAME | go NAME | poses | snapshot [FILE] | help | quit | exit
 
 Out-of-limit angles are refused, not clamped: at a keyboard a value beyond the
 URDF limits is far more likely a typo (900 for 90) than a wish for the limit.

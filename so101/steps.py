@@ -15,6 +15,7 @@ import time
 from pathlib import Path
 
 from so101.assets import ModelFilesError, urdf_path
+from so101.commands import LANGUAGES
 from so101.robot import ACTUATED_JOINTS, NUM_ARM_JOINTS
 from so101.display import MODE_ENV_VAR, MODES, DisplayError, resolve_mode
 
@@ -31,7 +32,7 @@ TYPE_LABELS = {
 def _language(value: str) -> str:
     # A `type`, not `choices`: argparse passes a string default through `type` but
     # never checks it against `choices`, so a bad $SO101_LANG would crash later.
-    if value not in TYPE_LABELS:
+    if value not in LANGUAGES:
         raise argparse.ArgumentTypeError(f"unknown language {value!r} (from --lang or $SO101_LANG); use zh or en")
     return value
 
