@@ -304,15 +304,17 @@ def bench_dataflow(path: Path, sim_env: dict, probe_env: dict) -> None:
     write_dataflow(descriptor, path)
 
 
-def find_process_with_env(name: str, value: str) -> int | None:
-    """The pid of our process whose environment holds name=value (the node runs under dora's daemon)."""
+def processes_with_env(name: str, value: str) -> list[int]:
+    """The pids of our processes whose environment holds name=value (a node runs under dora's daemon,
+    not under us: its environment is how to find it)."""
     wanted = f"{name}={value}".encode()
+    found = []
     for entry in Path("/proc").iterdir():
         if entry.name.isdigit():
-            with contextlib.suppress(OSError):
+            with contextlib.suppress(OSError):  # gone meanwhile, or not ours
                 if wanted in (entry / "environ").read_bytes().split(b"\0"):
-                    return int(entry.name)
-    return None
+                    found.append(int(entry.name))
+    return found
 
 
 def peak_rss_mb(pid: int | None) -> float | None:
@@ -352,7 +354,8 @@ def run_dataflow(run_dir: Path, duration_s: float, sim_env: dict, probe_env: dic
                     raise RuntimeError(f"no joint_state from `dora run` (see {log_path}):\n{log_path.read_text(errors='replace')[-2000:]}")
                 time.sleep(0.05)
             time.sleep(duration_s)
-            rss_mb = peak_rss_mb(find_process_with_env("SO101_TICK_LOG", str(tick_log)))
+            simulation = processes_with_env("SO101_TICK_LOG", str(tick_log))
+            rss_mb = peak_rss_mb(simulation[0] if simulation else None)
             process.send_signal(signal.SIGINT)
             process.wait(30)
         finally:

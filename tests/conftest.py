@@ -8,6 +8,8 @@ must not turn a slow example into a failure.
 """
 
 import os
+import shutil
+from pathlib import Path
 
 import pytest
 from hypothesis import HealthCheck, settings
@@ -15,6 +17,29 @@ from hypothesis import HealthCheck, settings
 settings.register_profile("ci", max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 settings.register_profile("soak", max_examples=10_000, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
+
+
+# -- the model files -------------------------------------------------------------------
+
+
+@pytest.fixture(scope="session")
+def model_dir() -> Path:
+    """The verified model this checkout uses (fails with our message if it is missing)."""
+    from so101 import assets
+
+    return assets.urdf_path().parent
+
+
+@pytest.fixture
+def model_copy(model_dir, tmp_path) -> Path:
+    """A private copy of the verified model, to break."""
+    from so101 import assets
+
+    copy = tmp_path / "SO101"
+    for relpath in assets.manifest():
+        (copy / relpath).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(model_dir / relpath, copy / relpath)
+    return copy
 
 
 # -- simulators ------------------------------------------------------------------------

@@ -1,5 +1,6 @@
-"""Running the dataflow in tests: the simulation node in-process under MockNode, and the
-real dataflow.yml under `dora run` (a copy with absolute paths and extra nodes).
+"""Running the project in tests: `so101` as a user runs it, the simulation node in-process
+under MockNode, and the real dataflow.yml under `dora run` (a copy with absolute paths and
+extra nodes).
 """
 
 from __future__ import annotations
@@ -12,18 +13,21 @@ from pathlib import Path
 
 import pyarrow as pa
 
-from so101.dataflow import dataflow_copy, write_dataflow
+from so101.dataflow import TICK_PERIOD_S, dataflow_copy, write_dataflow
 from so101.venv import BIN as VENV_BIN, env_with_bin_first
 
 ROOT = Path(__file__).resolve().parents[1]
 RECORDER = ROOT / "tests" / "nodes" / "state_recorder.py"
+SO101 = VENV_BIN / "so101"
+# The keyboard prompt as a person starts it in the second terminal (it joins a running dataflow).
+PROMPT_COMMAND = [str(VENV_BIN / "python"), str(ROOT / "nodes" / "keyboard_control.py")]
 
 # The simulation node's input as dataflow.yml declares it, and one tick of that timer.
-TIMER_4MS = {"inputs": {"tick": {"source": "dora/timer/millis/4", "queue_size": 1}}}
+TICK_TIMER_CONFIG = {"inputs": {"tick": {"source": f"dora/timer/millis/{TICK_PERIOD_S * 1000:g}", "queue_size": 1}}}
 TICK = ("tick", pa.array([], type=pa.null()))
 
 
-def run_simulation_node(monkeypatch, events, node_config=TIMER_4MS, **env):
+def run_simulation_node(monkeypatch, events, node_config=TICK_TIMER_CONFIG, **env):
     """Run nodes/simulation_node.py's main() headless over `events`; returns (exit code, the MockNode)."""
     from dora.testing import MockNode
 
@@ -44,6 +48,48 @@ def dora_env(**extra: str) -> dict[str, str]:
     env.pop("DISPLAY", None)
     env.update(extra)
     return env
+
+
+def prompt_env(tmp_path: Path, **extra: str) -> dict[str, str]:
+    """The prompt's environment in a test: English replies, poses and history kept in tmp_path."""
+    return dora_env(
+        SO101_LANG="en", SO101_POSES_FILE=str(tmp_path / "poses.json"),
+        SO101_HISTORY_FILE=str(tmp_path / "history"), **extra,
+    )
+
+
+def run_so101(*args: str, **env: str) -> subprocess.CompletedProcess:
+    """`so101 ARGS` as a user runs it from this venv: no DISPLAY, no SO101_LANG or SO101_MODE
+    from the test's own shell, `env` on top."""
+    environ = dora_env()
+    for name in ("SO101_LANG", "SO101_MODE"):
+        environ.pop(name, None)
+    environ.update(env)
+    return subprocess.run([str(SO101), *args], capture_output=True, text=True, env=environ, timeout=120)
+
+
+def error_lines(stderr: str) -> list[str]:
+    """stderr without the build-time banner pybullet prints when it is imported."""
+    return [line for line in stderr.splitlines() if not line.startswith("pybullet build time")]
+
+
+# A mesh to break in tests of the model's one-line errors.
+BROKEN_MESH = "assets/upper_arm_so101_v1.stl"
+
+
+def corrupt(path: Path) -> None:
+    """Flip one byte in the middle of the file."""
+    data = bytearray(path.read_bytes())
+    data[len(data) // 2] ^= 0xFF
+    path.write_bytes(bytes(data))
+
+
+def unused_display() -> str:
+    """A `:N` display with no X server behind it (its socket absent on this machine)."""
+    number = 90
+    while Path(f"/tmp/.X11-unix/X{number}").exists():
+        number += 1
+    return f":{number}"
 
 
 def write_test_dataflow(tmp_path: Path, sim_env: dict[str, str] | None = None, record_file: Path | None = None) -> Path:

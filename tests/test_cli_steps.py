@@ -2,24 +2,15 @@
 
 from __future__ import annotations
 
-import os
 import re
-import subprocess
 import sys
-from pathlib import Path
 
 import pytest
 
-SO101 = Path(sys.executable).with_name("so101")
+from tests.dataflow_helpers import error_lines, run_so101
 
 # The course's 0.5 rad targets, in degrees: 0.5 rad = 28.65°.
 COURSE_STEP_B_DEG = [28.65, -28.65, 28.65, -28.65, 28.65]
-
-
-def so101(*args: str, **env: str) -> subprocess.CompletedProcess:
-    environ = {key: value for key, value in os.environ.items() if key not in ("SO101_LANG", "SO101_MODE")}
-    environ.update(env)
-    return subprocess.run([str(SO101), *args], capture_output=True, text=True, env=environ, timeout=120)
 
 
 def table_rows(stdout: str, word: str, type_word: str) -> list[tuple[int, str, str]]:
@@ -32,7 +23,7 @@ def table_rows(stdout: str, word: str, type_word: str) -> list[tuple[int, str, s
 
 
 def test_inspect_prints_the_courses_table(course_printed_table):
-    result = so101("inspect", "--mode", "direct", "--steps", "1")
+    result = run_so101("inspect", "--mode", "direct", "--steps", "1")
     assert result.returncode == 0, result.stderr
     assert "SO-101 已加载,robot_id = 1" in result.stdout
     assert "关节数量: 7" in result.stdout
@@ -40,30 +31,26 @@ def test_inspect_prints_the_courses_table(course_printed_table):
     assert "Traceback" not in result.stderr
 
 
-def test_inspect_in_english(course_joint_table):
-    result = so101("inspect", "--mode", "direct", "--steps", "1", "--lang", "en")
+def test_inspect_in_english_with_the_limits_in_degrees(course_joint_table):
+    result = run_so101("inspect", "--mode", "direct", "--steps", "1", "--lang", "en")
     assert result.returncode == 0, result.stderr
     assert "joints: 7" in result.stdout
     assert table_rows(result.stdout, "joint", "type") == course_joint_table
+    shoulder_pan = next(line for line in result.stdout.splitlines() if "shoulder_pan" in line)
+    assert re.search(r"\[\s*-110\.0°,\s+110\.0°\]", shoulder_pan), shoulder_pan
 
 
 def test_language_comes_from_so101_lang():
-    result = so101("inspect", "--mode", "direct", "--steps", "1", SO101_LANG="en")
+    result = run_so101("inspect", "--mode", "direct", "--steps", "1", SO101_LANG="en")
     assert result.returncode == 0, result.stderr
     assert "joints: 7" in result.stdout
 
 
 def test_a_bad_so101_lang_is_a_one_line_error():
-    result = so101("inspect", "--mode", "direct", "--steps", "1", SO101_LANG="fr")
+    result = run_so101("inspect", "--mode", "direct", "--steps", "1", SO101_LANG="fr")
     assert result.returncode == 2
     assert "argument --lang: unknown language 'fr' (from --lang or $SO101_LANG); use zh or en" in result.stderr
     assert "Traceback" not in result.stderr
-
-
-def test_inspect_shows_the_limits_in_degrees():
-    result = so101("inspect", "--mode", "direct", "--steps", "1", "--lang", "en")
-    shoulder_pan = next(line for line in result.stdout.splitlines() if "shoulder_pan" in line)
-    assert re.search(r"\[\s*-110\.0°,\s+110\.0°\]", shoulder_pan), shoulder_pan
 
 
 def reached_angles(stdout: str, word: str) -> list[float]:
@@ -71,7 +58,7 @@ def reached_angles(stdout: str, word: str) -> list[float]:
 
 
 def test_joints_reaches_the_courses_targets():
-    result = so101("joints", "--mode", "direct", "--steps", "1")
+    result = run_so101("joints", "--mode", "direct", "--steps", "1")
     assert result.returncode == 0, result.stderr
     assert "当前关节角度:" in result.stdout
     angles = reached_angles(result.stdout, "关节")
@@ -81,17 +68,14 @@ def test_joints_reaches_the_courses_targets():
 
 def test_joints_takes_other_targets():
     targets_rad = ["0", "-0.3", "0", "0.2", "0"]
-    result = so101("joints", "--mode", "direct", "--steps", "1", "--lang", "en", "--targets", *targets_rad)
+    result = run_so101("joints", "--mode", "direct", "--steps", "1", "--lang", "en", "--targets", *targets_rad)
     assert result.returncode == 0, result.stderr
     assert reached_angles(result.stdout, "joint") == pytest.approx([0.0, -17.19, 0.0, 11.46, 0.0], abs=1.0)
 
 
 @pytest.mark.skipif(sys.platform in ("darwin", "win32"), reason="macOS and Windows always have a window")
 def test_auto_mode_without_display_runs_headless_with_a_notice():
-    environ = {key: value for key, value in os.environ.items() if key != "DISPLAY"}
-    result = subprocess.run(
-        [str(SO101), "inspect", "--steps", "1"], capture_output=True, text=True, env=environ, timeout=120
-    )
+    result = run_so101("inspect", "--steps", "1")  # run_so101 runs it without DISPLAY
     assert result.returncode == 0, result.stderr
     assert "running headless in DIRECT mode" in result.stdout + result.stderr
     assert "关节数量: 7" in result.stdout
@@ -99,27 +83,22 @@ def test_auto_mode_without_display_runs_headless_with_a_notice():
 
 @pytest.mark.skipif(sys.platform in ("darwin", "win32"), reason="macOS and Windows always have a window")
 def test_gui_without_display_is_a_one_line_error():
-    environ = {key: value for key, value in os.environ.items() if key != "DISPLAY"}
-    result = subprocess.run(
-        [str(SO101), "inspect", "--mode", "gui", "--steps", "1"], capture_output=True, text=True, env=environ,
-        timeout=120,
-    )
+    result = run_so101("inspect", "--mode", "gui", "--steps", "1")
     assert result.returncode == 2
-    # pybullet prints its build-time banner on import; everything else is our one line.
-    error_lines = [line for line in result.stderr.splitlines() if not line.startswith("pybullet build time")]
-    assert len(error_lines) == 1
-    assert error_lines[0].startswith("so101 inspect: GUI mode needs a display")
+    lines = error_lines(result.stderr)
+    assert len(lines) == 1
+    assert lines[0].startswith("so101 inspect: GUI mode needs a display")
 
 
 def test_help_lists_the_subcommands():
-    result = so101("--help")
+    result = run_so101("--help")
     assert result.returncode == 0
     for name in ("assets", "inspect", "joints"):
         assert re.search(rf"^\s+{name}\s+\S", result.stdout, re.MULTILINE), name
 
 
 def test_an_unknown_mode_is_refused_with_the_choices():
-    result = so101("inspect", "--mode", "window")
+    result = run_so101("inspect", "--mode", "window")
     assert result.returncode == 2
     assert "invalid choice: 'window'" in result.stderr
     assert "Traceback" not in result.stderr

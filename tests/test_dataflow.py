@@ -4,12 +4,11 @@ from __future__ import annotations
 
 import json
 import subprocess
-import sys
 import time
 
 import pytest
 
-from tests.dataflow_helpers import ROOT, DoraRun, dora_env, write_test_dataflow
+from tests.dataflow_helpers import PROMPT_COMMAND, DoraRun, prompt_env, write_test_dataflow
 
 pytestmark = pytest.mark.dataflow
 
@@ -32,9 +31,8 @@ def test_typed_commands_reach_their_targets(tmp_path):
     try:
         dora.wait_for("SO-101", timeout_s=60)
         prompt = subprocess.Popen(
-            [sys.executable, str(ROOT / "nodes" / "keyboard_control.py")],
-            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-            env=dora_env(SO101_LANG="en", SO101_POSES_FILE=str(poses_file)), cwd=tmp_path,
+            PROMPT_COMMAND, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+            env=prompt_env(tmp_path), cwd=tmp_path,
         )
         sent_at = []
         for command, _ in SCRIPT:

@@ -2,19 +2,10 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import pytest
 
 from so101.display import DisplayError, display_available, resolve_mode
-
-
-def missing_local_display() -> str:
-    """A `:N` display whose X socket does not exist on this machine."""
-    number = 90
-    while Path(f"/tmp/.X11-unix/X{number}").exists():
-        number += 1
-    return f":{number}"
+from tests.dataflow_helpers import unused_display
 
 
 def test_auto_without_display_is_direct_with_a_notice():
@@ -30,7 +21,7 @@ def test_auto_with_an_empty_display_is_direct():
 
 def test_auto_with_a_local_display_whose_socket_is_gone_is_direct():
     # A stale DISPLAY (e.g. an Xvfb that has exited) would make PyBullet's X client kill the process.
-    environ = {"DISPLAY": missing_local_display() + ".0"}
+    environ = {"DISPLAY": unused_display() + ".0"}
     assert display_available(environ, "linux") is False
     mode, notice = resolve_mode("auto", environ=environ, platform="linux")
     assert mode == "direct" and notice

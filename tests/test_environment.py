@@ -4,49 +4,19 @@ from __future__ import annotations
 
 import importlib.metadata
 import os
-import shutil
 import subprocess
 from pathlib import Path
 
 import pytest
 
-from so101.assets import default_assets_dir
 from so101.versions import cli_version_from_output, dora_version_problem, version_mismatch
-from tests.dataflow_helpers import VENV_BIN, DoraRun, dora_env, write_test_dataflow
+from tests.dataflow_helpers import (
+    BROKEN_MESH, PROMPT_COMMAND, VENV_BIN, DoraRun, corrupt, dora_env, error_lines, run_so101,
+    unused_display, write_test_dataflow,
+)
 
 NO_DISPLAY_NOTICE = "no display found"
 LIBRARY_VERSION = importlib.metadata.version("dora-rs")
-
-
-def unused_display() -> str:
-    """A display number with no X server behind it (the variable set, the server gone)."""
-    number = 90
-    while Path(f"/tmp/.X11-unix/X{number}").exists():
-        number += 1
-    return f":{number}"
-
-
-def broken_model_copy(tmp_path: Path, how: str) -> tuple[Path, str]:
-    """A copy of the verified model with one mesh deleted or altered; returns (dir, the bad file)."""
-    copy = tmp_path / "SO101"
-    shutil.copytree(default_assets_dir(), copy)
-    mesh = sorted((copy / "assets").glob("*.stl"))[0]
-    if how == "missing":
-        mesh.unlink()
-    else:
-        with mesh.open("r+b") as handle:  # one flipped byte in the middle of the file
-            handle.seek(mesh.stat().st_size // 2)
-            byte = handle.read(1)
-            handle.seek(-1, os.SEEK_CUR)
-            handle.write(bytes([byte[0] ^ 0xFF]))
-    return copy, str(mesh.relative_to(copy))
-
-
-def run_so101(*args: str, **env: str) -> subprocess.CompletedProcess:
-    environ = dora_env(SO101_LANG="en", **env)
-    return subprocess.run(
-        [str(VENV_BIN / "so101"), *args], capture_output=True, text=True, env=environ, timeout=120,
-    )
 
 
 # -- no display -------------------------------------------------------------------------
@@ -79,24 +49,34 @@ def test_dataflow_without_display_runs_direct_with_one_notice(tmp_path):
 
 # -- model files ------------------------------------------------------------------------
 
+def break_model(model_copy: Path, how: str) -> Path:
+    """One mesh of the copy deleted or altered; returns that file."""
+    mesh = model_copy / BROKEN_MESH
+    if how == "missing":
+        mesh.unlink()
+    else:
+        corrupt(mesh)
+    return mesh
+
+
 @pytest.mark.parametrize("how", ["missing", "corrupt"])
-def test_inspect_with_broken_model_says_which_file_and_exits_2(tmp_path, how):
-    assets_dir, bad_file = broken_model_copy(tmp_path, how)
-    result = run_so101("inspect", "--mode", "direct", "--steps", "1", SO101_ASSETS_DIR=str(assets_dir))
+def test_inspect_with_broken_model_says_which_file_and_exits_2(model_copy, how):
+    bad_file = break_model(model_copy, how)
+    result = run_so101("inspect", "--mode", "direct", "--steps", "1", SO101_ASSETS_DIR=str(model_copy))
     assert result.returncode == 2
-    # pybullet prints its build banner on import; everything else is our one line.
-    lines = [line for line in result.stderr.splitlines() if not line.startswith("pybullet build time:")]
+    lines = error_lines(result.stderr)
     assert len(lines) == 1, result.stderr
-    assert lines[0].startswith(f"so101 inspect: SO-101 model file {how}: {assets_dir / bad_file}")
+    assert lines[0].startswith(f"so101 inspect: SO-101 model file {how}: {bad_file}")
     assert "so101 assets" in lines[0]
     assert "Traceback" not in result.stdout + result.stderr
+    assert "shoulder_pan" not in result.stdout  # stopped before loading anything
 
 
 @pytest.mark.dataflow
 @pytest.mark.parametrize("how", ["missing", "corrupt"])
-def test_simulation_with_broken_model_stops_the_dataflow_with_the_message(tmp_path, how):
-    assets_dir, bad_file = broken_model_copy(tmp_path, how)
-    dataflow = write_test_dataflow(tmp_path, sim_env={"SO101_ASSETS_DIR": str(assets_dir)})
+def test_simulation_with_broken_model_stops_the_dataflow_with_the_message(tmp_path, model_copy, how):
+    bad_file = break_model(model_copy, how)
+    dataflow = write_test_dataflow(tmp_path, sim_env={"SO101_ASSETS_DIR": str(model_copy)})
     dora = DoraRun(dataflow, tmp_path / "dora.log", stop_after_s=120)
     try:
         exit_code = dora.process.wait(90)  # the node exits at once, and the dataflow with it
@@ -104,7 +84,7 @@ def test_simulation_with_broken_model_stops_the_dataflow_with_the_message(tmp_pa
         dora.stop()
     log = dora.log()
     assert exit_code != 0
-    assert f"[simulation] cannot start: SO-101 model file {how}: {assets_dir / bad_file}" in log, log[-3000:]
+    assert f"[simulation] cannot start: SO-101 model file {how}: {bad_file}" in log, log[-3000:]
     assert "exited with code 2" in log, log[-3000:]
     assert "Traceback" not in log
 
@@ -183,8 +163,7 @@ def test_teleop_with_mismatched_dora_stops_before_starting_anything(tmp_path, mo
 def test_a_prompt_that_cannot_join_names_a_dora_of_another_version(tmp_path):
     bin_dir = fake_dora(tmp_path, 'echo "dora-cli 1.0.4"')
     result = subprocess.run(
-        [str(VENV_BIN / "python"), str(Path(__file__).parents[1] / "nodes" / "keyboard_control.py")],
-        input="", capture_output=True, text=True, timeout=60,
+        PROMPT_COMMAND, input="", capture_output=True, text=True, timeout=60,
         env=dict(os.environ, PATH=f"{bin_dir}{os.pathsep}{os.environ['PATH']}", SO101_LANG="en"),
     )
     assert result.returncode == 1

@@ -21,7 +21,8 @@ from pathlib import Path
 
 import pytest
 
-from tests.dataflow_helpers import ROOT, DoraRun, dora_env, write_test_dataflow
+from bench.run_bench import processes_with_env
+from tests.dataflow_helpers import PROMPT_COMMAND, DoraRun, dora_env, prompt_env, write_test_dataflow
 
 pytestmark = pytest.mark.dataflow
 
@@ -34,16 +35,7 @@ def plain(text: str) -> str:
 
 def processes_with_marker(marker: str) -> list[int]:
     """PIDs whose environment holds SO101_TEST_RUN=marker: `dora run` and every node it started."""
-    needle = f"SO101_TEST_RUN={marker}".encode()
-    found = []
-    for entry in Path("/proc").iterdir():
-        if entry.name.isdigit():
-            try:
-                if needle in (entry / "environ").read_bytes().split(b"\0"):
-                    found.append(int(entry.name))
-            except OSError:  # gone meanwhile, or not ours
-                pass
-    return found
+    return processes_with_env("SO101_TEST_RUN", marker)
 
 
 def command_line(pid: int) -> str:
@@ -94,16 +86,12 @@ def test_killed_simulation_stops_the_dataflow_with_a_clear_report(tmp_path):
 def test_killed_prompt_leaves_the_simulation_running_and_a_new_prompt_drives_it(tmp_path):
     record_file = tmp_path / "joint_state.json"
     dataflow = write_test_dataflow(tmp_path, sim_env={"SO101_LANG": "en"}, record_file=record_file)
-    prompt_env = dora_env(
-        SO101_LANG="en", SO101_POSES_FILE=str(tmp_path / "poses.json"), SO101_HISTORY_FILE=str(tmp_path / "history"),
-    )
-    prompt_command = [sys.executable, str(ROOT / "nodes" / "keyboard_control.py")]
     dora = DoraRun(dataflow, tmp_path / "dora.log", stop_after_s=120)
     try:
         dora.wait_for("SO-101 loaded", timeout_s=60)
         first = subprocess.Popen(
-            prompt_command, stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-            text=True, env=prompt_env,
+            PROMPT_COMMAND, stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+            text=True, env=prompt_env(tmp_path),
         )
         first.stdin.write("0 45\n")
         first.stdin.flush()  # stdin stays open: the prompt waits for more, as at a keyboard
@@ -114,7 +102,7 @@ def test_killed_prompt_leaves_the_simulation_running_and_a_new_prompt_drives_it(
         killed_at = time.monotonic()
         time.sleep(1.0)
         second = subprocess.run(
-            prompt_command, input="0 -45\n", capture_output=True, text=True, env=prompt_env, timeout=60,
+            PROMPT_COMMAND, input="0 -45\n", capture_output=True, text=True, env=prompt_env(tmp_path), timeout=60,
         )
         dora.wait_for("joint 0 target -> -45°", timeout_s=30)
         time.sleep(1.5)
