@@ -96,3 +96,9 @@ def course_joint_table() -> list[tuple[int, str, str]]:
 def course_printed_table(course_joint_table) -> list[tuple[int, str, str]]:
     """The same rows as course step A prints them: (index, name, type in the course's Chinese words)."""
     return [(index, name, COURSE_TYPE_WORDS_ZH[kind]) for index, name, kind in course_joint_table]
+
+
+@pytest.fixture(scope="session")
+def course_step_b_deg() -> list[float]:
+    """Course step B's targets, [0.5, -0.5, 0.5, -0.5, 0.5] rad, in degrees: 0.5 rad = 28.65°."""
+    return [28.65, -28.65, 28.65, -28.65, 28.65]

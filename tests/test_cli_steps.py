@@ -9,10 +9,6 @@ import pytest
 
 from tests.dataflow_helpers import error_lines, run_so101
 
-# The course's 0.5 rad targets, in degrees: 0.5 rad = 28.65°.
-COURSE_STEP_B_DEG = [28.65, -28.65, 28.65, -28.65, 28.65]
-
-
 def table_rows(stdout: str, word: str, type_word: str) -> list[tuple[int, str, str]]:
     pattern = re.compile(rf"^\s+{word} (\d+): (\S+)\s+{type_word}: (.+?)(?:\s+\[.*\])?$")
     return [
@@ -57,13 +53,13 @@ def reached_angles(stdout: str, word: str) -> list[float]:
     return [float(match[1]) for match in re.finditer(rf"^\s+{word} \d+: (-?\d+\.\d)°$", stdout, re.MULTILINE)]
 
 
-def test_joints_reaches_the_courses_targets():
+def test_joints_reaches_the_courses_targets(course_step_b_deg):
     result = run_so101("joints", "--mode", "direct", "--steps", "1")
     assert result.returncode == 0, result.stderr
     assert "当前关节角度:" in result.stdout
     angles = reached_angles(result.stdout, "关节")
     assert len(angles) == 5
-    assert angles == pytest.approx(COURSE_STEP_B_DEG, abs=1.0)
+    assert angles == pytest.approx(course_step_b_deg, abs=1.0)
 
 
 def test_joints_takes_other_targets():

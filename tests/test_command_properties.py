@@ -12,11 +12,11 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from so101.commands import (
-    NO_ARGUMENT_COMMANDS, Batch, Empty, GoPose, ParseError, SavePose, SetJoint, parse_command,
+    LANGUAGES, NO_ARGUMENT_COMMANDS, Batch, Empty, GoPose, ParseError, SavePose, SetJoint, parse_command,
 )
 from so101.robot import ACTUATED_JOINTS, NUM_ARM_JOINTS
 
-LANGS = st.sampled_from(["zh", "en"])
+LANGS = st.sampled_from(LANGUAGES)
 # Words a person might mix up: the command words, numbers of every form, and noise.
 COMMAND_WORDS = sorted(NO_ARGUMENT_COMMANDS) + ["batch", "grip", "save", "go"]
 NUMBER_WORDS = st.one_of(

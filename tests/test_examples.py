@@ -10,7 +10,10 @@ from pathlib import Path
 
 import pytest
 
+from tests.dataflow_helpers import error_lines
+
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
+
 
 def run_example(script: str, *args: str, **env: str) -> subprocess.CompletedProcess:
     environ = {key: value for key, value in os.environ.items() if key not in ("DISPLAY", "SO101_MODE")}
@@ -30,12 +33,11 @@ def test_step_a_prints_the_courses_joint_table(course_printed_table):
     assert [(int(index), name, kind) for index, name, kind in rows] == course_printed_table
 
 
-def test_step_b_reaches_the_courses_angles():
+def test_step_b_reaches_the_courses_angles(course_step_b_deg):
     result = run_example("test_so101_joints.py", SO101_MODE="direct")
     assert result.returncode == 0, result.stderr
     angles = [float(angle) for angle in re.findall(r"^  关节 \d: (-?\d+\.\d)°$", result.stdout, re.MULTILINE)]
-    # The course's 0.5 rad targets are ±28.65°.
-    assert angles == pytest.approx([28.65, -28.65, 28.65, -28.65, 28.65], abs=1.0)
+    assert angles == pytest.approx(course_step_b_deg, abs=1.0)
 
 
 @pytest.mark.skipif(sys.platform in ("darwin", "win32"), reason="macOS and Windows always have a window")
@@ -52,7 +54,7 @@ def test_without_a_display_auto_runs_headless_and_says_so():
 def test_a_missing_model_is_one_clear_line(script, tmp_path):
     result = run_example(script, SO101_MODE="direct", SO101_ASSETS_DIR=str(tmp_path / "nowhere"))
     assert result.returncode == 2
-    error_lines = [line for line in result.stderr.splitlines() if not line.startswith("pybullet build time")]
-    assert len(error_lines) == 1
-    assert error_lines[0].startswith(f"{script}: SO-101 model file missing:")
-    assert "so101 assets" in error_lines[0]
+    lines = error_lines(result.stderr)
+    assert len(lines) == 1
+    assert lines[0].startswith(f"{script}: SO-101 model file missing:")
+    assert "so101 assets" in lines[0]

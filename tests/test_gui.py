@@ -15,10 +15,10 @@ import time
 
 import numpy as np
 import pytest
-import yaml
 from PIL import Image
 
-from tests.dataflow_helpers import ROOT, DoraRun, write_test_dataflow
+from so101.dataflow import dataflow_copy, write_dataflow
+from tests.dataflow_helpers import ROOT, DoraRun
 
 pytestmark = [
     pytest.mark.person,
@@ -76,22 +76,15 @@ def overlap(mask_a: np.ndarray, mask_b: np.ndarray) -> float:
 
 
 def gui_dataflow(tmp_path, trigger_file):
-    """dataflow.yml with the simulation in GUI mode and the test's sender in place of the prompt."""
-    path = write_test_dataflow(tmp_path, sim_env={"SO101_MODE": "gui", "SO101_LANG": "en"})
-    descriptor = yaml.safe_load(path.read_text())
-    descriptor["nodes"] = [node for node in descriptor["nodes"] if node["id"] != "keyboard_control"]
+    """dataflow.yml with the simulation in GUI mode and the test's sender in the prompt's place
+    (same id and output, so the simulation's joint_cmd input stays as dataflow.yml has it)."""
+    descriptor = dataflow_copy({"SO101_MODE": "gui", "SO101_LANG": "en"})
     for node in descriptor["nodes"]:
-        if node["id"] == "simulation":
-            node["inputs"]["joint_cmd"] = "sender/joint_cmd"
-    descriptor["nodes"].append({
-        "id": "sender",
-        "path": str(SENDER),
-        "inputs": {"tick": "dora/timer/millis/50"},
-        "outputs": ["joint_cmd"],
-        "env": {"TRIGGER_FILE": str(trigger_file), "JOINT_CMD": COMMAND_DEG},
-    })
-    path.write_text(yaml.safe_dump(descriptor, sort_keys=False))
-    return path
+        if node["id"] == "keyboard_control":
+            node["path"] = str(SENDER)
+            node["inputs"] = {"tick": "dora/timer/millis/50"}
+            node["env"] = {"TRIGGER_FILE": str(trigger_file), "JOINT_CMD": COMMAND_DEG}
+    return write_dataflow(descriptor, tmp_path / "dataflow.yml")
 
 
 def settled_arm(display, path, accept, timeout_s=60):

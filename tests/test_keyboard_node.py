@@ -244,16 +244,13 @@ def test_main_without_a_running_dataflow_says_how_to_start_it(monkeypatch, capsy
 
 
 def test_snapshot_draws_the_arm_as_it_is_now(tmp_path, monkeypatch):
-    import numpy as np
-    from matplotlib import image
-
-    from tests.test_snapshot import arm_pixels
+    from tests.image_helpers import arm_pixels, png_rgb
 
     monkeypatch.chdir(tmp_path)
     _, control = make_control(tmp_path, lang="en", events=state_events())
     lines, _ = control.handle_line("snapshot now.png")
     assert lines == ["  → snapshot written to now.png"]
-    rgb = (image.imread(tmp_path / "now.png")[:, :, :3] * 255).round().astype(np.uint8)
+    rgb = png_rgb((tmp_path / "now.png").read_bytes())
     assert arm_pixels(rgb).sum() > 0.02 * rgb.shape[0] * rgb.shape[1]
 
 

@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import re
-import struct
 import subprocess
 import sys
 
 import pytest
 
 from so101.cli import main
+from tests.image_helpers import png_size
 
 pytest.importorskip("matplotlib")
 
@@ -29,11 +29,6 @@ def table(stdout: str) -> dict[float, dict[str, str]]:
         if match:
             rows[float(match["damping"])] = match.groupdict()
     return rows
-
-
-def png_size(data: bytes) -> tuple[int, int]:
-    assert data[:8] == b"\x89PNG\r\n\x1a\n"
-    return struct.unpack(">II", data[16:24])
 
 
 def test_servo_plot_shows_overshoot_falling_with_damping(tmp_path):

@@ -7,19 +7,19 @@ import os
 import re
 import shutil
 import subprocess
-import sys
 import time
 import uuid
 from pathlib import Path
 
 import pytest
 
+from tests.dataflow_helpers import SO101
+
 pytestmark = [
     pytest.mark.person,
     pytest.mark.skipif(shutil.which("tmux") is None, reason="tmux is not installed (.ci/run installs it)"),
 ]
 
-SO101 = Path(sys.executable).parent / "so101"
 TARGET_DEG = [-30.0, 45.0, -60.0, 30.0, 0.0]
 
 

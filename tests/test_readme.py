@@ -53,12 +53,10 @@ def test_every_so101_command_in_the_readme_exists():
 
 
 def test_the_benchmark_table_in_the_readme_is_the_latest_result():
-    import importlib.util
     import json
 
-    spec = importlib.util.spec_from_file_location("run_bench", ROOT / "bench" / "run_bench.py")
-    run_bench = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(run_bench)
+    from bench import run_bench
+
     result = json.loads((ROOT / "bench" / "results" / "latest.json").read_text())
     shown = "\n".join(("    " + line).rstrip() for line in run_bench.table(result).splitlines())
     assert shown in README, "README's benchmark figures differ from bench/results/latest.json (so101 bench --show prints them)"

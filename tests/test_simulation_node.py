@@ -182,7 +182,7 @@ def test_image_output_shows_the_arm_at_the_asked_rate(monkeypatch):
     import numpy as np
     from dora.testing import MockNode
 
-    from tests.test_snapshot import arm_pixels
+    from tests.image_helpers import arm_pixels
 
     metadata_sent = []
     send_output = MockNode.send_output

@@ -2,23 +2,15 @@
 
 from __future__ import annotations
 
-import io
-import struct
-
 import numpy as np
 import pybullet as p
 import pytest
 
 from so101.cli import main
 from so101.png import encode_png
+from tests.image_helpers import arm_pixels, png_rgb, png_size
 
 SIZE = (160, 120)
-
-
-def arm_pixels(rgb: np.ndarray) -> np.ndarray:
-    """The SO-101's yellow: the floor is white and pale blue, so only the arm is red+green with little blue."""
-    red, green, blue = (rgb[:, :, channel].astype(int) for channel in range(3))
-    return (red > 150) & (green > 110) & (blue < 90)
 
 
 def test_render_is_an_rgb_uint8_image_of_the_asked_size(shared_sim):
@@ -51,20 +43,13 @@ def test_the_image_changes_when_the_pose_changes(make_sim):
 
 
 def test_png_encoder_round_trips_through_matplotlib():
-    image = pytest.importorskip("matplotlib.image")
+    pytest.importorskip("matplotlib")
     rgb = np.random.default_rng(5).integers(0, 256, size=(7, 11, 3), dtype=np.uint8)
-    decoded = image.imread(io.BytesIO(encode_png(rgb)))
-    assert np.array_equal((decoded[:, :, :3] * 255).round().astype(np.uint8), rgb)
-
-
-def png_size(data: bytes) -> tuple[int, int]:
-    assert data[:8] == b"\x89PNG\r\n\x1a\n"
-    assert data[12:16] == b"IHDR"
-    return struct.unpack(">II", data[16:24])
+    assert np.array_equal(png_rgb(encode_png(rgb)), rgb)
 
 
 def test_snapshot_command_writes_a_png_of_the_arm_in_the_pose(tmp_path, capsys):
-    image = pytest.importorskip("matplotlib.image")
+    pytest.importorskip("matplotlib")
     out = tmp_path / "pics" / "arm.png"
     assert main(["snapshot", "--pose", "45", "-30", "30", "20", "0", "--out", str(out), "--width", "200", "--height", "150"]) == 0
     printed = capsys.readouterr().out
@@ -72,8 +57,7 @@ def test_snapshot_command_writes_a_png_of_the_arm_in_the_pose(tmp_path, capsys):
     assert "pose reached (deg, joints 0-4 and gripper): 45.0 -30.0 30.0 20.0" in printed
     data = out.read_bytes()
     assert png_size(data) == (200, 150)
-    rgb = (image.imread(io.BytesIO(data))[:, :, :3] * 255).round().astype(np.uint8)
-    assert arm_pixels(rgb).sum() > 0.02 * 200 * 150
+    assert arm_pixels(png_rgb(data)).sum() > 0.02 * 200 * 150
 
 
 def test_snapshot_says_when_the_pose_cannot_be_reached(tmp_path, capsys):
