@@ -161,14 +161,6 @@ def write_plot(runs: list[StepRun], joint: int, start_deg: float, target_deg: fl
 
 
 def run(args: argparse.Namespace) -> int:
-    try:
-        import matplotlib  # noqa: F401 - checked before minutes of simulation, used in write_plot
-    except ImportError:
-        print(
-            "so101 plot-step: matplotlib is not installed; install it with: pip install -e '.[plot]'",
-            file=sys.stderr,
-        )
-        return 2
     joint = ACTUATED_JOINTS[args.joint]
     if not np.isfinite(args.target) or not joint.lower_deg <= args.target <= joint.upper_deg:
         print(

@@ -12,7 +12,6 @@ from pathlib import Path
 import numpy as np
 
 from so101.dataflow import TICK_PERIOD_S
-from so101.png import encode_png
 from so101.robot import ACTUATED_JOINTS, HOME_POSE_DEG, NUM_ARM_JOINTS
 
 REACHED_TOLERANCE_DEG = 0.5
@@ -64,6 +63,8 @@ def pose_error(pose_deg: list[float] | None) -> str | None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from PIL import Image
+
     from so101.simulator import DEFAULT_CAMERA, Camera, SO101Sim
 
     error = pose_error(args.pose)
@@ -92,7 +93,9 @@ def run(args: argparse.Namespace) -> int:
         reached_deg = sim.joint_angles_deg()
         rgb = sim.render_rgb(args.width, args.height, camera)
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_bytes(encode_png(rgb))
+    # A PNG whatever the name ends in, as before: by default Pillow picks the format from the suffix
+    # and fails on one it does not know (`--out arm`).
+    Image.fromarray(rgb).save(args.out, format="PNG")
     angles = " ".join(f"{angle:.1f}" for angle in reached_deg)
     print(f"wrote {args.out} ({args.width}x{args.height}), pose reached (deg, joints 0-4 and gripper): {angles}")
     missed = np.abs(reached_deg - targets_deg) >= REACHED_TOLERANCE_DEG

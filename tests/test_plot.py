@@ -6,12 +6,8 @@ import re
 import subprocess
 import sys
 
-import pytest
-
 from so101.cli import main
 from tests.image_helpers import png_size
-
-pytest.importorskip("matplotlib")
 
 ROW = re.compile(r"^\s+(?P<damping>[\d.]+)\s+(?P<overshoot>[\d.]+) %\s+(?P<settling>[\d.]+ s|never)\s+(?P<error>[+-][\d.]+)°$")
 
@@ -58,15 +54,6 @@ def test_position_plot_shows_no_overshoot_with_or_without_link_damping(tmp_path)
     assert [rows[value]["overshoot"] for value in (0.0, 0.2)] == ["0.0", "0.0"]
     assert rows[0.0]["settling"] == rows[0.2]["settling"]  # the course's link damping changes nothing here
     assert out.stat().st_size > 20_000
-
-
-def test_a_missing_matplotlib_gives_one_line_and_no_simulation(tmp_path, monkeypatch, capsys):
-    monkeypatch.setitem(sys.modules, "matplotlib", None)  # makes `import matplotlib` raise ImportError
-    assert main(["plot-step", "--out", str(tmp_path / "x.png")]) == 2
-    assert capsys.readouterr().err == (
-        "so101 plot-step: matplotlib is not installed; install it with: pip install -e '.[plot]'\n"
-    )
-    assert not (tmp_path / "x.png").exists()
 
 
 def test_a_target_outside_the_joint_range_is_refused(tmp_path, capsys):
