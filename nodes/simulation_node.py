@@ -31,6 +31,7 @@ from so101.display import DisplayError
 from so101.joint_cmd import decode_joint_cmd
 from so101.robot import GRIPPER_COMMAND_INDEX, HOME_POSE_DEG, NUM_ARM_JOINTS
 from so101.simulator import SO101Sim
+from so101.viewer import WindowClosed
 
 IMAGE_SIZE = (320, 240)
 
@@ -42,6 +43,7 @@ TEXT = {
         "clamped": "[仿真节点] 超出关节限位: {note}",
         "rejected": "[仿真节点] 忽略无效 joint_cmd: {error}",
         "no_timer": "[仿真节点] tick 不是 dora 定时器,物理步长取 {step_ms:g} ms",
+        "window_closed": "[仿真节点] 仿真停止: {reason}",
     },
     "en": {
         "loaded": "[simulation] SO-101 loaded, robot_id = {robot_id} ({mode} mode, step {step_ms:g} ms, {control} control)",
@@ -50,6 +52,7 @@ TEXT = {
         "clamped": "[simulation] beyond the joint limits: {note}",
         "rejected": "[simulation] ignored invalid joint_cmd: {error}",
         "no_timer": "[simulation] tick is not a dora timer; physics step set to {step_ms:g} ms",
+        "window_closed": "[simulation] stopping: {reason}",
     },
 }
 
@@ -173,6 +176,11 @@ def main() -> int:
                 break
     except KeyboardInterrupt:
         pass  # Ctrl-C on a node run by hand: stop like STOP
+    except WindowClosed as closed:
+        # As in the course, closing the window ends the simulation; exit code 1 makes dora
+        # stop the dataflow and say so, rather than leave a prompt driving nothing.
+        print(text["window_closed"].format(reason=closed), file=sys.stderr, flush=True)
+        return 1
     finally:
         sim.close()
         if tick_times_ns is not None:

@@ -18,6 +18,7 @@ import pybullet_data
 from so101 import assets
 from so101.camera import DEFAULT_CAMERA, Camera
 from so101.display import resolve_mode
+from so101.viewer import Window
 from so101.servo import (
     DEFAULT_DAMPING_RATIO,
     DEFAULT_NATURAL_FREQ_RAD_S,
@@ -64,10 +65,12 @@ class SO101Sim:
     targets and states are in degrees, in the order of `so101.robot.ACTUATED_JOINTS`:
     the five arm joints, then the gripper.
 
-    control_mode "position" (default) is the course's POSITION_CONTROL, its goal slewed
-    at max_velocity_rad_s; "servo" is a PD torque servo (gains from ζ, ωn and each
-    joint's inertia, torques clipped to servo_torque_limit_nm) that takes the goal as a
-    step, so max_velocity_rad_s does not apply to it.
+    control_mode "position" (default) makes the course's calls: per joint, every step,
+    `setJointMotorControl2(POSITION_CONTROL, targetPosition=goal, maxVelocity=3.0)` with
+    PyBullet's default force and gains, so the arm moves exactly as the course's does.
+    "servo" is a PD torque servo (gains from ζ, ωn and each joint's inertia, torques
+    clipped to servo_torque_limit_nm) that takes the goal as a step, so
+    max_velocity_rad_s does not apply to it.
     """
 
     def __init__(
@@ -99,13 +102,13 @@ class SO101Sim:
         if notice:
             log(notice)
         self.time_step_s = float(time_step_s)
-        self.client = p.connect(p.GUI if self.mode == "gui" else p.DIRECT)
+        # The physics is always DIRECT: a GUI client would hold every step back to the
+        # window's frame rate. GUI mode adds a window that mirrors the arm (so101.viewer).
+        self.client = p.connect(p.DIRECT)
         if self.client < 0:
-            raise RuntimeError(f"PyBullet could not connect in {self.mode.upper()} mode")
+            raise RuntimeError("PyBullet could not connect in DIRECT mode")
         cid = self.client
-        if self.mode == "gui":
-            p.configureDebugVisualizer(p.COV_ENABLE_GUI, 0, physicsClientId=cid)
-            p.resetDebugVisualizerCamera(0.6, 45, -30, [0, 0, 0.15], physicsClientId=cid)
+        self._window = None
         p.setAdditionalSearchPath(pybullet_data.getDataPath(), physicsClientId=cid)
         p.setGravity(0, 0, -9.81, physicsClientId=cid)
         p.setPhysicsEngineParameter(fixedTimeStep=self.time_step_s, physicsClientId=cid)
@@ -114,26 +117,22 @@ class SO101Sim:
             str(urdf), basePosition=[0, 0, 0], baseOrientation=[0, 0, 0, 1],
             useFixedBase=True, physicsClientId=cid,
         )
+        if self.mode == "gui":
+            self._window = Window(urdf)
         self.joints = [self._joint_info(i) for i in range(p.getNumJoints(self.robot_id, physicsClientId=cid))]
         self._indices = [joint.index for joint in ACTUATED_JOINTS]
-        self._forces = [self.joints[i].max_force for i in self._indices]
         if link_damping is not None:
-            # The course's setting. Note: these are drag coefficients on the links'
-            # Cartesian motion, not joint damping (see README, exercise 2).
-            for index in range(-1, len(self.joints)):
+            # The course's setting, on the links it sets it on. Note: these are drag
+            # coefficients on the links' Cartesian motion, not joint damping (README, exercise 2).
+            for index in range(len(self.joints)):
                 p.changeDynamics(
                     self.robot_id, index, linearDamping=link_damping, angularDamping=link_damping,
                     physicsClientId=cid,
                 )
         self.max_velocity_rad_s = float(max_velocity_rad_s)
         self._goal_rad = np.radians(np.asarray(HOME_POSE_DEG, dtype=float))
-        # Position mode: the target actually sent to the motors. It moves toward the goal at no more
-        # than max_velocity, which is what the course's `maxVelocity=3.0` gives
-        # (setJointMotorControlArray has no maxVelocity argument).
-        self._command_rad = self._goal_rad.copy()
-        # The command as a list, ready for PyBullet; recomputed only while slewing toward the goal.
-        self._command_list = self._command_rad.tolist()
-        self._slewing = False
+        # (joint index, goal in radians) pairs, ready for the per-joint motor calls.
+        self._motor_goals = list(zip(self._indices, self._goal_rad.tolist()))
         self.steps = 0
         # The torques sent on the last step (servo mode; zeros in position mode).
         self.last_torques_nm = np.zeros(len(self._indices))
@@ -175,7 +174,7 @@ class SO101Sim:
         if goal.shape != (len(ACTUATED_JOINTS),) or not np.all(np.isfinite(goal)):
             raise ValueError(f"expected {len(ACTUATED_JOINTS)} finite angles in degrees, got {targets_deg!r}")
         self._goal_rad = np.radians(goal)
-        self._slewing = True
+        self._motor_goals = list(zip(self._indices, self._goal_rad.tolist()))
 
     def set_time_step_s(self, time_step_s: float) -> None:
         """Change the physics step (before the first step: `sim_time_s` assumes one step size)."""
@@ -189,7 +188,7 @@ class SO101Sim:
 
     def step(self, count: int = 1) -> None:
         """Re-issue the motor commands and advance the physics by `count` time steps."""
-        max_delta = self.max_velocity_rad_s * self.time_step_s
+        client, robot_id, max_velocity = self.client, self.robot_id, self.max_velocity_rad_s
         for _ in range(count):
             if self.control_mode == "servo":
                 # A servo gets the goal as a step, as a real one does over its bus; the
@@ -197,21 +196,19 @@ class SO101Sim:
                 # lesson: a PD loop follows a ramp with little overshoot whatever ζ.)
                 self._send_servo_torques()
             else:
-                if self._slewing:
-                    error_rad = self._goal_rad - self._command_rad
-                    if np.all(np.abs(error_rad) <= max_delta):  # the last bit: land exactly on the goal
-                        self._command_rad = self._goal_rad.copy()
-                        self._slewing = False
-                    else:
-                        self._command_rad += np.clip(error_rad, -max_delta, max_delta)
-                    self._command_list = self._command_rad.tolist()
-                p.setJointMotorControlArray(
-                    self.robot_id, self._indices, p.POSITION_CONTROL,
-                    targetPositions=self._command_list, forces=self._forces,
-                    physicsClientId=self.client,
-                )
-            p.stepSimulation(physicsClientId=self.client)
+                # The course's own call, joint by joint: setJointMotorControlArray has no
+                # maxVelocity, and PyBullet applies maxVelocity as a cap on the motor's
+                # velocity target, so the joint is at 3 rad/s from the first step.
+                for joint_index, goal_rad in self._motor_goals:
+                    p.setJointMotorControl2(
+                        robot_id, joint_index, p.POSITION_CONTROL, targetPosition=goal_rad,
+                        maxVelocity=max_velocity, physicsClientId=client,
+                    )
+            p.stepSimulation(physicsClientId=client)
             self.steps += 1
+        if self._window is not None and self._window.due():
+            states = p.getJointStates(robot_id, self._indices, physicsClientId=client)
+            self._window.show([state[0] for state in states])
 
     def _send_servo_torques(self) -> None:
         # PyBullet forgets TORQUE_CONTROL torques after each step: they are sent every step.
@@ -271,7 +268,10 @@ class SO101Sim:
 
     # -- life cycle ------------------------------------------------------------------
     def close(self) -> None:
-        """Disconnect; safe to call twice."""
+        """Disconnect and close the window; safe to call twice."""
+        if self._window is not None:
+            self._window.close()
+            self._window = None
         if self.client is not None and self.client >= 0:
             try:
                 p.disconnect(physicsClientId=self.client)

@@ -104,12 +104,13 @@ def test_physics_step_follows_the_tick_period(monkeypatch, capsys, make_sim, per
     assert code == 0
     assert f"step {period_ms} ms" in capsys.readouterr().out
     # The same 20 steps of a simulator built with that step give the same angle (PyBullet is
-    # deterministic); 20 ticks of 4 ms and of 10 ms end about 8° and 21° along the way to 90°.
+    # deterministic); at the course's 3 rad/s from the first step, 20 ticks of 4 ms and of 10 ms
+    # end 0.24 rad (13.75°) and 0.6 rad (34.4°) along the way to 90°.
     reference = make_sim(time_step_s=period_ms / 1000)
     reference.set_targets_deg([90, 0, 0, 0, 0, 0])
     reference.step(20)
     assert last_state(node)[0] == pytest.approx(reference.joint_angles_deg()[0], abs=1e-6)
-    assert last_state(node)[0] == pytest.approx(8.3 if period_ms == 4 else 20.8, abs=0.5)
+    assert last_state(node)[0] == pytest.approx(13.75 if period_ms == 4 else 34.4, abs=0.5)
 
 
 def test_a_tick_that_is_not_a_timer_gets_the_courses_4_ms(monkeypatch, capsys):

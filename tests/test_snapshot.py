@@ -78,9 +78,11 @@ def test_snapshot_command_writes_a_png_of_the_arm_in_the_pose(tmp_path, capsys):
 
 
 def test_snapshot_says_when_the_pose_cannot_be_reached(tmp_path, capsys):
-    # Shoulder_lift at 90° from home drives the gripper into the floor; it stops near 38°.
+    # Shoulder_lift at 90° from home drives the gripper into the floor; it stops near 38°,
+    # and the course's strong motors press the outer joints off their angles too.
     assert main(["snapshot", "--pose", "0", "90", "0", "0", "0", "--out", str(tmp_path / "a.png"), "--width", "32", "--height", "32"]) == 0
-    assert "note: shoulder_lift did not reach the asked angle" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "note: shoulder_lift" in out and "did not reach the asked angle" in out
 
 
 @pytest.mark.parametrize(
