@@ -12,12 +12,15 @@ dora would print one JSON warning per dropped event into this terminal.
 
 With a terminal, lines are read with line editing and history; with a pipe or a
 file on stdin, each line is run in order, echoed with its reply, and the node exits
-at the end of the input (for scripts and tests).
+at the end of the input (for scripts and tests). dora's own log lines (JSON, written
+by its Rust side straight to file descriptor 1) go to a log file for the whole session,
+never between the person's commands.
 
 Environment:
   SO101_LANG          zh (default, as the course) | en
   SO101_POSES_FILE    where saved poses are kept (default: saved_poses.json beside dataflow.yml)
   SO101_HISTORY_FILE  the prompt's line history (default: ~/.so101_history)
+  SO101_PROMPT_LOG    where dora's log lines go (default: out/keyboard_control.log beside dataflow.yml)
 """
 
 from __future__ import annotations
@@ -42,11 +45,13 @@ from so101.commands import (  # noqa: E402
 )
 from so101.poses import Pose, PoseStore  # noqa: E402
 from so101.robot import ACTUATED_JOINTS, NUM_ARM_JOINTS  # noqa: E402
+from so101.terminal import dora_logs_to  # noqa: E402
 from so101.versions import dora_version_mismatch  # noqa: E402
 
 NODE_ID = "keyboard_control"
 DEFAULT_POSES_FILE = ROOT / "saved_poses.json"
 DEFAULT_HISTORY_FILE = Path("~/.so101_history")
+DEFAULT_PROMPT_LOG = ROOT / "out" / "keyboard_control.log"
 # How long `save` waits for a first joint_state (a piped script may start before one arrives).
 FIRST_STATE_WAIT_S = 2.0
 EVENT_WAIT_S = 0.2
@@ -317,28 +322,14 @@ def run_prompt(control: KeyboardControl, interactive: bool, history_file: Path) 
         save_history()
 
 
-@contextlib.contextmanager
-def _rust_logs_silenced():
-    """File descriptor 1 goes to /dev/null inside the block (dora's Rust logging writes there directly)."""
-    sys.stdout.flush()
-    saved = os.dup(1)
-    devnull = os.open(os.devnull, os.O_WRONLY)
-    os.dup2(devnull, 1)
-    try:
-        yield
-    finally:
-        os.dup2(saved, 1)
-        os.close(saved)
-        os.close(devnull)
-
-
 def _arguments(argv: list[str] | None) -> None:
     parser = argparse.ArgumentParser(
         prog="keyboard_control.py",
         description="The SO-101 keyboard prompt: a dynamic dora node that joins a running `dora run dataflow.yml`. "
         "Type `help` at the prompt for the commands. A pipe or a file on stdin runs its lines in order and exits.",
         epilog="environment: SO101_LANG=zh|en (default zh); SO101_POSES_FILE (default "
-        f"{DEFAULT_POSES_FILE}); SO101_HISTORY_FILE (default {DEFAULT_HISTORY_FILE})",
+        f"{DEFAULT_POSES_FILE}); SO101_HISTORY_FILE (default {DEFAULT_HISTORY_FILE}); SO101_PROMPT_LOG, where "
+        f"dora's own log lines go (default {DEFAULT_PROMPT_LOG})",
     )
     parser.parse_args(argv)
 
@@ -351,35 +342,43 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     poses_file = Path(os.environ.get("SO101_POSES_FILE") or DEFAULT_POSES_FILE).expanduser()
     history_file = Path(os.environ.get("SO101_HISTORY_FILE") or DEFAULT_HISTORY_FILE).expanduser()
-    interactive = sys.stdin.isatty()
+    log_file = Path(os.environ.get("SO101_PROMPT_LOG") or DEFAULT_PROMPT_LOG).expanduser()
+    with contextlib.ExitStack() as logs_aside:
+        try:
+            logs_aside.enter_context(dora_logs_to(log_file))
+        except OSError as error:
+            say(f"  (dora's log lines are dropped: cannot write {log_file}: {error.strerror or error})")
+            logs_aside.enter_context(dora_logs_to(Path(os.devnull)))
+        return _session(lang, poses_file, history_file)
 
+
+def _session(lang: str, poses_file: Path, history_file: Path) -> int:
+    """Join the dataflow, then run the prompt until quit, end of input or STOP."""
     from dora import Node
 
+    interactive = sys.stdin.isatty()
     poses = PoseStore(poses_file)
     control = KeyboardControl(lambda angles_deg: None, poses, lang)
     # Ctrl-C must raise KeyboardInterrupt even when started with SIGINT ignored: STOP relies on it too.
     signal.signal(signal.SIGINT, signal.default_int_handler)
-    with _rust_logs_silenced():
-        # Joining, the node's input queues fill (250 joint_states a second) before anything reads them,
-        # and dora prints one JSON warning line per dropped event on stdout: this terminal. Read them
-        # at once, and keep that burst of warnings off the screen.
-        try:
-            node = Node(NODE_ID)
-        except Exception as error:  # noqa: BLE001 - dora raises a bare RuntimeError with a multi-line chain
-            reason = " ".join(str(error).split("Location:")[0].split())  # drop the Rust backtrace
-            print(TEXT[lang]["join_failed"].format(node_id=NODE_ID, error=reason), file=sys.stderr)
-            mismatch = dora_version_mismatch()  # the likeliest cause when the dataflow does run
-            if mismatch:
-                print(f"keyboard_control: {mismatch}", file=sys.stderr)
-            return 1
-        control.send_joint_cmd = joint_cmd_sender(node)
-        pump = EventPump(node, control, on_stop=_interrupt_main_thread)
-        pump.start()
-        try:
-            pump.caught_up.wait(timeout=5)
-        except KeyboardInterrupt:  # Ctrl-C, or STOP, while joining
-            pump.finish()
-            return 0
+    try:
+        node = Node(NODE_ID)
+    except Exception as error:  # noqa: BLE001 - dora raises a bare RuntimeError with a multi-line chain
+        reason = " ".join(str(error).split("Location:")[0].split())  # drop the Rust backtrace
+        print(TEXT[lang]["join_failed"].format(node_id=NODE_ID, error=reason), file=sys.stderr)
+        mismatch = dora_version_mismatch()  # the likeliest cause when the dataflow does run
+        if mismatch:
+            print(f"keyboard_control: {mismatch}", file=sys.stderr)
+        return 1
+    control.send_joint_cmd = joint_cmd_sender(node)
+    pump = EventPump(node, control, on_stop=_interrupt_main_thread)
+    pump.start()
+    try:
+        # The input queues filled while joining: read them before the first command.
+        pump.caught_up.wait(timeout=5)
+    except KeyboardInterrupt:  # Ctrl-C, or STOP, while joining
+        pump.finish()
+        return 0
 
     if poses.load_notice:
         say(f"  {poses.load_notice}")

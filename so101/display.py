@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
+import shutil
+import subprocess
 import sys
 from pathlib import Path
 
@@ -42,3 +45,34 @@ def resolve_mode(requested: str, environ=os.environ, platform: str = sys.platfor
     if display_available(environ, platform):
         return "gui", None
     return "direct", "no display found (DISPLAY is not set or not reachable): running headless in DIRECT mode"
+
+
+@contextlib.contextmanager
+def virtual_display(log_path: Path | None = None, size: str = "1280x800x24"):
+    """A fresh Xvfb server on a display number it picks itself (-displayfd): yields ":N", stops it after.
+
+    Raises DisplayError, with Xvfb's own last words, when it is not installed or does not start.
+    """
+    if shutil.which("Xvfb") is None:
+        raise DisplayError("Xvfb is not installed (Debian package xvfb)")
+    read_end, write_end = os.pipe()
+    log = open(log_path, "wb") if log_path else subprocess.DEVNULL
+    try:
+        server = subprocess.Popen(
+            ["Xvfb", "-displayfd", str(write_end), "-screen", "0", size, "-nolisten", "tcp"],
+            pass_fds=(write_end,), stdout=subprocess.DEVNULL, stderr=log, start_new_session=True,
+        )
+    finally:
+        os.close(write_end)
+    try:
+        with os.fdopen(read_end, "rb") as reader:
+            number = reader.readline().strip()  # Xvfb writes the number once it listens, or exits
+        if not number:
+            said = Path(log_path).read_text(errors="replace")[-500:] if log_path else ""
+            raise DisplayError(f"Xvfb did not start{': ' + said if said else ''}")
+        yield f":{number.decode()}"
+    finally:
+        server.terminate()
+        server.wait(10)
+        if log_path:
+            log.close()

@@ -34,7 +34,7 @@ DEFAULT_FPS = 30.0
 # Slots of the shared file, float64 each.
 FRAME, STATUS, ANGLES = 0, 1, 2
 SLOTS = ANGLES + len(ACTUATED_JOINTS)
-LOADING, SHOWING = 0.0, 1.0
+STARTING, OPEN = 0.0, 1.0
 # The viewer's own niceness: the window must never take a CPU from the physics.
 VIEWER_NICENESS = 10
 # Where the course points its camera (and where this project's window always has).
@@ -80,7 +80,7 @@ class Window:
         self._next_frame_s = time.monotonic() + self.frame_period_s
         code = self.process.poll()
         if code is not None:
-            opened = self._shared[STATUS] == SHOWING
+            opened = self._shared[STATUS] == OPEN
             raise WindowClosed(
                 "the window was closed" if opened else f"the window could not open (its process exited with code {code})"
             )
@@ -122,13 +122,13 @@ def run_viewer(shared_path: Path, urdf: Path, fps: float) -> int:
     client = p.connect(p.GUI, options=f"--minGraphicsUpdateTimeMs={int(frame_period_s * 1e6)}")
     if client < 0:
         return 1
+    shared[STATUS] = OPEN
     p.configureDebugVisualizer(p.COV_ENABLE_GUI, 0, physicsClientId=client)
     p.resetDebugVisualizerCamera(**CAMERA, physicsClientId=client)
     p.setAdditionalSearchPath(pybullet_data.getDataPath(), physicsClientId=client)
     p.loadURDF("plane.urdf", physicsClientId=client)
     robot_id = p.loadURDF(str(urdf), useFixedBase=True, physicsClientId=client)
     indices = [joint.index for joint in ACTUATED_JOINTS]
-    shared[STATUS] = SHOWING
     shown_frame = -1.0
     try:
         # Ends with the physics: its close() terminates this process; if it died, the parent changes.

@@ -51,10 +51,10 @@ def dora_env(**extra: str) -> dict[str, str]:
 
 
 def prompt_env(tmp_path: Path, **extra: str) -> dict[str, str]:
-    """The prompt's environment in a test: English replies, poses and history kept in tmp_path."""
+    """The prompt's environment in a test: English replies, poses, history and dora's log lines kept in tmp_path."""
     return dora_env(
         SO101_LANG="en", SO101_POSES_FILE=str(tmp_path / "poses.json"),
-        SO101_HISTORY_FILE=str(tmp_path / "history"), **extra,
+        SO101_HISTORY_FILE=str(tmp_path / "history"), SO101_PROMPT_LOG=str(tmp_path / "prompt.log"), **extra,
     )
 
 

@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import json
 import math
+import os
+import shutil
 import subprocess
 import sys
 from array import array
@@ -60,6 +62,13 @@ def test_latency_is_send_to_first_state_moving_toward_the_target():
     assert breakdown["wait_for_next_tick_ms"]["p50"] == pytest.approx(2.7)
     assert breakdown["tick_start_to_arrival_ms"]["p50"] == pytest.approx(0.3)
     assert breakdown["probes_that_missed_the_next_tick"] == 1
+
+
+def test_a_visible_move_is_the_first_state_past_the_visible_threshold():
+    states = [[0, 0.0, 0.0], [4 * MS, 0.07, 0.0], [8 * MS, 0.3, 0.0], [12 * MS, 0.5, 0.0]]
+    commands = [[1 * MS, 0, 4.0]]
+    assert run_bench.reflecting_states(states, commands, [0, 4]) == [(1 * MS, 4 * MS)]
+    assert run_bench.reflecting_states(states, commands, [0, 4], run_bench.VISIBLE_MOVE_DEG) == [(1 * MS, 12 * MS)]
 
 
 def test_motion_away_from_the_target_does_not_count():
@@ -183,6 +192,18 @@ def test_quick_bench_writes_every_figure(tmp_path):
     assert latency["count"] >= 10 and latency["probes_sent"] >= latency["count"]
     assert latency["p99"] >= latency["p50"] > 0
     assert latency["wait_for_next_tick_ms"]["p50"] >= 0
+    visible = latency["first_visible_move_ms"]
+    assert visible["count"] >= 10 and visible["p50"] >= latency["p50"]
+
+    gui = figures["gui"]
+    if shutil.which("Xvfb") is None and not os.environ.get("DISPLAY"):
+        assert gui["skipped"] == "Xvfb is not installed (Debian package xvfb)"
+        window_rows = 0
+    else:
+        assert 100 < gui["joint_state_per_s"] < 300 and 0.4 < gui["sim_over_wall"] < 1.2
+        assert gui["latency_ms"]["p99"] >= gui["latency_ms"]["p50"] > 0 and gui["first_visible_move_ms"]["count"] >= 10
+        assert "window open" in result.stdout
+        window_rows = 2
 
     runs = figures["fast_mode"]["runs"]
     assert [run["steps_per_state"] for run in runs] == [1, 100]
@@ -191,7 +212,7 @@ def test_quick_bench_writes_every_figure(tmp_path):
     # Fewer publications per step can only help: 100 steps per state beat 1.
     assert runs[1]["steps_per_s"] > runs[0]["steps_per_s"]
 
-    assert len(figures["targets"]) == 7
+    assert len(figures["targets"]) == 8 + window_rows
     assert all(isinstance(row["met"], bool) for row in figures["targets"])
     assert "targets:" in result.stdout and "joint_state per s" in result.stdout
 

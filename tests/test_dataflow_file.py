@@ -31,7 +31,11 @@ def test_the_simulation_is_stepped_by_a_fresh_4_ms_tick_and_keeps_every_command(
 def test_the_prompt_sends_joint_cmd_and_hears_the_state():
     prompt = NODES["keyboard_control"]
     assert prompt["outputs"] == ["joint_cmd"]
-    assert prompt["inputs"] == {"joint_state": "simulation/joint_state", "gripper_state": "simulation/gripper_state"}
+    # The latest state is all the prompt reads: older ones are dropped, not queued.
+    assert prompt["inputs"] == {
+        "joint_state": {"source": "simulation/joint_state", "queue_size": 1},
+        "gripper_state": {"source": "simulation/gripper_state", "queue_size": 1},
+    }
 
 
 def test_every_simulation_setting_is_declared_with_its_default():

@@ -184,6 +184,12 @@ class FakeNode:
         self.outputs.append((output_id, data))
 
 
+@pytest.fixture(autouse=True)
+def prompt_log_in_tmp(tmp_path, monkeypatch):
+    """main() sets dora's log lines aside in a file: the test's, not the checkout's out/."""
+    monkeypatch.setenv("SO101_PROMPT_LOG", str(tmp_path / "prompt.log"))
+
+
 def test_main_joins_as_keyboard_control_and_runs_a_piped_file_to_its_end(tmp_path, monkeypatch, capsys):
     import dora
 
@@ -265,3 +271,16 @@ def test_snapshot_without_state_or_with_a_bad_file_says_so_in_one_line(tmp_path,
     (lines,), _ = control.handle_line("snapshot taken/now.png")
     assert lines.startswith("  snapshot failed: ")
     assert not (tmp_path / "taken" / "now.png").exists()
+
+
+def test_main_says_so_in_one_line_when_the_log_file_cannot_be_written(tmp_path, monkeypatch, capsys):
+    import dora
+
+    (tmp_path / "a-file").write_text("")
+    monkeypatch.setenv("SO101_PROMPT_LOG", str(tmp_path / "a-file" / "prompt.log"))
+    monkeypatch.setattr(dora, "Node", lambda node_id: FakeNode([]))
+    monkeypatch.setattr("sys.stdin", io.StringIO("quit\n"))
+    assert keyboard_control.main([]) == 0
+    out = capsys.readouterr().out
+    assert f"  (dora's log lines are dropped: cannot write {tmp_path / 'a-file' / 'prompt.log'}: File exists)" in out
+    assert "> quit" in out

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import pytest
 
+from so101.display import virtual_display
 from tests.dataflow_helpers import SO101
 
 pytestmark = [
@@ -71,15 +72,15 @@ def _alive(pid: int) -> bool:
     return state != "Z"
 
 
-def start_teleop(tmp_path: Path, lang: str) -> tuple[Terminal, Path, Path]:
-    """`so101 teleop` headless in a new terminal; returns it, the poses file and the dataflow's log."""
+def start_teleop(tmp_path: Path, lang: str, mode: str = "direct", **env: str) -> tuple[Terminal, Path, Path]:
+    """`so101 teleop` (headless by default) in a new terminal; returns it, the poses file and the dataflow's log."""
     poses_file = tmp_path / "poses.json"
     log_file = tmp_path / "dora.log"
     env = {
         "SO101_POSES_FILE": str(poses_file), "SO101_HISTORY_FILE": str(tmp_path / "history"),
-        "SO101_LANG": lang, "PATH": os.environ["PATH"],
+        "SO101_PROMPT_LOG": str(tmp_path / "prompt.log"), "SO101_LANG": lang, "PATH": os.environ["PATH"], **env,
     }
-    return Terminal(f"{SO101} teleop --mode direct --lang {lang} --log {log_file}", env), poses_file, log_file
+    return Terminal(f"{SO101} teleop --mode {mode} --lang {lang} --log {log_file}", env), poses_file, log_file
 
 
 def test_a_person_drives_the_arm_from_the_prompt(tmp_path):
@@ -161,3 +162,32 @@ def test_ctrl_c_or_d_on_teleop_stops_everything_and_keeps_poses_and_history(tmp_
     spawned = [int(pid) for pid in re.findall(r"spawned node with pid (\d+)", log_file.read_text())]
     assert spawned, log_file.read_text()[-2000:]
     assert [pid for pid in spawned if _alive(pid)] == []
+
+
+@pytest.mark.skipif(shutil.which("Xvfb") is None, reason="Xvfb is not installed (Debian package xvfb)")
+def test_no_dora_log_line_reaches_the_prompt_with_the_window_open(tmp_path):
+    """The GUI on a software-rendered display is the busiest case: the prompt's input queues
+    overflow there if anything does, and dora logs each drop on descriptor 1."""
+    with virtual_display(tmp_path / "xvfb.log") as display:
+        terminal, _, _ = start_teleop(tmp_path, "en", mode="gui", DISPLAY=display)
+        try:
+            end = terminal.wait_for(r"^=+\n>$", timeout_s=120).start()
+            started = time.monotonic()
+            sent = 0
+            while time.monotonic() - started < 32:
+                text = ("0 60", "0 -60", "state", "batch -30 45 -60 30 0", "home")[sent % 5]
+                terminal.type_line(text)
+                end = terminal.wait_for(rf"^> {re.escape(text)}\n  .*$", timeout_s=20, after=end).end()
+                sent += 1
+                time.sleep(1.0)
+            terminal.type_line("quit")
+            terminal.wait_for(r"^TELEOP_EXIT=0$", timeout_s=60, after=end)
+            screen = terminal.screen()
+        finally:
+            terminal.close()
+    assert sent >= 15
+    assert "Traceback" not in screen, screen
+    assert not re.search(r'\{"timestamp"|"level":', screen), f"dora log lines in the prompt:\n{screen}"
+    # Every line on the screen is the prompt's own: banner, help, commands and their replies.
+    prompt_log = (tmp_path / "prompt.log").read_text(errors="replace")
+    assert all(line.startswith("{") for line in prompt_log.splitlines()), prompt_log[-2000:]
