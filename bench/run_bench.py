@@ -42,6 +42,7 @@ if str(ROOT) not in sys.path:
 
 from so101.dataflow import TICK_PERIOD_S, dataflow_copy, write_dataflow  # noqa: E402
 from so101.display import DisplayError, display_available, virtual_display  # noqa: E402
+from so101.viewer import WINDOW_SHOWING  # noqa: E402
 from so101.venv import env_with_bin_first, executable  # noqa: E402
 
 PROBER = ROOT / "bench" / "nodes" / "prober.py"
@@ -86,21 +87,22 @@ def summary(values, scale: float = 1.0) -> dict:
     }
 
 
-def tick_pairs(raw: bytes) -> list[tuple[int, int]]:
-    """The simulation node's SO101_TICK_LOG file: (start ns, end ns) of each tick's work."""
+def tick_records(raw: bytes) -> list[tuple[int, int, int]]:
+    """The simulation node's SO101_TICK_LOG file: (start ns, end ns, physics steps so far) of each tick."""
     numbers = array("q")
-    numbers.frombytes(raw[: len(raw) - len(raw) % (2 * numbers.itemsize)])
-    return list(zip(numbers[0::2], numbers[1::2]))
+    numbers.frombytes(raw[: len(raw) - len(raw) % (3 * numbers.itemsize)])
+    return list(zip(numbers[0::3], numbers[1::3], numbers[2::3]))
 
 
-def tick_figures(ticks: list[tuple[int, int]], period_s: float, steps_per_tick: int = 1) -> dict:
-    """Interval and work statistics of the ticks served, and the ticks missed between them.
+def tick_figures(ticks: list[tuple[int, int, int]], period_s: float) -> dict:
+    """Interval and work statistics of the ticks served, the ticks missed between them, and the
+    physics steps taken.
 
     A gap of k periods (rounded) between two served ticks means k - 1 timer ticks were
     dropped: with queue_size 1 a tick that arrives while the node is busy replaces the
-    waiting one.
+    waiting one (the node then takes their steps with the next one).
     """
-    starts = [start for start, _ in ticks]
+    starts = [start for start, _, _ in ticks]
     intervals_s = [(b - a) / 1e9 for a, b in zip(starts, starts[1:])]
     missed = sum(max(0, round(interval / period_s) - 1) for interval in intervals_s)
     span_s = (ticks[-1][1] - ticks[0][0]) / 1e9 if ticks else 0.0
@@ -109,9 +111,10 @@ def tick_figures(ticks: list[tuple[int, int]], period_s: float, steps_per_tick: 
         "ticks_missed": missed,
         "span_s": span_s,
         "served_per_s": (len(ticks) - 1) / ((starts[-1] - starts[0]) / 1e9) if len(ticks) > 1 else float("nan"),
-        "steps_per_s": len(ticks) * steps_per_tick / span_s if span_s > 0 else float("nan"),
+        # The steps taken from the end of the first tick to the end of the last, over that time.
+        "steps_per_s": (ticks[-1][2] - ticks[0][2]) / ((ticks[-1][1] - ticks[0][1]) / 1e9) if len(ticks) > 1 else float("nan"),
         "interval_ms": summary(intervals_s, 1e3),
-        "work_us": summary([(end - start) / 1e3 for start, end in ticks]),
+        "work_us": summary([(end - start) / 1e3 for start, end, _ in ticks]),
     }
 
 
@@ -308,8 +311,8 @@ def measure_node_work_in_process(ticks: int, work_dir: Path) -> dict:
                 os.environ[name] = value
     if code != 0:
         raise RuntimeError(f"the simulation node exited with {code} in process")
-    pairs = tick_pairs(tick_log.read_bytes())[250:]  # the same settled arm as the raw step
-    return summary([(end - start) / 1e3 for start, end in pairs])
+    ticks = tick_records(tick_log.read_bytes())[250:]  # the same settled arm as the raw step
+    return summary([(end - start) / 1e3 for start, end, _ in ticks])
 
 
 # -- dora run -------------------------------------------------------------------------
@@ -321,6 +324,8 @@ def bench_dataflow(path: Path, sim_env: dict, probe_env: dict) -> None:
         if node["id"] == "keyboard_control":
             node["path"] = str(PROBER)
             node["env"] = probe_env
+            # The prompt keeps only the latest state; the prober counts every one.
+            node["inputs"] = {name: {**spec, "queue_size": 1000} for name, spec in node["inputs"].items()}
     write_dataflow(descriptor, path)
 
 
@@ -350,7 +355,9 @@ def peak_rss_mb(pid: int | None) -> float | None:
 def run_dataflow(run_dir: Path, duration_s: float, sim_env: dict, probe_env: dict, display: str | None = None) -> dict:
     """`dora run` for duration_s after the first joint_state, then Ctrl-C; the raw records.
 
-    With `display` the nodes get that DISPLAY; without, none (headless)."""
+    With `display` the nodes get that DISPLAY, and the measured time starts once the
+    window shows the arm (it loads for a few seconds while the physics already runs);
+    without, no DISPLAY (headless)."""
     run_dir.mkdir(parents=True)
     tick_log = run_dir / "ticks.bin"
     probe_log = run_dir / "probe.json"
@@ -377,6 +384,13 @@ def run_dataflow(run_dir: Path, duration_s: float, sim_env: dict, probe_env: dic
                 if process.poll() is not None or time.monotonic() > deadline:
                     raise RuntimeError(f"no joint_state from `dora run` (see {log_path}):\n{log_path.read_text(errors='replace')[-2000:]}")
                 time.sleep(0.05)
+            measured_from_ns = time.monotonic_ns()
+            if display:
+                while WINDOW_SHOWING not in log_path.read_text(errors="replace"):
+                    if process.poll() is not None or time.monotonic() > deadline:
+                        raise RuntimeError(f"the window did not show the arm (see {log_path})")
+                    time.sleep(0.05)
+                measured_from_ns = time.monotonic_ns()
             time.sleep(duration_s)
             simulation = processes_with_env("SO101_TICK_LOG", str(tick_log))
             rss_mb = peak_rss_mb(simulation[0] if simulation else None)
@@ -390,10 +404,10 @@ def run_dataflow(run_dir: Path, duration_s: float, sim_env: dict, probe_env: dic
         raise RuntimeError(f"`dora run` stopped without the nodes' records (see {log_path})")
     node_logs = sorted(run_dir.glob("out/*/log_simulation.jsonl"))
     return {
-        "started_ns": started_ns, "started_epoch_s": started_epoch_s, "ticks": tick_pairs(tick_log.read_bytes()),
+        "started_ns": started_ns, "started_epoch_s": started_epoch_s, "ticks": tick_records(tick_log.read_bytes()),
         "probe": json.loads(probe_log.read_text()), "log": log_path.read_text(errors="replace"),
         "simulation_log": node_logs[-1].read_text(errors="replace") if node_logs else "",
-        "peak_rss_mb": rss_mb, "exit_code": process.returncode,
+        "peak_rss_mb": rss_mb, "exit_code": process.returncode, "measured_from_ns": measured_from_ns,
     }
 
 
@@ -401,14 +415,14 @@ def realtime_figures(record: dict, period_s: float) -> dict:
     """Figures 3-7 from one paced run's records, the first WARMUP_S after the first state left out of the rates."""
     probe = record["probe"]
     states = probe["states"]
-    steady_from_ns = states[0][0] + int(WARMUP_S * 1e9)
+    steady_from_ns = max(states[0][0], record["measured_from_ns"]) + int(WARMUP_S * 1e9)
     steady_states = [state for state in states if state[0] >= steady_from_ns]
     steady_ticks = [tick for tick in record["ticks"] if tick[0] >= steady_from_ns]
     ticks = tick_figures(steady_ticks, period_s)
     span_s = (steady_states[-1][0] - steady_states[0][0]) / 1e9
     per_s = (len(steady_states) - 1) / span_s
     commands = probe["commands"]
-    tick_starts_ns = [start for start, _ in record["ticks"]]
+    tick_starts_ns = [start for start, _, _ in record["ticks"]]
     latency = latency_breakdown(reflecting_states(states, commands, probe["probed_joints"]), tick_starts_ns)
     visible = latency_breakdown(reflecting_states(states, commands, probe["probed_joints"], VISIBLE_MOVE_DEG), tick_starts_ns)
     startup_s = (probe["first_state_ns"] - record["started_ns"]) / 1e9
@@ -425,8 +439,8 @@ def realtime_figures(record: dict, period_s: float) -> dict:
             "dora_dropped_tick_warnings_steady": warnings_after,
             "tick_interval_ms": ticks["interval_ms"],
             "tick_work_us": ticks["work_us"],
-            # Each joint_state is one physics step of the tick period.
-            "sim_over_wall": per_s * period_s,
+            # Physics steps of the tick period over the wall time they took (the node's tick log).
+            "sim_over_wall": ticks["steps_per_s"] * period_s,
             "startup_s": startup_s,
             "peak_rss_mb": record["peak_rss_mb"],
         },
@@ -482,7 +496,7 @@ def run_benchmark(duration_s: float, fast_s: float, fast_steps: list[int], raw_s
                 {"PROBE_PERIOD_S": "0", "PROBE_COUNT_ONLY": "1"},
             )
             steady_from_ns = record["probe"]["first_state_ns"] + int(WARMUP_S * 1e9)
-            ticks = tick_figures([tick for tick in record["ticks"] if tick[0] >= steady_from_ns], TICK_PERIOD_S, steps)
+            ticks = tick_figures([tick for tick in record["ticks"] if tick[0] >= steady_from_ns], TICK_PERIOD_S)
             runs.append({
                 "steps_per_state": steps, "steps_per_s": ticks["steps_per_s"],
                 "ratio_to_raw": ticks["steps_per_s"] / raw["steps_per_s"],

@@ -2,7 +2,9 @@
 
 Each `tick` re-issues the current joint targets, advances the physics by one
 step of the tick's own period, and publishes `joint_state`. A `joint_cmd` only
-updates the targets; the next tick applies them.
+updates the targets; the next tick applies them. When dora had to drop ticks
+because the node was late (a busy machine), the next tick takes the steps of the
+dropped ones too, so simulated time keeps pace with the wall clock.
 
 Environment (declared in dataflow.yml):
   SO101_MODE        auto | gui | direct   (auto: a window where a display exists)
@@ -11,7 +13,7 @@ Environment (declared in dataflow.yml):
   SO101_IMAGE_HZ    rate of the optional `image` output, 0 = off
   SO101_FAST_STEPS  0 = paced by the tick (default); N > 0 = fast mode for batch use:
                     no wall-clock pacing, N physics steps per published state
-  SO101_TICK_LOG    file to write per-tick timings to at exit, for `so101 bench`; empty = off
+  SO101_TICK_LOG    file to write per-tick timings and step counts to at exit, for `so101 bench`; empty = off
   SO101_LANG        zh | en               (log language)
 """
 
@@ -26,7 +28,7 @@ import pyarrow as pa
 from dora import Node
 
 from so101.assets import ModelFilesError
-from so101.dataflow import TICK_PERIOD_S, timer_period_s
+from so101.dataflow import TICK_PERIOD_S, steps_due, timer_period_s
 from so101.display import DisplayError
 from so101.joint_cmd import decode_joint_cmd
 from so101.robot import GRIPPER_COMMAND_INDEX, HOME_POSE_DEG, NUM_ARM_JOINTS
@@ -128,11 +130,12 @@ def main() -> int:
     log(text["loaded"].format(robot_id=sim.robot_id, mode=sim.mode.upper(), step_ms=tick_s * 1000, control=control_mode))
 
     joint_targets_deg = tuple(HOME_POSE_DEG)
-    steps_per_tick = fast_steps or 1
     events = fast_events(node) if fast_steps else node
-    # (start, end) of each tick's work in time.monotonic_ns, when asked for; None costs nothing per tick.
+    # (start ns, end ns, physics steps so far) of each tick, in time.monotonic_ns, when asked for;
+    # None costs nothing per tick.
     tick_log_path = os.environ.get("SO101_TICK_LOG", "")
-    tick_times_ns = array("q") if tick_log_path else None
+    tick_log = array("q") if tick_log_path else None
+    last_tick_stamp = None
     # Counted in physics steps, so fast mode (several steps per tick) keeps the simulated rate.
     steps_per_image = max(1, round(1.0 / (image_hz * tick_s))) if image_hz > 0 else 0
     next_image_step = steps_per_image
@@ -140,14 +143,19 @@ def main() -> int:
         for event in events:
             if event["type"] == "INPUT":
                 if event["id"] == "tick":
-                    if tick_times_ns is not None:
-                        tick_times_ns.append(time.monotonic_ns())
-                    sim.step(steps_per_tick)
+                    if tick_log is not None:
+                        tick_log.append(time.monotonic_ns())
+                    if fast_steps:
+                        sim.step(fast_steps)
+                    else:
+                        stamp = event["metadata"].get("timestamp")
+                        sim.step(steps_due(last_tick_stamp, stamp, tick_s))
+                        last_tick_stamp = stamp
                     angles_deg = sim.joint_angles_deg()
                     node.send_output("joint_state", pa.array(angles_deg[:NUM_ARM_JOINTS], type=pa.float64()))
                     node.send_output("gripper_state", pa.array(angles_deg[NUM_ARM_JOINTS:], type=pa.float64()))
-                    if tick_times_ns is not None:
-                        tick_times_ns.append(time.monotonic_ns())
+                    if tick_log is not None:
+                        tick_log.extend((time.monotonic_ns(), sim.steps))
                     if steps_per_image and sim.steps >= next_image_step:
                         next_image_step += steps_per_image * ((sim.steps - next_image_step) // steps_per_image + 1)
                         width, height = IMAGE_SIZE
@@ -183,9 +191,9 @@ def main() -> int:
         return 1
     finally:
         sim.close()
-        if tick_times_ns is not None:
-            with open(tick_log_path, "wb") as tick_log:
-                tick_times_ns.tofile(tick_log)
+        if tick_log is not None:
+            with open(tick_log_path, "wb") as tick_log_file:
+                tick_log.tofile(tick_log_file)
     return 0
 
 

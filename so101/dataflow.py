@@ -29,6 +29,25 @@ def timer_period_s(node_config: dict, input_id: str = "tick") -> float | None:
     return float(amount) / (1000.0 if unit == "millis" else 1.0)
 
 
+# A tick makes up for at most this many periods: a longer stall (a debugger, a suspended
+# laptop) is let go rather than replayed as one sudden burst of motion.
+MAX_STEPS_PER_TICK = 10
+
+
+def steps_due(previous_stamp, stamp, period_s: float) -> int:
+    """Physics steps owed at a timer tick: one per timer period since the last tick taken.
+
+    dora keeps one waiting tick (queue_size 1) and drops older ones when the node is
+    late, so a busy machine delivers a tick 8 ms after the last: two steps keep simulated
+    time with the wall clock. `stamp`s are the ticks' metadata timestamps (when the timer
+    fired); without them (a tick that is not a dora timer, a test's mock) one step.
+    """
+    if previous_stamp is None or stamp is None:
+        return 1
+    periods = round((stamp - previous_stamp).total_seconds() / period_s)
+    return min(max(periods, 1), MAX_STEPS_PER_TICK)
+
+
 def dataflow_copy(node_env: dict[str, str]) -> dict:
     """dataflow.yml as a dict to run from elsewhere: every node that runs a file gets its
     path made absolute and `node_env` over its own `env:` (which dora ranks above the shell's)."""

@@ -18,7 +18,7 @@ import pybullet_data
 from so101 import assets
 from so101.camera import DEFAULT_CAMERA, Camera
 from so101.display import resolve_mode
-from so101.viewer import Window
+from so101.viewer import WINDOW_SHOWING, Window
 from so101.servo import (
     DEFAULT_DAMPING_RATIO,
     DEFAULT_NATURAL_FREQ_RAD_S,
@@ -118,7 +118,7 @@ class SO101Sim:
             useFixedBase=True, physicsClientId=cid,
         )
         if self.mode == "gui":
-            self._window = Window(urdf)
+            self._window = Window(urdf, on_showing=lambda: log(WINDOW_SHOWING))
         self.joints = [self._joint_info(i) for i in range(p.getNumJoints(self.robot_id, physicsClientId=cid))]
         self._indices = [joint.index for joint in ACTUATED_JOINTS]
         if link_damping is not None:

@@ -33,19 +33,21 @@ def test_percentile_interpolates():
 
 def test_tick_figures_count_missed_ticks_from_the_gaps():
     starts_ms = [0, 4, 8, 20, 24, 28.7, 32]  # 8 -> 20 ms: the ticks at 12 and 16 were dropped
-    ticks = [(int(start * MS), int(start * MS) + 30_000) for start in starts_ms]
+    steps = [1, 2, 3, 6, 7, 8, 9]  # and the tick at 20 ms took their steps
+    ticks = [(int(start * MS), int(start * MS) + 30_000, count) for start, count in zip(starts_ms, steps)]
     figures = run_bench.tick_figures(ticks, 0.004)
     assert figures["ticks_served"] == 7
     assert figures["ticks_missed"] == 2
+    assert figures["steps_per_s"] == pytest.approx(8 / 0.032)  # 8 steps from the first tick's end to the last's
     assert figures["interval_ms"]["p50"] == pytest.approx(4.0, abs=0.01)
     assert figures["interval_ms"]["max"] == pytest.approx(12.0)
     assert figures["work_us"]["p50"] == pytest.approx(30.0)
 
 
-def test_tick_log_bytes_become_start_end_pairs():
-    raw = array("q", [10, 15, 20, 26]).tobytes()
-    assert run_bench.tick_pairs(raw) == [(10, 15), (20, 26)]
-    assert run_bench.tick_pairs(raw + b"\x01\x02") == [(10, 15), (20, 26)]  # a torn write is ignored
+def test_tick_log_bytes_become_start_end_steps_records():
+    raw = array("q", [10, 15, 1, 20, 26, 3]).tobytes()
+    assert run_bench.tick_records(raw) == [(10, 15, 1), (20, 26, 3)]
+    assert run_bench.tick_records(raw + b"\x01\x02") == [(10, 15, 1), (20, 26, 3)]  # a torn write is ignored
 
 
 def test_latency_is_send_to_first_state_moving_toward_the_target():
@@ -130,10 +132,11 @@ def test_tick_log_holds_start_and_end_of_each_tick(monkeypatch, tmp_path):
     events = [TICK] * 30 + [("joint_cmd", pa.array([0, 10]))]
     code, node = run_simulation_node(monkeypatch, events, SO101_TICK_LOG=str(tick_log))
     assert code == 0
-    pairs = run_bench.tick_pairs(tick_log.read_bytes())
-    assert len(pairs) == 30  # one per tick, none for the joint_cmd
-    assert all(start < end for start, end in pairs)
-    assert all(end <= next_start for (_, end), (next_start, _) in zip(pairs, pairs[1:]))
+    records = run_bench.tick_records(tick_log.read_bytes())
+    assert len(records) == 30  # one per tick, none for the joint_cmd
+    assert all(start < end for start, end, _ in records)
+    assert all(end <= next_start for (_, end, _), (next_start, _, _) in zip(records, records[1:]))
+    assert [steps for _, _, steps in records] == list(range(1, 31))  # a mock's ticks carry no timestamp: one step each
 
 
 def test_without_tick_log_no_file_is_written(monkeypatch, tmp_path):

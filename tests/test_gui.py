@@ -130,10 +130,10 @@ def test_killed_gui_window_ends_the_simulation_and_is_not_reopened(tmp_path, xvf
     dora = DoraRun(gui_dataflow(tmp_path, tmp_path / "unused"), tmp_path / "dora.log", stop_after_s=300,
                    DISPLAY=xvfb_display)
     try:
-        dora.wait_for("SO-101 loaded", timeout_s=120)
         # The window opens in its own process, while the physics already runs.
+        dora.wait_for("window open: it shows the arm", timeout_s=120)
         windows = subprocess.run(
-            ["xdotool", "search", "--sync", "--name", "Bullet Physics"], capture_output=True, text=True,
+            ["xdotool", "search", "--name", "Bullet Physics"], capture_output=True, text=True,
             env=display_env, timeout=60,
         ).stdout.split()
         assert len(windows) == 1, windows
@@ -148,3 +148,37 @@ def test_killed_gui_window_ends_the_simulation_and_is_not_reopened(tmp_path, xvf
     assert "Node `simulation` failed" in log
     assert log.count("simulation: spawner spawned node") == 1, "the simulation was started again"
     assert "restarting node" not in log
+
+
+@pytest.mark.skipif(shutil.which("xdotool") is None, reason="xdotool is not installed (package xdotool)")
+def test_the_window_keeps_pybullets_camera_controls(tmp_path, xvfb_display):
+    """The window is a mirror in its own process, and still PyBullet's own: Ctrl + left drag
+    turns the camera, the wheel zooms (the arm itself does not move)."""
+    display_env = dict(os.environ, DISPLAY=xvfb_display)
+
+    def xdotool(*args):
+        subprocess.run(["xdotool", *args], check=True, env=display_env, timeout=30)
+
+    dora = DoraRun(gui_dataflow(tmp_path, tmp_path / "unused"), tmp_path / "dora.log", stop_after_s=300,
+                   DISPLAY=xvfb_display)
+    try:
+        dora.wait_for("window open: it shows the arm", timeout_s=120)
+        before = settled_arm(xvfb_display, tmp_path / "before.png", lambda m: m.sum() >= MIN_ARM_PIXELS)
+        xdotool("mousemove", "500", "400")
+        xdotool("keydown", "ctrl")
+        xdotool("mousedown", "1")
+        for step in range(1, 21):
+            xdotool("mousemove", str(500 + 12 * step), "400")
+            time.sleep(0.05)
+        xdotool("mouseup", "1")
+        xdotool("keyup", "ctrl")
+        turned = settled_arm(xvfb_display, tmp_path / "turned.png", lambda m: overlap(before, m) < MAX_OVERLAP_AFTER_MOVE)
+        for _ in range(3):
+            xdotool("click", "5")  # wheel down: zoom out
+        zoomed = settled_arm(xvfb_display, tmp_path / "zoomed.png", lambda m: m.sum() < 0.7 * turned.sum())
+    finally:
+        exit_code = dora.stop()
+    assert before.sum() >= MIN_ARM_PIXELS
+    assert overlap(before, turned) < MAX_OVERLAP_AFTER_MOVE, "Ctrl + drag did not turn the camera"
+    assert zoomed.sum() < 0.7 * turned.sum(), "the wheel did not zoom out"
+    assert exit_code == 0, dora.log()[-3000:]

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import datetime
 import math
 
 import pyarrow as pa
 import pytest
 
+from so101.dataflow import MAX_STEPS_PER_TICK
 from tests.dataflow_helpers import TICK, run_simulation_node
 
 
@@ -216,3 +218,19 @@ def test_no_image_output_by_default(monkeypatch):
     code, node = run_simulation_node(monkeypatch, ticks(30))
     assert code == 0
     assert "image" not in node.outputs
+
+
+def test_a_tick_after_dropped_ones_takes_their_steps_too(monkeypatch):
+    # Timer stamps 4 ms apart, then 12 ms (two ticks dropped by a late node), then 1 s (a stall).
+    start = datetime.datetime(2026, 1, 1, tzinfo=datetime.timezone.utc)
+    stamps_ms = [0, 4, 8, 20, 1020]
+    events = [("joint_cmd", pa.array([0, 90]))] + [
+        {"type": "INPUT", "id": "tick", "value": pa.array([], type=pa.null()),
+         "metadata": {"timestamp": start + datetime.timedelta(milliseconds=ms)}}
+        for ms in stamps_ms
+    ]
+    code, node = run_simulation_node(monkeypatch, events)
+    assert code == 0
+    # 1 + 1 + 1 + 3 + 10 (a stall is let go past MAX_STEPS_PER_TICK) steps at 3 rad/s = 0.012 rad/step
+    assert MAX_STEPS_PER_TICK == 10
+    assert last_state(node)[0] == pytest.approx(math.degrees(16 * 0.012), abs=0.01)
