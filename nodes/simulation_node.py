@@ -32,7 +32,7 @@ from so101.dataflow import TICK_PERIOD_S, steps_due, timer_period_s
 from so101.display import DisplayError
 from so101.joint_cmd import decode_joint_cmd
 from so101.robot import GRIPPER_COMMAND_INDEX, HOME_POSE_DEG, NUM_ARM_JOINTS
-from so101.simulator import SO101Sim
+from so101.simulator import SO101Sim, release_freed_memory
 from so101.viewer import WindowClosed
 
 IMAGE_SIZE = (320, 240)
@@ -111,10 +111,11 @@ def main() -> int:
 
     # Load the arm before joining the dataflow: ticks that arrive while the URDF loads
     # would only be discarded, one warning each.
+    release_freed_memory()
     try:
         sim = SO101Sim(
             mode=mode, time_step_s=TICK_PERIOD_S, control_mode=control_mode,
-            servo_damping_ratio=servo_zeta, log=log,
+            servo_damping_ratio=servo_zeta, log=log, renders=image_hz > 0,
         )
     except (ModelFilesError, DisplayError, ValueError) as error:
         print(f"[simulation] cannot start: {error}", file=sys.stderr, flush=True)

@@ -7,6 +7,7 @@ in degrees; PyBullet's radians stay inside.
 
 from __future__ import annotations
 
+import ctypes
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
@@ -41,9 +42,26 @@ JOINT_TYPE_NAMES = {
     p.JOINT_FIXED: "fixed",
 }
 
+M_MMAP_THRESHOLD = -3  # glibc's mallopt parameter number
+
 # "position": the course's POSITION_CONTROL motor. "servo": a PD torque servo, in
 # which the damping ratio decides whether a step overshoots (exercise 2).
 CONTROL_MODES = ("position", "servo")
+
+
+def release_freed_memory() -> None:
+    """Make glibc hand large freed blocks back to the system at once (a process-wide setting).
+
+    Loading the arm computes a convex hull per collision mesh and frees it: up to 79 MB
+    for the largest. glibc raises its mmap threshold as blocks are freed, so it keeps
+    them in its heap; with the threshold fixed at 64 KiB they are unmapped when freed,
+    and the next mesh does not pile on top. Elsewhere than glibc, nothing to do.
+    """
+    try:
+        libc = ctypes.CDLL("libc.so.6")
+    except OSError:
+        return
+    libc.mallopt(M_MMAP_THRESHOLD, 64 * 1024)
 
 
 @dataclass(frozen=True)
@@ -71,6 +89,9 @@ class SO101Sim:
     "servo" is a PD torque servo (gains from ζ, ωn and each joint's inertia, torques
     clipped to servo_torque_limit_nm) that takes the goal as a step, so
     max_velocity_rad_s does not apply to it.
+
+    renders=False leaves out PyBullet's CPU renderer (render_rgb then refuses): it keeps
+    a copy of every visual mesh, 68 MB of this arm's, that only pictures need.
     """
 
     def __init__(
@@ -85,6 +106,7 @@ class SO101Sim:
         servo_damping_ratio: float = DEFAULT_DAMPING_RATIO,
         servo_natural_freq_rad_s: float = DEFAULT_NATURAL_FREQ_RAD_S,
         servo_torque_limit_nm: float = SERVO_TORQUE_LIMIT_NM,
+        renders: bool = True,
     ):
         if control_mode not in CONTROL_MODES:
             raise ValueError(f"unknown control mode {control_mode!r}; use one of: {', '.join(CONTROL_MODES)}")
@@ -109,6 +131,12 @@ class SO101Sim:
             raise RuntimeError("PyBullet could not connect in DIRECT mode")
         cid = self.client
         self._window = None
+        self.renders = renders
+        # Static plugins of every client, unloaded before anything loads (the renderer
+        # cannot be loaded back). fileIOPlugin caches each file it opens, 15 MB of STL
+        # here, for the client's lifetime; loading reads the files without it.
+        for plugin in ("fileIOPlugin",) + (() if renders else ("tinyRendererPlugin",)):
+            p.unloadPlugin(p.loadPlugin(plugin, physicsClientId=cid), physicsClientId=cid)
         p.setAdditionalSearchPath(pybullet_data.getDataPath(), physicsClientId=cid)
         p.setGravity(0, 0, -9.81, physicsClientId=cid)
         p.setPhysicsEngineParameter(fixedTimeStep=self.time_step_s, physicsClientId=cid)
@@ -250,6 +278,8 @@ class SO101Sim:
         Uses the CPU renderer (ER_TINY_RENDERER), so it works in DIRECT mode with no
         display or GPU.
         """
+        if not self.renders:
+            raise RuntimeError("this simulator was made without its renderer (renders=False): no pictures")
         if width < 1 or height < 1:
             raise ValueError(f"image size must be at least 1x1 pixels, got {width}x{height}")
         view = p.computeViewMatrixFromYawPitchRoll(

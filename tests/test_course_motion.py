@@ -100,3 +100,44 @@ def test_a_joint_moves_on_the_first_step_after_a_command():
         assert sim.joint_angles_deg()[0] - before == pytest.approx(0.4, abs=0.05)
     finally:
         sim.close()
+
+
+def contact_points(client: int, robot_id: int) -> list[tuple]:
+    """The arm's contacts with anything: (link, other body, other link, position on the arm)."""
+    return sorted(
+        (point[3], point[2], point[4], *point[5]) for point in p.getContactPoints(bodyA=robot_id, physicsClientId=client)
+    )
+
+
+def test_leaving_out_the_renderer_and_the_file_cache_changes_no_physics():
+    # The node's memory savings (renders=False unloads PyBullet's CPU renderer and its file
+    # cache before loading) against the course's plain loading, through ground contact:
+    # shoulder_lift at 90° presses the gripper into the floor, then the pan sweeps it along.
+    course = CourseArm()
+    sim = SO101Sim(mode="direct", time_step_s=TICK_PERIOD_S, log=lambda message: None, renders=False)
+    try:
+        contacts_seen = 0
+        for targets_deg in ([0.0, 90.0, 0.0, 0.0, 0.0, 30.0], [60.0, 90.0, 0.0, 0.0, 0.0, 30.0]):
+            sim.set_targets_deg(targets_deg)
+            for step in range(STEPS_PER_COMMAND):
+                expected = np.array(course.tick(targets_deg))
+                sim.step()
+                assert np.max(np.abs(sim.joint_angles_deg() - expected)) <= 1e-9, f"{targets_deg} step {step}"
+                sim_contacts = contact_points(sim.client, sim.robot_id)
+                course_contacts = contact_points(course.client, course.robot_id)
+                assert [c[:3] for c in sim_contacts] == [c[:3] for c in course_contacts], f"step {step}"
+                assert np.allclose([c[3:] for c in sim_contacts], [c[3:] for c in course_contacts], rtol=0, atol=1e-9)
+                contacts_seen += bool(sim_contacts)
+        assert contacts_seen > 100  # the comparison covered the arm on the ground, not only in the air
+    finally:
+        sim.close()
+        course.close()
+
+
+def test_a_simulator_without_its_renderer_refuses_pictures():
+    sim = SO101Sim(mode="direct", log=lambda message: None, renders=False)
+    try:
+        with pytest.raises(RuntimeError, match=r"made without its renderer \(renders=False\): no pictures"):
+            sim.render_rgb(32, 32)
+    finally:
+        sim.close()
