@@ -28,7 +28,7 @@ import pyarrow as pa
 from dora import Node
 
 from so101.assets import ModelFilesError
-from so101.dataflow import TICK_PERIOD_S, steps_due, timer_period_s
+from so101.dataflow import TICK_PERIOD_S, TickClock, timer_period_s
 from so101.display import DisplayError
 from so101.joint_cmd import decode_joint_cmd
 from so101.robot import GRIPPER_COMMAND_INDEX, HOME_POSE_DEG, NUM_ARM_JOINTS
@@ -136,7 +136,7 @@ def main() -> int:
     # None costs nothing per tick.
     tick_log_path = os.environ.get("SO101_TICK_LOG", "")
     tick_log = array("q") if tick_log_path else None
-    last_tick_stamp = None
+    tick_clock = TickClock(tick_s)
     # Counted in physics steps, so fast mode (several steps per tick) keeps the simulated rate.
     steps_per_image = max(1, round(1.0 / (image_hz * tick_s))) if image_hz > 0 else 0
     next_image_step = steps_per_image
@@ -149,9 +149,7 @@ def main() -> int:
                     if fast_steps:
                         sim.step(fast_steps)
                     else:
-                        stamp = event["metadata"].get("timestamp")
-                        sim.step(steps_due(last_tick_stamp, stamp, tick_s))
-                        last_tick_stamp = stamp
+                        sim.step(tick_clock.steps_due(event["metadata"].get("timestamp")))
                     angles_deg = sim.joint_angles_deg()
                     node.send_output("joint_state", pa.array(angles_deg[:NUM_ARM_JOINTS], type=pa.float64()))
                     node.send_output("gripper_state", pa.array(angles_deg[NUM_ARM_JOINTS:], type=pa.float64()))

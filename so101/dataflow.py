@@ -34,18 +34,35 @@ def timer_period_s(node_config: dict, input_id: str = "tick") -> float | None:
 MAX_STEPS_PER_TICK = 10
 
 
-def steps_due(previous_stamp, stamp, period_s: float) -> int:
-    """Physics steps owed at a timer tick: one per timer period since the last tick taken.
+class TickClock:
+    """Physics steps owed at each timer tick, so that simulated time follows the timer.
 
     dora keeps one waiting tick (queue_size 1) and drops older ones when the node is
-    late, so a busy machine delivers a tick 8 ms after the last: two steps keep simulated
-    time with the wall clock. `stamp`s are the ticks' metadata timestamps (when the timer
-    fired); without them (a tick that is not a dora timer, a test's mock) one step.
+    late, so on a busy machine a tick can come 8 ms after the last: it owes two steps.
+    Counted from the first tick, not tick to tick, so rounding never adds up: simulated
+    time stays within a step of the timer's. `stamp`s are the ticks' metadata timestamps
+    (when the timer fired); without one (a tick that is not a dora timer, a test's mock)
+    a tick is one step.
     """
-    if previous_stamp is None or stamp is None:
-        return 1
-    periods = round((stamp - previous_stamp).total_seconds() / period_s)
-    return min(max(periods, 1), MAX_STEPS_PER_TICK)
+
+    def __init__(self, period_s: float):
+        self.period_s = period_s
+        self._origin = None  # the stamp the count starts from
+        self._steps = 0  # steps taken since then
+
+    def steps_due(self, stamp) -> int:
+        if stamp is None:
+            return 1
+        if self._origin is None:
+            self._origin, self._steps = stamp, 1
+            return 1
+        owed = round((stamp - self._origin).total_seconds() / self.period_s) + 1 - self._steps
+        steps = min(max(owed, 1), MAX_STEPS_PER_TICK)
+        if owed > MAX_STEPS_PER_TICK:  # a stall: take what is allowed, count afresh from here
+            self._origin, self._steps = stamp, 1
+        else:
+            self._steps += steps
+        return steps
 
 
 def dataflow_copy(node_env: dict[str, str]) -> dict:

@@ -153,7 +153,7 @@ def test_killed_gui_window_ends_the_simulation_and_is_not_reopened(tmp_path, xvf
 @pytest.mark.skipif(shutil.which("xdotool") is None, reason="xdotool is not installed (package xdotool)")
 def test_the_window_keeps_pybullets_camera_controls(tmp_path, xvfb_display):
     """The window is a mirror in its own process, and still PyBullet's own: Ctrl + left drag
-    turns the camera, the wheel zooms (the arm itself does not move)."""
+    turns the camera, the wheel zooms, a plain left drag does neither (the arm does not move)."""
     display_env = dict(os.environ, DISPLAY=xvfb_display)
 
     def xdotool(*args):
@@ -164,6 +164,15 @@ def test_the_window_keeps_pybullets_camera_controls(tmp_path, xvfb_display):
     try:
         dora.wait_for("window open: it shows the arm", timeout_s=120)
         before = settled_arm(xvfb_display, tmp_path / "before.png", lambda m: m.sum() >= MIN_ARM_PIXELS)
+        # A plain left drag, the course's "rotate", leaves the camera where it is.
+        xdotool("mousemove", "500", "400")
+        xdotool("mousedown", "1")
+        for step in range(1, 21):
+            xdotool("mousemove", str(500 + 12 * step), "400")
+            time.sleep(0.05)
+        xdotool("mouseup", "1")
+        time.sleep(1.5)  # the window takes the mouse's events at least 4 times a second
+        plain_drag = arm_pixels(screenshot(xvfb_display, tmp_path / "plain-drag.png"))
         xdotool("mousemove", "500", "400")
         xdotool("keydown", "ctrl")
         xdotool("mousedown", "1")
@@ -179,6 +188,7 @@ def test_the_window_keeps_pybullets_camera_controls(tmp_path, xvfb_display):
     finally:
         exit_code = dora.stop()
     assert before.sum() >= MIN_ARM_PIXELS
+    assert overlap(before, plain_drag) > SAME_FRAME_OVERLAP, "a plain left drag moved the camera"
     assert overlap(before, turned) < MAX_OVERLAP_AFTER_MOVE, "Ctrl + drag did not turn the camera"
     assert zoomed.sum() < 0.7 * turned.sum(), "the wheel did not zoom out"
     assert exit_code == 0, dora.log()[-3000:]

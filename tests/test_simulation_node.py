@@ -8,7 +8,7 @@ import math
 import pyarrow as pa
 import pytest
 
-from so101.dataflow import MAX_STEPS_PER_TICK
+from so101.dataflow import MAX_STEPS_PER_TICK, TickClock
 from tests.dataflow_helpers import TICK, run_simulation_node
 
 
@@ -234,3 +234,15 @@ def test_a_tick_after_dropped_ones_takes_their_steps_too(monkeypatch):
     # 1 + 1 + 1 + 3 + 10 (a stall is let go past MAX_STEPS_PER_TICK) steps at 3 rad/s = 0.012 rad/step
     assert MAX_STEPS_PER_TICK == 10
     assert last_state(node)[0] == pytest.approx(math.degrees(16 * 0.012), abs=0.01)
+
+
+def test_the_tick_clock_counts_from_the_first_tick_so_timer_jitter_adds_no_steps():
+    start = datetime.datetime(2026, 1, 1, tzinfo=datetime.timezone.utc)
+    clock = TickClock(0.004)
+    # The tick due at 8 ms is dropped and the next one fires late (10.1 ms), then on time;
+    # the one at 20 ms is dropped too. Tick to tick, rounding each gap would owe
+    # 1, 1, 2, 1 (a 1.9 ms gap still steps once), 1, 2: 8 steps for 7 timer periods.
+    owed = [clock.steps_due(start + datetime.timedelta(milliseconds=ms)) for ms in (0, 4, 10.1, 12, 16, 24)]
+    assert owed == [1, 1, 2, 1, 1, 1]
+    assert sum(owed) == 24 / 4 + 1  # the timer's own count: one step per period, and the first tick's
+    assert TickClock(0.004).steps_due(None) == 1
