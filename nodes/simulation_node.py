@@ -1,7 +1,7 @@
 """simulation: the SO-101 in PyBullet as a dora node (course step C).
 
-Each `tick` re-issues the current joint targets, advances the physics by one
-step of the tick's own period, and publishes `joint_state`. A `joint_cmd` only
+Each `tick` advances the physics by one step of the tick's own period (with the
+course's motor calls for a new goal first) and publishes `joint_state`. A `joint_cmd` only
 updates the targets; the next tick applies them. When dora had to drop ticks
 because the node was late (a busy machine), the next tick takes the steps of the
 dropped ones too, so simulated time keeps pace with the wall clock.

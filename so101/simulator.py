@@ -159,7 +159,8 @@ class SO101Sim:
                 )
         self.max_velocity_rad_s = float(max_velocity_rad_s)
         self._goal_rad = np.radians(np.asarray(HOME_POSE_DEG, dtype=float))
-        # (joint index, goal in radians) pairs, ready for the per-joint motor calls.
+        # (joint index, goal in radians) pairs for the per-joint motor calls, while they are
+        # still to be made; None once the motors have them.
         self._motor_goals = list(zip(self._indices, self._goal_rad.tolist()))
         self.steps = 0
         # The torques sent on the last step (servo mode; zeros in position mode).
@@ -215,7 +216,7 @@ class SO101Sim:
         return np.degrees(self._goal_rad)
 
     def step(self, count: int = 1) -> None:
-        """Re-issue the motor commands and advance the physics by `count` time steps."""
+        """Send new motor commands, if any, and advance the physics by `count` time steps."""
         client, robot_id, max_velocity = self.client, self.robot_id, self.max_velocity_rad_s
         for _ in range(count):
             if self.control_mode == "servo":
@@ -223,15 +224,19 @@ class SO101Sim:
                 # torque limit bounds its speed. (A goal slewed at 3 rad/s would hide the
                 # lesson: a PD loop follows a ramp with little overshoot whatever ζ.)
                 self._send_servo_torques()
-            else:
+            elif self._motor_goals is not None:
                 # The course's own call, joint by joint: setJointMotorControlArray has no
                 # maxVelocity, and PyBullet applies maxVelocity as a cap on the motor's
-                # velocity target, so the joint is at 3 rad/s from the first step.
+                # velocity target, so the joint is at 3 rad/s from the first step. The
+                # course re-sends it every step; PyBullet keeps a motor's command until
+                # it changes, so sending it once per goal moves the arm the same, step for
+                # step (tests/test_course_motion.py), for less work per tick.
                 for joint_index, goal_rad in self._motor_goals:
                     p.setJointMotorControl2(
                         robot_id, joint_index, p.POSITION_CONTROL, targetPosition=goal_rad,
                         maxVelocity=max_velocity, physicsClientId=client,
                     )
+                self._motor_goals = None
             p.stepSimulation(physicsClientId=client)
             self.steps += 1
         if self._window is not None and self._window.due():
