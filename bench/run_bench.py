@@ -14,7 +14,9 @@ One run on one machine measures:
      RSS of the simulation node;
   8. the same with the window open (SO101_MODE gui; on a fresh Xvfb server when no
      display is reachable): joint_state/s, simulated over wall time, latency;
-  9. the node's fast mode (SO101_FAST_STEPS): steps per second against the raw rate.
+  9. the node's fast mode (SO101_FAST_STEPS): steps per second against the raw rate;
+  10. where the node's memory goes: peak RSS after each loading stage, in fresh processes,
+     for the course's plain loading and for the node's.
 It prints a table and writes the figures, the targets and the machine to a JSON file.
 Timings are wall-clock on a shared machine: the load average is recorded with them.
 """
@@ -315,6 +317,50 @@ def measure_node_work_in_process(ticks: int, work_dir: Path) -> dict:
     return summary([(end - start) / 1e3 for start, end, _ in ticks])
 
 
+# The node's imports, then the arm loaded one of three ways; peak and current RSS (MB) after each stage.
+MEMORY_STAGES_SCRIPT = r"""
+import json, sys
+def mb():  # VmHWM, not ru_maxrss: the latter keeps the forking parent's peak across exec
+    status = dict(line.split(":", 1) for line in open("/proc/self/status"))
+    return {"peak": int(status["VmHWM"].split()[0]) / 1024, "current": int(status["VmRSS"].split()[0]) / 1024}
+way = sys.argv[1]
+stages = {"python": mb()}
+import pyarrow, dora, pybullet as p, pybullet_data
+from so101 import assets, simulator
+stages["imports (numpy, pyarrow, dora, pybullet)"] = mb()
+if way == "node":
+    simulator.release_freed_memory()
+cid = p.connect(p.DIRECT)
+if way != "course":
+    for plugin in ("fileIOPlugin", "tinyRendererPlugin"):
+        p.unloadPlugin(p.loadPlugin(plugin, physicsClientId=cid), physicsClientId=cid)
+stages["DIRECT client"] = mb()
+p.setAdditionalSearchPath(pybullet_data.getDataPath(), physicsClientId=cid)
+p.loadURDF("plane.urdf", physicsClientId=cid)
+p.loadURDF(str(assets.urdf_path()), useFixedBase=True, physicsClientId=cid)
+stages["the arm loaded"] = mb()
+print(json.dumps(stages))
+"""
+MEMORY_WAYS = {
+    "course": "as the course loads it",
+    "plugins": "without the renderer and file cache",
+    "node": "and glibc returns freed blocks (the node)",
+}
+
+
+def measure_memory_stages() -> dict:
+    """Peak and current RSS after each loading stage, one fresh process per way of loading."""
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")])))
+    ways = {}
+    for way in MEMORY_WAYS:
+        result = subprocess.run([sys.executable, "-c", MEMORY_STAGES_SCRIPT, way], capture_output=True, text=True,
+                                env=env, timeout=120)
+        if result.returncode != 0:
+            raise RuntimeError(f"the memory stages ({way}) failed: {result.stderr.strip()[-500:]}")
+        ways[way] = json.loads(result.stdout.strip().splitlines()[-1])
+    return ways
+
+
 # -- dora run -------------------------------------------------------------------------
 def bench_dataflow(path: Path, sim_env: dict, probe_env: dict) -> None:
     """dataflow.yml as it is, with absolute paths, the simulation headless unless sim_env says otherwise,
@@ -504,6 +550,8 @@ def run_benchmark(duration_s: float, fast_s: float, fast_steps: list[int], raw_s
                 "measured_s": ticks["span_s"],
             })
         figures["fast_mode"] = {"runs": runs}
+        print("memory, stage by stage ...", flush=True)
+        figures["memory_stages_mb"] = measure_memory_stages()
     figures["targets"] = target_rows(figures)
     return {
         "machine": machine_facts(),
@@ -557,6 +605,12 @@ def table(result: dict) -> str:
     for run in result["fast_mode"]["runs"]:
         label = f"fast mode, SO101_FAST_STEPS={run['steps_per_state']} (steps/s, x raw)"
         lines.append(f"{label:<52} {run['steps_per_s']:>10.0f} | {run['ratio_to_raw']:<9.2f}")
+    stages = result["memory_stages_mb"]
+    lines += ["", f"{'memory, peak | current RSS (MB)':<52} " + " ".join(f"{way:>17}" for way in stages)]
+    for stage in next(iter(stages.values())):
+        cells = " ".join(f"{stages[way][stage]['peak']:>8.1f} |{stages[way][stage]['current']:>7.1f}" for way in stages)
+        lines.append(f"{'  ' + stage:<52} {cells}")
+    lines += [f"  {way}: {MEMORY_WAYS[way]}" for way in stages]
     lines += ["", "targets:"]
     for row in result["targets"]:
         value = row["value"]

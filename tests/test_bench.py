@@ -215,6 +215,15 @@ def test_quick_bench_writes_every_figure(tmp_path):
     # Fewer publications per step can only help: 100 steps per state beat 1.
     assert runs[1]["steps_per_s"] > runs[0]["steps_per_s"]
 
+    stages = figures["memory_stages_mb"]
+    assert list(stages) == ["course", "plugins", "node"]
+    for way in stages.values():
+        assert list(way) == ["python", "imports (numpy, pyarrow, dora, pybullet)", "DIRECT client", "the arm loaded"]
+        assert 5 < way["python"]["peak"] < way["DIRECT client"]["peak"] < way["the arm loaded"]["peak"] < 4000
+    # Leaving out the renderer and the file cache keeps less after loading than the course's way.
+    assert stages["plugins"]["the arm loaded"]["current"] < stages["course"]["the arm loaded"]["current"]
+    assert "memory, peak | current RSS (MB)" in result.stdout
+
     assert len(figures["targets"]) == 8 + window_rows
     assert all(isinstance(row["met"], bool) for row in figures["targets"])
     assert "targets:" in result.stdout and "joint_state per s" in result.stdout
