@@ -19,7 +19,6 @@ import pybullet_data
 from so101 import assets
 from so101.camera import DEFAULT_CAMERA, Camera
 from so101.display import resolve_mode
-from so101.viewer import WINDOW_SHOWING, Window
 from so101.servo import (
     DEFAULT_DAMPING_RATIO,
     DEFAULT_NATURAL_FREQ_RAD_S,
@@ -33,6 +32,7 @@ from so101.robot import (
     COURSE_MAX_VELOCITY_RAD_S,
     HOME_POSE_DEG,
 )
+from so101.viewer import WINDOW_SHOWING, Window
 
 JOINT_TYPE_NAMES = {
     p.JOINT_REVOLUTE: "revolute",
@@ -83,7 +83,7 @@ class SO101Sim:
     targets and states are in degrees, in the order of `so101.robot.ACTUATED_JOINTS`:
     the five arm joints, then the gripper.
 
-    control_mode "position" (default) makes the course's calls: per joint, every step,
+    control_mode "position" (default) makes the course's calls for each new goal: per joint,
     `setJointMotorControl2(POSITION_CONTROL, targetPosition=goal, maxVelocity=3.0)` with
     PyBullet's default force and gains, so the arm moves exactly as the course's does.
     "servo" is a PD torque servo (gains from ζ, ωn and each joint's inertia, torques

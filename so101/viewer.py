@@ -6,13 +6,13 @@ at the window's frame rate: 84 steps a second instead of 250 under Xvfb here. So
 physics always runs in its own DIRECT client, and the window is a second PyBullet
 client, in another process and at a lower priority, that loads the same arm, never
 steps it, and sets its joints to the latest angles at most `fps` times a second.
-The window keeps PyBullet's own camera controls (drag to rotate, wheel to zoom,
-Ctrl-drag to pan).
+The window keeps PyBullet's own camera controls (Ctrl + left drag turns, the wheel
+zooms, Ctrl + middle drag pans).
 
 The two processes share one small file, mapped into both: a frame counter, the
 viewer's state, and the six joint angles in radians (so101.robot.ACTUATED_JOINTS order).
 
-    python -m so101.viewer --shared FILE [--fps N]    (started by `Window`, not by hand)
+    python -m so101.viewer --shared FILE --urdf URDF [--fps N]    (started by `Window`, not by hand)
 """
 
 from __future__ import annotations
@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import mmap
 import os
+import signal
 import subprocess
 import sys
 import tempfile
@@ -43,7 +44,7 @@ STARTING, OPEN, SHOWING = 0.0, 1.0, 2.0  # the window: not yet, open, showing th
 STILL_RAD = 1.7e-4
 # The viewer's niceness where SCHED_IDLE is not to be had.
 VIEWER_NICENESS = 19
-# Where the course points its camera (and where this project's window always has).
+# The course's camera: where the window starts.
 CAMERA = {"cameraDistance": 0.6, "cameraYaw": 45, "cameraPitch": -30, "cameraTargetPosition": [0, 0, 0.15]}
 
 
@@ -145,8 +146,6 @@ def _lowest_priority() -> None:
 
 def run_viewer(shared_path: Path, urdf: Path, fps: float) -> int:
     """The viewer process: a GUI client that shows the angles the physics hands it."""
-    import signal
-
     import pybullet as p
     import pybullet_data
 
