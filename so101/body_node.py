@@ -1,0 +1,203 @@
+"""One dora event loop for any body of the SO-101 (PyBullet, MuJoCo): the simulation node's contract.
+
+A body has the small surface `SO101Sim` and `SO101MuJoCo` share: set_targets_deg,
+set_time_step_s, step(count), steps, joint_angles_deg, render_rgb, close. This loop turns
+one into the node dataflow.yml declares: each `tick` advances the physics by the tick's
+period (and the periods of ticks dora dropped while the node was late) and publishes
+`joint_state` and `gripper_state`; a `joint_cmd` is decoded, clamped to the joint limits
+and logged, and only updates the targets, which the next tick applies; bad ones are
+logged and ignored; STOP or Ctrl-C closes the body and ends with 0.
+
+Settings read from the node's environment (declared in the dataflow file):
+  SO101_MODE        auto | gui | direct   (auto: a window where a display exists)
+  SO101_IMAGE_HZ    rate of the optional `image` output, 0 = off
+  SO101_FAST_STEPS  0 = paced by the tick (default); N > 0 = fast mode for batch use:
+                    no wall-clock pacing, N physics steps per published state
+  SO101_TICK_LOG    file to write per-tick timings and step counts to at exit, for `so101 bench`; empty = off
+  SO101_LANG        zh | en               (log language)
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from array import array
+from dataclasses import dataclass
+from typing import Mapping
+
+import pyarrow as pa
+
+from so101.dataflow import TICK_PERIOD_S, TickClock, timer_period_s
+from so101.joint_cmd import decode_joint_cmd
+from so101.robot import GRIPPER_COMMAND_INDEX, HOME_POSE_DEG, NUM_ARM_JOINTS
+from so101.viewer import WindowClosed
+
+IMAGE_SIZE = (320, 240)
+
+TEXT = {
+    "zh": {
+        "loaded": "[仿真节点] SO-101 加载完成,{identity}({mode} 模式,步长 {step_ms:g} ms,{detail})",
+        "one": "[仿真节点] 关节 {index} 目标 → {angle:g}°",
+        "all": "[仿真节点] 全关节目标 → {angles}°",
+        "clamped": "[仿真节点] 超出关节限位: {note}",
+        "rejected": "[仿真节点] 忽略无效 joint_cmd: {error}",
+        "no_timer": "[仿真节点] tick 不是 dora 定时器,物理步长取 {step_ms:g} ms",
+        "window_closed": "[仿真节点] 仿真停止: {reason}",
+    },
+    "en": {
+        "loaded": "[simulation] SO-101 loaded, {identity} ({mode} mode, step {step_ms:g} ms, {detail})",
+        "one": "[simulation] joint {index} target -> {angle:g}°",
+        "all": "[simulation] all joint targets -> {angles}°",
+        "clamped": "[simulation] beyond the joint limits: {note}",
+        "rejected": "[simulation] ignored invalid joint_cmd: {error}",
+        "no_timer": "[simulation] tick is not a dora timer; physics step set to {step_ms:g} ms",
+        "window_closed": "[simulation] stopping: {reason}",
+    },
+}
+
+
+def log(line: str) -> None:
+    print(line, flush=True)
+
+
+def cannot_start(error: Exception) -> int:
+    """One line on stderr and the exit code for a setting or a model that is wrong."""
+    print(f"[simulation] cannot start: {error}", file=sys.stderr, flush=True)
+    return 2
+
+
+def number_setting(environ: Mapping[str, str], name: str, default: str, minimum: float) -> float:
+    raw = environ.get(name, default)
+    try:
+        value = float(raw)
+    except ValueError:
+        value = float("nan")
+    if not value >= minimum:  # also rejects NaN
+        raise ValueError(f"{name}={raw!r} is not a number >= {minimum:g}")
+    return value
+
+
+def whole_number_setting(environ: Mapping[str, str], name: str, default: str) -> int:
+    raw = environ.get(name, default)
+    if not raw.strip().isdigit():
+        raise ValueError(f"{name}={raw!r} is not a whole number >= 0")
+    return int(raw)
+
+
+@dataclass(frozen=True)
+class NodeSettings:
+    """What every body's node reads from its environment (the body's own settings apart)."""
+
+    mode: str
+    image_hz: float
+    fast_steps: int
+    tick_log_path: str
+    lang: str
+
+    @classmethod
+    def from_environ(cls, environ: Mapping[str, str]) -> "NodeSettings":
+        """Raises ValueError naming a bad value and what is accepted."""
+        return cls(
+            mode=environ.get("SO101_MODE", "auto"),
+            image_hz=number_setting(environ, "SO101_IMAGE_HZ", "0", 0.0),
+            fast_steps=whole_number_setting(environ, "SO101_FAST_STEPS", "0"),
+            tick_log_path=environ.get("SO101_TICK_LOG", ""),
+            lang="en" if environ.get("SO101_LANG", "zh") == "en" else "zh",
+        )
+
+
+# In fast mode a tick is made up whenever no input is waiting.
+FAST_TICK = {"type": "INPUT", "id": "tick", "value": None, "metadata": {}}
+
+
+def fast_events(node):
+    """The node's events without waiting: FAST_TICK whenever its queue is empty.
+
+    Fast mode polls instead of taking a 0 ms timer: the physics step stays the
+    timer's period (a 0 ms tick would make it 0), and no event has to travel
+    through the daemon per step.
+    """
+    while True:
+        event = node.try_recv()
+        yield FAST_TICK if event is None else event
+
+
+def run_body_node(body, node, settings: NodeSettings, identity: str, detail: Mapping[str, str]) -> int:
+    """The event loop, until STOP; closes `body`. `identity` and `detail[lang]` go into the
+    "loaded" log line (`so101 teleop` waits for it). Returns the node's exit code."""
+    text = TEXT[settings.lang]
+    fast_steps = settings.fast_steps
+    image_hz = settings.image_hz
+    # The physics step equals the tick period, so simulated time keeps pace with the
+    # wall clock (the course's default 1/240 s step on a 4 ms tick runs 4% fast).
+    tick_s = timer_period_s(node.node_config())
+    if tick_s is None:
+        tick_s = TICK_PERIOD_S
+        log(text["no_timer"].format(step_ms=tick_s * 1000))
+    body.set_time_step_s(tick_s)
+    log(text["loaded"].format(identity=identity, mode=body.mode.upper(), step_ms=tick_s * 1000, detail=detail[settings.lang]))
+
+    joint_targets_deg = tuple(HOME_POSE_DEG)
+    events = fast_events(node) if fast_steps else node
+    # (start ns, end ns, physics steps so far) of each tick, in time.monotonic_ns, when asked for;
+    # None costs nothing per tick.
+    tick_log = array("q") if settings.tick_log_path else None
+    tick_clock = TickClock(tick_s)
+    # Counted in physics steps, so fast mode (several steps per tick) keeps the simulated rate.
+    steps_per_image = max(1, round(1.0 / (image_hz * tick_s))) if image_hz > 0 else 0
+    next_image_step = steps_per_image
+    try:
+        for event in events:
+            if event["type"] == "INPUT":
+                if event["id"] == "tick":
+                    if tick_log is not None:
+                        tick_log.append(time.monotonic_ns())
+                    if fast_steps:
+                        body.step(fast_steps)
+                    else:
+                        body.step(tick_clock.steps_due(event["metadata"].get("timestamp")))
+                    angles_deg = body.joint_angles_deg()
+                    node.send_output("joint_state", pa.array(angles_deg[:NUM_ARM_JOINTS], type=pa.float64()))
+                    node.send_output("gripper_state", pa.array(angles_deg[NUM_ARM_JOINTS:], type=pa.float64()))
+                    if tick_log is not None:
+                        tick_log.extend((time.monotonic_ns(), body.steps))
+                    if steps_per_image and body.steps >= next_image_step:
+                        next_image_step += steps_per_image * ((body.steps - next_image_step) // steps_per_image + 1)
+                        width, height = IMAGE_SIZE
+                        rgb = body.render_rgb(width, height)
+                        node.send_output(
+                            "image", pa.array(rgb.ravel()),
+                            {"width": width, "height": height, "encoding": "rgb8"},
+                        )
+                elif event["id"] == "joint_cmd":
+                    decoded = decode_joint_cmd(event["value"], joint_targets_deg)
+                    if decoded.error:
+                        log(text["rejected"].format(error=decoded.error))
+                        continue
+                    for note in decoded.notes:
+                        log(text["clamped"].format(note=note))
+                    previous_gripper_deg = joint_targets_deg[GRIPPER_COMMAND_INDEX]
+                    joint_targets_deg = decoded.targets_deg
+                    body.set_targets_deg(joint_targets_deg)
+                    if decoded.joint_index is not None:
+                        log(text["one"].format(index=decoded.joint_index, angle=joint_targets_deg[decoded.joint_index]))
+                    else:
+                        log(text["all"].format(angles=[round(a, 2) for a in joint_targets_deg[:NUM_ARM_JOINTS]]))
+                        if joint_targets_deg[GRIPPER_COMMAND_INDEX] != previous_gripper_deg:
+                            log(text["one"].format(index=GRIPPER_COMMAND_INDEX, angle=joint_targets_deg[GRIPPER_COMMAND_INDEX]))
+            elif event["type"] == "STOP":
+                break
+    except KeyboardInterrupt:
+        pass  # Ctrl-C on a node run by hand: stop like STOP
+    except WindowClosed as closed:
+        # As in the course, closing the window ends the simulation; exit code 1 makes dora
+        # stop the dataflow and say so, rather than leave a prompt driving nothing.
+        print(text["window_closed"].format(reason=closed), file=sys.stderr, flush=True)
+        return 1
+    finally:
+        body.close()
+        if tick_log is not None:
+            with open(settings.tick_log_path, "wb") as tick_log_file:
+                tick_log.tofile(tick_log_file)
+    return 0
+

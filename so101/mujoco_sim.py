@@ -1,0 +1,165 @@
+"""The SO-101 in MuJoCo, behind the same small surface as `so101.simulator.SO101Sim`.
+
+Targets and states in degrees, in `so101.robot.ACTUATED_JOINTS` order; `step(count)`
+advances `count` periods of the node's tick; `render_rgb` draws offscreen; `close()` is
+safe twice. The model is TheRobotStudio's MJCF from `so101 assets`: position actuators
+of the STS3215 class (kp 17.8, force ±3.35 N·m) and joint damping 0.60 N·m·s/rad,
+armature and friction loss. This class adds what PyBullet's scene has: a ground plane
+at z = 0 and a light.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from so101 import assets
+from so101.camera import DEFAULT_CAMERA, Camera
+from so101.display import DisplayError, display_available, resolve_mode
+from so101.robot import ACTUATED_JOINTS, HOME_POSE_DEG
+
+# Offscreen drawing without a display needs an OpenGL back end: EGL, with Mesa's
+# software renderer where there is no GPU. MuJoCo reads this when it is imported.
+if not display_available():
+    os.environ.setdefault("MUJOCO_GL", "egl")
+
+import mujoco  # noqa: E402
+
+# The Debian packages EGL drawing needs (the README names them, .ci/run installs them).
+EGL_PACKAGES = "libegl1 libegl-mesa0 libgl1-mesa-dri"
+
+
+class SO101MuJoCo:
+    """An SO-101 on a fixed base in MuJoCo, stepped by hand.
+
+    joint_damping_n_m_s None keeps the MJCF's damping (0.60 N·m·s/rad, the STS3215
+    class); a number sets every joint's (exercise 2: 0 swings). MuJoCo steps at the
+    MJCF's 2 ms; a tick period is a whole number of those steps.
+    """
+
+    def __init__(
+        self,
+        mode: str = "auto",
+        time_step_s: float = 0.004,
+        assets_dir: Path | str | None = None,
+        log=print,
+        joint_damping_n_m_s: float | None = None,
+        renders: bool = True,
+    ):
+        if joint_damping_n_m_s is not None and not joint_damping_n_m_s >= 0:
+            raise ValueError(f"joint damping must be a number >= 0 N·m·s/rad, got {joint_damping_n_m_s!r}")
+        mjcf = assets.mjcf_path(assets_dir)  # a missing file gives our message, not MuJoCo's
+        self.mode, notice = resolve_mode(mode)
+        if notice:
+            log(notice)
+        # No MuJoCo window is built yet (README): auto runs headless, gui says so.
+        if mode == "auto" and self.mode == "gui":
+            self.mode = "direct"
+            log("the MuJoCo body has no window yet: running headless in DIRECT mode")
+        if self.mode == "gui":
+            raise DisplayError("the MuJoCo body has no window yet: use mode direct or auto")
+        spec = mujoco.MjSpec.from_file(str(mjcf))
+        spec.worldbody.add_geom(
+            name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 0.05], rgba=[0.85, 0.87, 0.92, 1],
+        )
+        spec.worldbody.add_light(pos=[0.3, -0.3, 1.5], dir=[-0.2, 0.2, -1], type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL)
+        self.model = spec.compile()
+        self.data = mujoco.MjData(self.model)
+        self.model_step_s = float(self.model.opt.timestep)
+        self.joint_names = [self.model.joint(i).name for i in range(self.model.njnt)]
+        self._qpos = [int(self.model.joint(joint.name).qposadr[0]) for joint in ACTUATED_JOINTS]
+        self._qvel = [int(self.model.joint(joint.name).dofadr[0]) for joint in ACTUATED_JOINTS]
+        if joint_damping_n_m_s is not None:
+            self.model.dof_damping[self._qvel] = float(joint_damping_n_m_s)
+        self._actuators = [int(self.model.actuator(joint.name).id) for joint in ACTUATED_JOINTS]
+        self.renders = renders
+        self._renderer = None
+        self.steps = 0
+        self.set_time_step_s(time_step_s)
+        self.set_targets_deg(HOME_POSE_DEG)
+        mujoco.mj_forward(self.model, self.data)
+
+    # -- control ---------------------------------------------------------------------
+    def set_targets_deg(self, targets_deg: Sequence[float]) -> None:
+        """Goal angles in degrees for all six actuated joints (arm 0-4, gripper)."""
+        goal = np.asarray(targets_deg, dtype=float)
+        if goal.shape != (len(ACTUATED_JOINTS),) or not np.all(np.isfinite(goal)):
+            raise ValueError(f"expected {len(ACTUATED_JOINTS)} finite angles in degrees, got {targets_deg!r}")
+        self.data.ctrl[self._actuators] = np.radians(goal)
+
+    def joint_damping_n_m_s(self) -> float:
+        """The joints' damping (one value for all, as the MJCF's STS3215 class and this class set it)."""
+        return float(self.model.dof_damping[self._qvel[0]])
+
+    def targets_deg(self) -> np.ndarray:
+        return np.degrees(self.data.ctrl[self._actuators])
+
+    def set_time_step_s(self, time_step_s: float) -> None:
+        """The period of one `step()`: a whole number of the model's own steps."""
+        if not time_step_s > 0:
+            raise ValueError(f"time step must be a positive number of seconds, got {time_step_s!r}")
+        self.substeps = max(1, round(time_step_s / self.model_step_s))
+        self.time_step_s = self.substeps * self.model_step_s
+
+    def step(self, count: int = 1) -> None:
+        """Advance the physics by `count` periods of `time_step_s`."""
+        mujoco.mj_step(self.model, self.data, nstep=count * self.substeps)
+        self.steps += count
+
+    # -- state -----------------------------------------------------------------------
+    def joint_angles_deg(self) -> np.ndarray:
+        """Measured angles in degrees, arm joints 0-4 then the gripper."""
+        return np.degrees(self.data.qpos[self._qpos])
+
+    def joint_velocities_deg_s(self) -> np.ndarray:
+        return np.degrees(self.data.qvel[self._qvel])
+
+    @property
+    def sim_time_s(self) -> float:
+        return self.steps * self.time_step_s
+
+    # -- pictures --------------------------------------------------------------------
+    def render_rgb(self, width: int = 640, height: int = 480, camera: Camera = DEFAULT_CAMERA) -> np.ndarray:
+        """The scene as an RGB image, uint8 of shape (height, width, 3), drawn offscreen."""
+        if not self.renders:
+            raise RuntimeError("this simulator was made without its renderer (renders=False): no pictures")
+        if width < 1 or height < 1:
+            raise ValueError(f"image size must be at least 1x1 pixels, got {width}x{height}")
+        if self._renderer is None or (self._renderer.width, self._renderer.height) != (width, height):
+            self._close_renderer()
+            self.model.vis.global_.offwidth = max(self.model.vis.global_.offwidth, width)
+            self.model.vis.global_.offheight = max(self.model.vis.global_.offheight, height)
+            try:
+                self._renderer = mujoco.Renderer(self.model, height, width)
+            except Exception as error:  # noqa: BLE001 - MuJoCo's GL set-up fails in several ways
+                raise DisplayError(
+                    f"MuJoCo cannot draw offscreen ({type(error).__name__}: {error}); "
+                    f"without a display it needs EGL: apt-get install {EGL_PACKAGES}"
+                ) from None
+        view = mujoco.MjvCamera()
+        view.lookat[:] = camera.target_xyz_m
+        view.distance = camera.distance_m
+        # PyBullet's yaw 0 looks along +y, MuJoCo's azimuth 90 does; both pitch down when negative.
+        view.azimuth = camera.yaw_deg + 90.0
+        view.elevation = camera.pitch_deg
+        self._renderer.update_scene(self.data, view)
+        return self._renderer.render().copy()
+
+    # -- life cycle ------------------------------------------------------------------
+    def _close_renderer(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+    def close(self) -> None:
+        """Let go of the renderer; safe to call twice."""
+        self._close_renderer()
+
+    def __enter__(self) -> "SO101MuJoCo":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()

@@ -1,0 +1,83 @@
+"""Every body speaks the same contract: registered once, the same graph, the same facts.
+
+A simulation node added under nodes/ without an entry in so101.bodies would escape the
+contract suite (the `body` fixture of tests/test_simulation_node.py runs over that table):
+the first test fails then.
+"""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ElementTree
+
+import numpy as np
+import pytest
+import yaml
+
+from so101 import assets
+from so101.bodies import BODIES, DEFAULT_BODY
+from so101.robot import ACTUATED_JOINTS
+from tests.dataflow_helpers import ROOT
+
+
+def test_every_simulation_node_is_a_registered_body():
+    node_files = sorted((ROOT / "nodes").glob("simulation*.py"))
+    assert node_files == sorted(body.node_file for body in BODIES.values())
+    assert DEFAULT_BODY == "pybullet"  # the course's choice
+
+
+def graph(dataflow_file):
+    """The dataflow's nodes without what may differ between bodies: the simulation's path and env."""
+    nodes = yaml.safe_load(dataflow_file.read_text(encoding="utf-8"))["nodes"]
+    for node in nodes:
+        if node["id"] == "simulation":
+            node.pop("path")
+            node.pop("env")
+    return nodes
+
+
+@pytest.mark.parametrize("name", list(BODIES))
+def test_each_body_has_the_courses_graph(name):
+    body = BODIES[name]
+    assert body.dataflow_file.is_file() and body.node_file.is_file()
+    assert graph(body.dataflow_file) == graph(BODIES[DEFAULT_BODY].dataflow_file)
+    simulation = next(node for node in yaml.safe_load(body.dataflow_file.read_text())["nodes"] if node["id"] == "simulation")
+    assert (ROOT / simulation["path"]) == body.node_file
+
+
+def test_the_joint_facts_equal_the_mjcf():
+    from so101.mujoco_sim import SO101MuJoCo
+
+    with SO101MuJoCo(mode="direct", renders=False, log=lambda message: None) as sim:
+        model = sim.model
+        assert sim.joint_names == [joint.name for joint in ACTUATED_JOINTS]  # names and order
+        for joint in ACTUATED_JOINTS:
+            # The MJCF gives the ranges with more digits than the URDF (so101.robot's source):
+            # shoulder_pan is ±110° there, ±1.91986 rad = ±109.9999° in the URDF.
+            low, high = np.degrees(model.joint(joint.name).range)
+            assert (low, high) == pytest.approx((joint.lower_deg, joint.upper_deg), abs=1e-3), joint.name
+            # The servo's command range, as the MJCF declares it (5 decimals there).
+            ctrl_low, ctrl_high = np.degrees(model.actuator(joint.name).ctrlrange)
+            assert (ctrl_low, ctrl_high) == pytest.approx((joint.lower_deg, joint.upper_deg), abs=1e-3), joint.name
+    # The file itself, not only what MuJoCo made of it.
+    worldbody = ElementTree.parse(assets.mjcf_path()).getroot().find("worldbody")  # not the <default> classes
+    declared = [element.get("name") for element in worldbody.iter("joint")]
+    assert declared == [joint.name for joint in ACTUATED_JOINTS]
+
+
+def test_without_damping_the_mujoco_arm_overshoots_more():
+    from so101.mujoco_sim import SO101MuJoCo
+
+    def peak_deg(damping):
+        with SO101MuJoCo(mode="direct", renders=False, joint_damping_n_m_s=damping, log=lambda message: None) as sim:
+            sim.set_targets_deg([90, 0, 0, 0, 0, 0])
+            peak = 0.0
+            for _ in range(375):  # 1.5 s
+                sim.step()
+                peak = max(peak, sim.joint_angles_deg()[0])
+            return peak, sim.joint_damping_n_m_s()
+
+    with_mjcf_damping, damping = peak_deg(None)
+    without, _ = peak_deg(0.0)
+    assert damping == pytest.approx(0.60)  # the STS3215 class's
+    assert with_mjcf_damping > 90.0  # MuJoCo's servo is a spring: even damped it overshoots a little
+    assert without > with_mjcf_damping + 10.0  # and without damping it swings far past
