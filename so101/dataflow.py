@@ -11,6 +11,9 @@ DATAFLOW_FILE = ROOT / "dataflow.yml"
 # (tests/test_dataflow_file.py holds the two equal). Tools that simulate without the
 # dataflow (plot-step, snapshot, bench) step with it too.
 TICK_PERIOD_S = 0.004
+# The start of the simulation node's "loaded" log line, in its two languages (so101/body_node.py):
+# every body logs it once the arm is loaded, just before it starts publishing joint_state.
+LOADED_MARKS = ("SO-101 loaded", "SO-101 加载完成")
 
 _TIMER = re.compile(r"^dora/timer/(millis|secs)/(\d+(?:\.\d+)?)$")
 
@@ -65,12 +68,13 @@ class TickClock:
         return steps
 
 
-def dataflow_copy(node_env: dict[str, str]) -> dict:
-    """dataflow.yml as a dict to run from elsewhere: every node that runs a file gets its
-    path made absolute and `node_env` over its own `env:` (which dora ranks above the shell's)."""
+def dataflow_copy(node_env: dict[str, str], dataflow_file: Path = DATAFLOW_FILE) -> dict:
+    """A dataflow file (dataflow.yml by default) as a dict to run from elsewhere: every node
+    that runs a file gets its path made absolute and `node_env` over its own `env:` (which
+    dora ranks above the shell's)."""
     import yaml
 
-    descriptor = yaml.safe_load(DATAFLOW_FILE.read_text(encoding="utf-8"))
+    descriptor = yaml.safe_load(dataflow_file.read_text(encoding="utf-8"))
     for node in descriptor["nodes"]:
         if node.get("path", "dynamic") != "dynamic":
             node["path"] = str((ROOT / node["path"]).resolve())

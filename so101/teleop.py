@@ -22,7 +22,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from so101.dataflow import DATAFLOW_FILE, dataflow_copy, write_dataflow
+from so101.bodies import BODIES, DEFAULT_BODY
+from so101.dataflow import LOADED_MARKS, dataflow_copy, write_dataflow
 from so101.display import MODES, resolve_mode
 from so101.steps import _language
 from so101.venv import env_with_bin_first, executable
@@ -31,8 +32,6 @@ from so101.versions import dora_version_problem
 ROOT = Path(__file__).resolve().parents[1]
 PROMPT = ROOT / "nodes" / "keyboard_control.py"
 DEFAULT_LOG = ROOT / "out" / "teleop-dora.log"
-# The simulation node logs this once the arm is loaded, just before it starts publishing joint_state.
-READY_MARK = "robot_id ="
 START_TIMEOUT_S = 90.0
 STOP_TIMEOUT_S = 20.0
 LOG_TAIL_LINES = 15
@@ -60,6 +59,11 @@ TEXT = {
 
 
 def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
+    parser.add_argument(
+        "--body", choices=list(BODIES), default=DEFAULT_BODY,
+        help=f"what simulates the arm: pybullet (the course's, default) or mujoco; runs {BODIES[DEFAULT_BODY].dataflow_file.name} "
+        f"or {BODIES['mujoco'].dataflow_file.name}",
+    )
     parser.add_argument(
         "--mode", choices=MODES, default=os.environ.get("SO101_MODE", "auto"),
         help="simulation window: gui, direct (headless) or auto (gui where a display exists; default $SO101_MODE, "
@@ -122,7 +126,8 @@ class Dataflow:
         """True once the simulation is up; False if dora exited first; None on timeout."""
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:
-            if READY_MARK in self.log.read_text(encoding="utf-8", errors="replace"):
+            log_text = self.log.read_text(encoding="utf-8", errors="replace")
+            if any(mark in log_text for mark in LOADED_MARKS):
                 return True
             if self.process.poll() is not None:
                 return False
@@ -165,15 +170,22 @@ def _alive(pid: int) -> bool:
 
 def run(args: argparse.Namespace) -> int:
     text = TEXT[args.lang]
+    body = BODIES[args.body]
+    if args.mode == "gui" and not body.has_window:
+        print(f"so101 teleop: the {body.name} body has no window yet: use --mode direct or auto", file=sys.stderr)
+        return 2
     try:
         resolved_mode, notice = resolve_mode(args.mode)  # a GUI without a display fails here, in one line
     except ValueError as error:  # a bad $SO101_MODE: argparse does not check defaults against choices
         print(f"so101 teleop: {error} (from --mode or $SO101_MODE)", file=sys.stderr)
         return 2
+    if resolved_mode == "gui" and not body.has_window:
+        resolved_mode, notice = "direct", f"the {body.name} body has no window yet: running headless in DIRECT mode"
     if notice:
         print(notice, flush=True)
-    if not DATAFLOW_FILE.exists() or not PROMPT.exists():
-        print(f"so101 teleop: {DATAFLOW_FILE} or {PROMPT} is missing: run it from a checkout of the project", file=sys.stderr)
+    dataflow_file = body.dataflow_file
+    if not dataflow_file.exists() or not PROMPT.exists():
+        print(f"so101 teleop: {dataflow_file} or {PROMPT} is missing: run it from a checkout of the project", file=sys.stderr)
         return 2
     # A CLI and library of different versions fail deep in the daemon; say it here, in one line.
     version_problem = dora_version_problem(_dora_executable())
@@ -186,7 +198,7 @@ def run(args: argparse.Namespace) -> int:
     print(text["starting"].format(mode=resolved_mode, log=log), flush=True)
     with tempfile.TemporaryDirectory(prefix="so101-teleop-") as work_dir:
         copy = write_dataflow(
-            dataflow_copy({"SO101_MODE": resolved_mode, "SO101_LANG": args.lang}), Path(work_dir) / "dataflow.yml",
+            dataflow_copy({"SO101_MODE": resolved_mode, "SO101_LANG": args.lang}, dataflow_file), Path(work_dir) / "dataflow.yml",
         )
         dataflow = Dataflow(copy, log, env)
         return _run_prompt(dataflow, env, text, log)
