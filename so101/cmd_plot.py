@@ -1,8 +1,9 @@
 """`so101 plot-step`: the step response of one joint for a few damping values, as a PNG and a table.
 
-Course exercise 2, measured: in position mode the damping values are the course's
-link damping (`changeDynamics(linearDamping=c, angularDamping=c)`); in servo mode
-they are the PD servo's damping ratio ζ.
+Course exercise 2, measured. In PyBullet's position mode the damping values are the
+course's link damping (`changeDynamics(linearDamping=c, angularDamping=c)`); in its servo
+mode they are the PD servo's damping ratio ζ. With `--body mujoco` they are the joints'
+own damping in N·m·s/rad, the MJCF's 0.60 first: the exercise as the course means it.
 """
 
 from __future__ import annotations
@@ -19,8 +20,9 @@ from so101.robot import ACTUATED_JOINTS, HOME_POSE_DEG
 from so101.servo import DEFAULT_NATURAL_FREQ_RAD_S, SERVO_TORQUE_LIMIT_NM
 from so101.step_response import SETTLING_BAND, StepMetrics, step_metrics
 
-DEFAULT_DAMPING = {"servo": (0.1, 0.2, 0.7), "position": (0.0, 0.2)}
-DAMPING_LABEL = {"servo": "ζ", "position": "link damping"}
+# Keyed by what is stepped: PyBullet's two control modes, or the MuJoCo body.
+DEFAULT_DAMPING = {"servo": (0.1, 0.2, 0.7), "position": (0.0, 0.2), "mujoco": (0.6, 0.3, 0.0)}
+DAMPING_LABEL = {"servo": "ζ", "position": "link damping", "mujoco": "joint damping"}
 MAX_DURATION_S = 60.0
 MISSED_TARGET_DEG = 2.0
 
@@ -61,16 +63,21 @@ def _duration(text: str) -> float:
 
 
 def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
+    parser.add_argument(
+        "--body", choices=("pybullet", "mujoco"), default="pybullet",
+        help="pybullet (default; --mode applies) or mujoco: the MJCF's servos, damping = joint damping in N·m·s/rad",
+    )
     parser.add_argument("--joint", type=_joint, default=0, help="joint to step: 0-4 arm, 5 gripper (default 0, as in exercise 2)")
     parser.add_argument("--target", type=float, default=90.0, metavar="DEG", help="target angle in degrees (default 90)")
     parser.add_argument(
         "--mode", choices=("position", "servo"), default="servo",
-        help="servo (default): PD torque servo, damping = ζ; position: the course's POSITION_CONTROL, "
-        "damping = the course's link damping",
+        help="PyBullet only. servo (default): PD torque servo, damping = ζ; position: the course's "
+        "POSITION_CONTROL, damping = the course's link damping",
     )
     parser.add_argument(
         "--damping", type=_non_negative, nargs="+", metavar="VALUE", default=None,
-        help="one line per value (default: ζ = 0.1 0.2 0.7 in servo mode; link damping 0 0.2 in position mode)",
+        help="one line per value (default: ζ = 0.1 0.2 0.7 in servo mode; link damping 0 0.2 in position mode; "
+        "joint damping 0.6 0.3 0 N·m·s/rad in MuJoCo)",
     )
     parser.add_argument("--duration", type=_duration, default=1.5, help="simulated seconds after the step (default 1.5)")
     parser.add_argument(
@@ -78,12 +85,23 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
     )
 
 
-def record_step(joint: int, target_deg: float, mode: str, damping: float, duration_s: float) -> StepRun:
-    """Start at home, set one joint's goal to target_deg, record its angle every 4 ms step."""
+def _simulator(kind: str, damping: float):
+    if kind == "mujoco":
+        from so101.mujoco_sim import SO101MuJoCo
+
+        return SO101MuJoCo(mode="direct", time_step_s=TICK_PERIOD_S, joint_damping_n_m_s=damping, renders=False,
+                           log=lambda message: None)
     from so101.simulator import SO101Sim
 
-    options = {"servo_damping_ratio": damping} if mode == "servo" else {"link_damping": damping}
-    with SO101Sim(mode="direct", time_step_s=TICK_PERIOD_S, control_mode=mode, log=lambda message: None, **options) as sim:
+    options = {"servo_damping_ratio": damping} if kind == "servo" else {"link_damping": damping}
+    return SO101Sim(mode="direct", time_step_s=TICK_PERIOD_S, control_mode=kind, log=lambda message: None, **options)
+
+
+def record_step(joint: int, target_deg: float, kind: str, damping: float, duration_s: float) -> StepRun:
+    """Start at home, set one joint's goal to target_deg, record its angle every 4 ms step.
+
+    kind: "position" or "servo" (PyBullet's control modes) or "mujoco"."""
+    with _simulator(kind, damping) as sim:
         start_deg = float(sim.joint_angles_deg()[joint])
         goal_deg = list(HOME_POSE_DEG)
         goal_deg[joint] = target_deg
@@ -97,7 +115,8 @@ def record_step(joint: int, target_deg: float, mode: str, damping: float, durati
             sim.step()
             times_s[i] = sim.sim_time_s
             angles_deg[i] = sim.joint_angles_deg()[joint]
-            max_torque = max(max_torque, float(np.abs(sim.last_torques_nm).max()))
+            if kind == "servo":
+                max_torque = max(max_torque, float(np.abs(sim.last_torques_nm).max()))
     return StepRun(damping, times_s, angles_deg, max_torque, step_metrics(times_s, angles_deg, start_deg, target_deg))
 
 
@@ -118,6 +137,8 @@ def format_table(runs: list[StepRun], mode: str) -> str:
 
 
 def _mode_description(mode: str) -> str:
+    if mode == "mujoco":
+        return "MuJoCo: the MJCF's position servos, kp 17.8 N·m/rad, ±3.35 N·m; damping in N·m·s/rad"
     if mode == "servo":
         return (
             f"servo mode: PD torque, ωn = {DEFAULT_NATURAL_FREQ_RAD_S:g} rad/s, "
@@ -143,7 +164,7 @@ def write_plot(runs: list[StepRun], joint: int, start_deg: float, target_deg: fl
         axes.plot(
             run.times_s, run.angles_deg, linewidth=1.8, linestyle=line_styles[number % len(line_styles)],
             label=f"{DAMPING_LABEL[mode]} = {run.damping:g}: overshoot {m.overshoot_percent:.1f}%, "
-            f"settles in {_settling_text(m.settling_time_s)}",
+            + ("does not settle in this run" if m.settling_time_s is None else f"settles in {m.settling_time_s:.2f} s"),
         )
     joint_info = ACTUATED_JOINTS[joint]
     axes.set_title(
@@ -173,17 +194,26 @@ def run(args: argparse.Namespace) -> int:
     if args.target == start_deg:
         print(f"so101 plot-step: --target must differ from the start angle {start_deg:g}° to make a step", file=sys.stderr)
         return 2
-    damping_values = args.damping if args.damping is not None else DEFAULT_DAMPING[args.mode]
-    runs = [record_step(args.joint, args.target, args.mode, value, args.duration) for value in damping_values]
-    write_plot(runs, args.joint, start_deg, args.target, args.mode, args.out)
+    kind = "mujoco" if args.body == "mujoco" else args.mode
+    damping_values = args.damping if args.damping is not None else DEFAULT_DAMPING[kind]
+    runs = [record_step(args.joint, args.target, kind, value, args.duration) for value in damping_values]
+    write_plot(runs, args.joint, start_deg, args.target, kind, args.out)
     print(
         f"step response: joint {args.joint} ({joint.name}) {start_deg:g}° -> {args.target:g}°, "
-        f"{_mode_description(args.mode)}, {TICK_PERIOD_S * 1000:g} ms steps, {args.duration:g} s"
+        f"{_mode_description(kind)}, {TICK_PERIOD_S * 1000:g} ms steps, {args.duration:g} s"
     )
-    print(format_table(runs, args.mode))
-    if args.mode == "servo":
+    print(format_table(runs, kind))
+    if kind == "servo":
         print(f"largest torque sent: {max(run.max_abs_torque_nm for run in runs):.2f} N·m")
-    if any(abs(run.metrics.final_error_deg) > MISSED_TARGET_DEG for run in runs):
+    far = [run for run in runs if abs(run.metrics.final_error_deg) > MISSED_TARGET_DEG]
+    # In the last 0.1 s a swinging joint still moves; one held by the ground or itself does not.
+    swinging = [run for run in far if np.ptp(run.angles_deg[-round(0.1 / TICK_PERIOD_S):]) > 0.5]
+    if swinging:
+        print(
+            f"note: with {DAMPING_LABEL[kind]} {', '.join(f'{run.damping:g}' for run in swinging)} the joint is still "
+            "swinging at the end; a longer --duration shows where it settles"
+        )
+    if len(far) > len(swinging):
         print(
             "note: the joint ended more than 2° from the target; "
             "the arm is probably touching the ground or itself on the way"

@@ -61,3 +61,17 @@ def test_a_target_outside_the_joint_range_is_refused(tmp_path, capsys):
     assert capsys.readouterr().err == (
         "so101 plot-step: --target 300° is outside joint 0 (shoulder_pan)'s range [-110.0°, 110.0°]\n"
     )
+
+
+def test_mujoco_plot_shows_the_courses_exercise_joint_damping_stops_the_swing(tmp_path):
+    out = tmp_path / "mujoco.png"
+    result = run_plot_step("--body", "mujoco", "--out", str(out))
+    assert result.returncode == 0, result.stderr
+    assert "MuJoCo: the MJCF's position servos" in result.stdout
+    rows = table(result.stdout)
+    assert set(rows) == {0.6, 0.3, 0.0}  # the MJCF's damping first, then less, then none
+    assert float(rows[0.0]["overshoot"]) > float(rows[0.3]["overshoot"]) > float(rows[0.6]["overshoot"])
+    assert rows[0.6]["settling"] != "never" and abs(float(rows[0.6]["error"])) < 1.0
+    assert rows[0.0]["settling"] == "never"  # it swings past the end of the run
+    assert "with joint damping 0 the joint is still swinging at the end" in result.stdout
+    assert png_size(out) == (800, 480)
