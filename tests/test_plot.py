@@ -74,4 +74,4 @@ def test_mujoco_plot_shows_the_courses_exercise_joint_damping_stops_the_swing(tm
     assert rows[0.6]["settling"] != "never" and abs(float(rows[0.6]["error"])) < 1.0
     assert rows[0.0]["settling"] == "never"  # it swings past the end of the run
     assert "with joint damping 0 the joint is still swinging at the end" in result.stdout
-    assert png_size(out) == (800, 480)
+    assert png_size(out.read_bytes()) == (800, 480)
