@@ -96,9 +96,13 @@ def unused_display() -> str:
     return f":{number}"
 
 
-def write_test_dataflow(tmp_path: Path, sim_env: dict[str, str] | None = None, record_file: Path | None = None) -> Path:
-    """dataflow.yml with absolute node paths, the simulation forced headless, and optionally a recorder node."""
-    descriptor = dataflow_copy({"SO101_MODE": "direct", **(sim_env or {})})
+def write_test_dataflow(tmp_path: Path, sim_env: dict[str, str] | None = None, record_file: Path | None = None,
+                        body: str = "pybullet") -> Path:
+    """A body's dataflow file (dataflow.yml by default) with absolute node paths, the simulation
+    forced headless, and optionally a recorder node."""
+    from so101.bodies import BODIES
+
+    descriptor = dataflow_copy({"SO101_MODE": "direct", **(sim_env or {})}, BODIES[body].dataflow_file)
     if record_file is not None:
         descriptor["nodes"].append(
             {

@@ -1,4 +1,4 @@
-"""End to end: the real dataflow.yml under `dora run`, headless, commands typed into the prompt node."""
+"""End to end, for every body: its real dataflow file under `dora run`, headless, commands typed into the prompt node."""
 
 from __future__ import annotations
 
@@ -8,26 +8,37 @@ import time
 
 import pytest
 
+from so101.bodies import BODIES
 from tests.dataflow_helpers import PROMPT_COMMAND, DoraRun, prompt_env, write_test_dataflow
 
 pytestmark = pytest.mark.dataflow
 
 SETTLE_S = 1.5  # 90° at the course's 3 rad/s takes 0.52 s; the rest is margin
-
-# (command, expected arm angles in degrees once it has settled)
-SCRIPT = [
-    ("0 90", [90, 0, 0, 0, 0]),
-    ("batch -30 45 -60 30 0", [-30, 45, -60, 30, 0]),
-    ("save a", [-30, 45, -60, 30, 0]),
-    ("home", [0, 0, 0, 0, 0]),
-    ("go a", [-30, 45, -60, 30, 0]),
-]
+BATCH = [-30.0, 45.0, -60.0, 30.0, 0.0]
+# The commands, in order; `go a` goes to wherever `save a` found the arm.
+SCRIPT = ["0 90", "batch -30 45 -60 30 0", "save a", "home", "go a"]
+# MuJoCo's MJCF servos (kp 17.8 N·m/rad) give under gravity: shoulder_lift settles about
+# 2.5° off the course's batch. PyBullet's course motors hold within 0.1°.
+GRAVITY_SAG_BOUND_DEG = {"pybullet": 1.0, "mujoco": 3.0}
 
 
-def test_typed_commands_reach_their_targets(tmp_path):
+def settled_in_process(body: str, targets_deg: list[float]) -> list[float]:
+    """Where the body itself, with no dataflow, holds the arm for these arm targets (gripper at 0)."""
+    if body == "mujoco":
+        from so101.mujoco_sim import SO101MuJoCo as Body
+    else:
+        from so101.simulator import SO101Sim as Body
+    with Body(mode="direct", time_step_s=0.004, log=lambda message: None) as sim:
+        sim.set_targets_deg(list(targets_deg) + [0.0])
+        sim.step(round(SETTLE_S / 0.004))
+        return list(sim.joint_angles_deg()[:5])
+
+
+@pytest.mark.parametrize("body", list(BODIES))
+def test_typed_commands_reach_their_targets(tmp_path, body):
     record_file = tmp_path / "joint_state.json"
     poses_file = tmp_path / "poses.json"
-    dora = DoraRun(write_test_dataflow(tmp_path, record_file=record_file), tmp_path / "dora.log")
+    dora = DoraRun(write_test_dataflow(tmp_path, record_file=record_file, body=body), tmp_path / "dora.log")
     try:
         dora.wait_for("SO-101", timeout_s=60)
         prompt = subprocess.Popen(
@@ -35,7 +46,7 @@ def test_typed_commands_reach_their_targets(tmp_path):
             env=prompt_env(tmp_path), cwd=tmp_path,
         )
         sent_at = []
-        for command, _ in SCRIPT:
+        for command in SCRIPT:
             time.sleep(SETTLE_S if sent_at else 1.0)
             sent_at.append(time.monotonic())
             prompt.stdin.write(command + "\n")
@@ -50,16 +61,22 @@ def test_typed_commands_reach_their_targets(tmp_path):
     assert "Traceback" not in prompt_output, prompt_output
     assert "Traceback" not in dora.log(), dora.log()[-3000:]
 
+    # `save a` stored the state it had reached, from joint_state.
+    saved = json.loads(poses_file.read_text())
+    assert list(saved) == ["a"]
+    saved_deg = saved["a"]["joints_deg"]
+    targets = {"0 90": [90.0, 0, 0, 0, 0], "batch -30 45 -60 30 0": BATCH, "save a": BATCH, "home": [0.0] * 5,
+               "go a": saved_deg}
+
     samples = json.loads(record_file.read_text())["samples"]
     windows = list(zip(sent_at, sent_at[1:] + [end]))
-    for (command, expected), (start, stop) in zip(SCRIPT, windows):
+    for command, (start, stop) in zip(SCRIPT, windows):
         in_window = [state for t, state in samples if start < t < stop]
         assert in_window, f"no joint_state between sending {command!r} and the next command"
         reached = in_window[-1]
-        for angle, target in zip(reached, expected):
-            assert abs(angle - target) <= 1.0, f"after {command!r}: {reached} is not within 1° of {expected}"
-
-    # `save a` stored the state it had reached, from joint_state: the batch's angles within 1°.
-    saved = json.loads(poses_file.read_text())
-    assert list(saved) == ["a"]
-    assert saved["a"]["joints_deg"] == pytest.approx([-30, 45, -60, 30, 0], abs=1.0)
+        # The node adds nothing to the physics: the arm holds where the body holds it by itself ...
+        expected = settled_in_process(body, targets[command])
+        assert reached == pytest.approx(expected, abs=1.0), f"{body}, after {command!r}: {reached}, the body alone {expected}"
+        # ... and that is the target, but for what gravity takes off a soft servo.
+        assert reached == pytest.approx(targets[command], abs=GRAVITY_SAG_BOUND_DEG[body]), f"{body}, after {command!r}"
+    assert saved_deg == pytest.approx(BATCH, abs=GRAVITY_SAG_BOUND_DEG[body])
