@@ -17,12 +17,11 @@ class Body:
     name: str
     node_file: Path  # the `simulation` node's path in the dataflow
     dataflow_file: Path
-    has_window: bool  # whether SO101_MODE gui opens one
 
 
 BODIES = {
     # The course's choice, and the default.
-    "pybullet": Body("pybullet", ROOT / "nodes" / "simulation_node.py", ROOT / "dataflow.yml", has_window=True),
-    "mujoco": Body("mujoco", ROOT / "nodes" / "simulation_mujoco.py", ROOT / "dataflow_mujoco.yml", has_window=False),
+    "pybullet": Body("pybullet", ROOT / "nodes" / "simulation_node.py", ROOT / "dataflow.yml"),
+    "mujoco": Body("mujoco", ROOT / "nodes" / "simulation_mujoco.py", ROOT / "dataflow_mujoco.yml"),
 }
 DEFAULT_BODY = "pybullet"

@@ -20,6 +20,7 @@ from so101 import assets
 from so101.camera import DEFAULT_CAMERA, Camera
 from so101.display import DisplayError, display_available, resolve_mode
 from so101.robot import ACTUATED_JOINTS, HOME_POSE_DEG
+from so101.viewer import WINDOW_SHOWING, Window
 
 # Offscreen drawing without a display needs an OpenGL back end: EGL, with Mesa's
 # software renderer where there is no GPU. MuJoCo reads this when it is imported.
@@ -30,6 +31,16 @@ import mujoco  # noqa: E402
 
 # The Debian packages EGL drawing needs (the README names them, .ci/run installs them).
 EGL_PACKAGES = "libegl1 libegl-mesa0 libgl1-mesa-dri"
+
+
+def scene_model(mjcf: Path) -> "mujoco.MjModel":
+    """The MJCF's arm with what PyBullet's scene has too: a ground plane at z = 0 and a light."""
+    spec = mujoco.MjSpec.from_file(str(mjcf))
+    spec.worldbody.add_geom(
+        name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 0.05], rgba=[0.85, 0.87, 0.92, 1],
+    )
+    spec.worldbody.add_light(pos=[0.3, -0.3, 1.5], dir=[-0.2, 0.2, -1], type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL)
+    return spec.compile()
 
 
 class SO101MuJoCo:
@@ -55,18 +66,7 @@ class SO101MuJoCo:
         self.mode, notice = resolve_mode(mode)
         if notice:
             log(notice)
-        # No MuJoCo window is built yet (README): auto runs headless, gui says so.
-        if mode == "auto" and self.mode == "gui":
-            self.mode = "direct"
-            log("the MuJoCo body has no window yet: running headless in DIRECT mode")
-        if self.mode == "gui":
-            raise DisplayError("the MuJoCo body has no window yet: use mode direct or auto")
-        spec = mujoco.MjSpec.from_file(str(mjcf))
-        spec.worldbody.add_geom(
-            name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 0.05], rgba=[0.85, 0.87, 0.92, 1],
-        )
-        spec.worldbody.add_light(pos=[0.3, -0.3, 1.5], dir=[-0.2, 0.2, -1], type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL)
-        self.model = spec.compile()
+        self.model = scene_model(mjcf)
         self.data = mujoco.MjData(self.model)
         self.model_step_s = float(self.model.opt.timestep)
         self.joint_names = [self.model.joint(i).name for i in range(self.model.njnt)]
@@ -78,6 +78,10 @@ class SO101MuJoCo:
         self.renders = renders
         self._renderer = None
         self.steps = 0
+        # GUI mode: MuJoCo's viewer in a process of its own, mirroring the angles (so101/mujoco_viewer.py).
+        self._window = None
+        if self.mode == "gui":
+            self._window = Window(["so101.mujoco_viewer", "--mjcf", str(mjcf)], on_showing=lambda: log(WINDOW_SHOWING))
         self.set_time_step_s(time_step_s)
         self.set_targets_deg(HOME_POSE_DEG)
         mujoco.mj_forward(self.model, self.data)
@@ -108,6 +112,8 @@ class SO101MuJoCo:
         """Advance the physics by `count` periods of `time_step_s`."""
         mujoco.mj_step(self.model, self.data, nstep=count * self.substeps)
         self.steps += count
+        if self._window is not None and self._window.due():
+            self._window.show(self.data.qpos[self._qpos])
 
     # -- state -----------------------------------------------------------------------
     def joint_angles_deg(self) -> np.ndarray:
@@ -155,7 +161,10 @@ class SO101MuJoCo:
             self._renderer = None
 
     def close(self) -> None:
-        """Let go of the renderer; safe to call twice."""
+        """Close the window and let go of the renderer; safe to call twice."""
+        if self._window is not None:
+            self._window.close()
+            self._window = None
         self._close_renderer()
 
     def __enter__(self) -> "SO101MuJoCo":

@@ -146,7 +146,7 @@ class SO101Sim:
             useFixedBase=True, physicsClientId=cid,
         )
         if self.mode == "gui":
-            self._window = Window(urdf, on_showing=lambda: log(WINDOW_SHOWING))
+            self._window = Window(["so101.viewer", "--urdf", str(urdf)], on_showing=lambda: log(WINDOW_SHOWING))
         self.joints = [self._joint_info(i) for i in range(p.getNumJoints(self.robot_id, physicsClientId=cid))]
         self._indices = [joint.index for joint in ACTUATED_JOINTS]
         if link_damping is not None:

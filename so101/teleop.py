@@ -171,16 +171,11 @@ def _alive(pid: int) -> bool:
 def run(args: argparse.Namespace) -> int:
     text = TEXT[args.lang]
     body = BODIES[args.body]
-    if args.mode == "gui" and not body.has_window:
-        print(f"so101 teleop: the {body.name} body has no window yet: use --mode direct or auto", file=sys.stderr)
-        return 2
     try:
         resolved_mode, notice = resolve_mode(args.mode)  # a GUI without a display fails here, in one line
     except ValueError as error:  # a bad $SO101_MODE: argparse does not check defaults against choices
         print(f"so101 teleop: {error} (from --mode or $SO101_MODE)", file=sys.stderr)
         return 2
-    if resolved_mode == "gui" and not body.has_window:
-        resolved_mode, notice = "direct", f"the {body.name} body has no window yet: running headless in DIRECT mode"
     if notice:
         print(notice, flush=True)
     dataflow_file = body.dataflow_file

@@ -56,16 +56,21 @@ class WindowClosed(RuntimeError):
     """The window's process ended: closed by the person, or it could not open."""
 
 
-def _shared_array(path: Path) -> tuple[mmap.mmap, np.ndarray]:
+def shared_array(path: Path) -> tuple[mmap.mmap, np.ndarray]:
     with open(path, "r+b") as handle:
         mapping = mmap.mmap(handle.fileno(), SLOTS * 8)
     return mapping, np.ndarray((SLOTS,), dtype=np.float64, buffer=mapping)
 
 
 class Window:
-    """The physics side: starts the viewer process and hands it the angles, at most `fps` times a second."""
+    """The physics side: starts a viewer process and hands it the angles, at most `fps` times a second.
 
-    def __init__(self, urdf: Path, fps: float = DEFAULT_FPS, on_showing=lambda: None):
+    `viewer` is the viewer's module with its model options: this file's PyBullet window
+    (`["so101.viewer", "--urdf", URDF]`) or MuJoCo's (`["so101.mujoco_viewer", "--mjcf", MJCF]`);
+    both take `--shared FILE --fps N` and keep to this file's shared slots.
+    """
+
+    def __init__(self, viewer: list[str], fps: float = DEFAULT_FPS, on_showing=lambda: None):
         """`on_showing` is called once, from show(), when the window first shows the arm."""
         self.frame_period_s = 1.0 / fps
         self.showing = False
@@ -74,11 +79,11 @@ class Window:
         with os.fdopen(handle, "wb") as shared:
             shared.write(bytes(SLOTS * 8))
         self._path = Path(name)
-        self._mapping, self._shared = _shared_array(self._path)
+        self._mapping, self._shared = shared_array(self._path)
         self._next_frame_s = 0.0
         self.process = subprocess.Popen(
-            [sys.executable, "-m", "so101.viewer", "--shared", str(self._path), "--urdf", str(urdf), "--fps", f"{fps:g}"],
-            # PyBullet's GUI chatters on stdout (GL versions, threads); its errors, such as
+            [sys.executable, "-m", *viewer, "--shared", str(self._path), "--fps", f"{fps:g}"],
+            # The GUIs chatter on stdout (GL versions, threads); their errors, such as
             # "X connection ... broken", stay on stderr, in the node's log.
             stdout=subprocess.DEVNULL,
             env=dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(Path(__file__).resolve().parents[1]),
@@ -122,7 +127,7 @@ class Window:
         self._path.unlink(missing_ok=True)
 
 
-def _lowest_priority() -> None:
+def lowest_priority() -> None:
     """The window runs only on CPU time nothing else wants: PyBullet's GUI keeps a thread
     spinning (its MotionThreadFunc polls with usleep(0)) and draws in software where there
     is no GPU. On Linux it keeps to one CPU, leaving the others whole to the physics and
@@ -151,9 +156,9 @@ def run_viewer(shared_path: Path, urdf: Path, fps: float) -> int:
 
     # Ctrl-C in a terminal reaches the whole process group: the physics closes this window.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    _lowest_priority()
+    lowest_priority()
     parent = os.getppid()
-    mapping, shared = _shared_array(shared_path)
+    mapping, shared = shared_array(shared_path)
     frame_period_s = 1.0 / fps
     # GUI_MAIN_THREAD: the window draws and reads the mouse only inside this process's
     # PyBullet calls, so it draws when there is something new, not continuously.

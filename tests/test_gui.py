@@ -1,9 +1,10 @@
 """The real GUI: the simulation node in GUI mode under `dora run`, on an Xvfb display.
 
 Screenshots (ImageMagick `import`) before and after a joint_cmd show that the arm
-is drawn and that it moved. The arm is the only yellow thing in the scene (its
-3D-printed parts, rgba 1.0 0.82 0.12 in the URDF); the floor is a blue-white
-checker and the sky lavender, so yellow pixels are the arm.
+is drawn and that it moved, in PyBullet's window and in MuJoCo's. The arm is the only
+yellow thing in the scene (its 3D-printed parts, rgba 1.0 0.82 0.12 in the URDF and the
+MJCF); PyBullet's floor is a blue-white checker and its sky lavender, MuJoCo's floor
+grey-blue, so yellow pixels are the arm.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from so101.bodies import BODIES
 from so101.dataflow import dataflow_copy, write_dataflow
 from so101.display import DisplayError, virtual_display
 from tests.dataflow_helpers import ROOT, DoraRun
@@ -60,10 +62,10 @@ def overlap(mask_a: np.ndarray, mask_b: np.ndarray) -> float:
     return (mask_a & mask_b).sum() / max(1, (mask_a | mask_b).sum())
 
 
-def gui_dataflow(tmp_path, trigger_file):
-    """dataflow.yml with the simulation in GUI mode and the test's sender in the prompt's place
-    (same id and output, so the simulation's joint_cmd input stays as dataflow.yml has it)."""
-    descriptor = dataflow_copy({"SO101_MODE": "gui", "SO101_LANG": "en"})
+def gui_dataflow(tmp_path, trigger_file, body="pybullet"):
+    """A body's dataflow file with the simulation in GUI mode and the test's sender in the prompt's place
+    (same id and output, so the simulation's joint_cmd input stays as the file has it)."""
+    descriptor = dataflow_copy({"SO101_MODE": "gui", "SO101_LANG": "en"}, BODIES[body].dataflow_file)
     for node in descriptor["nodes"]:
         if node["id"] == "keyboard_control":
             node["path"] = str(SENDER)
@@ -88,12 +90,13 @@ def settled_arm(display, path, accept, timeout_s=60):
         previous = mask
 
 
-def test_arm_is_drawn_and_moves_in_the_gui_window(tmp_path, xvfb_display):
+@pytest.mark.parametrize("body", list(BODIES))
+def test_arm_is_drawn_and_moves_in_the_gui_window(tmp_path, xvfb_display, body):
     empty = arm_pixels(screenshot(xvfb_display, tmp_path / "empty.png"))
     assert empty.sum() == 0  # the bare X screen has nothing yellow: a yellow pixel later is the arm
 
     trigger = tmp_path / "send-now"
-    dora = DoraRun(gui_dataflow(tmp_path, trigger), tmp_path / "dora.log", stop_after_s=300, DISPLAY=xvfb_display)
+    dora = DoraRun(gui_dataflow(tmp_path, trigger, body), tmp_path / "dora.log", stop_after_s=300, DISPLAY=xvfb_display)
     try:
         dora.wait_for("SO-101 loaded", timeout_s=120)
         assert "(GUI mode" in dora.log()

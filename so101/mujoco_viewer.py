@@ -1,0 +1,71 @@
+"""MuJoCo's window, in a process of its own that mirrors the arm's joint angles.
+
+The same rule as the PyBullet window (so101/viewer.py, whose shared slots and priority
+this uses): the physics runs headless in the node, and this process, at the lowest CPU
+priority, shows the latest angles in MuJoCo's own viewer (`mujoco.viewer`: drag to turn,
+right drag to move, wheel to zoom), never stepping the physics itself.
+
+    python -m so101.mujoco_viewer --shared FILE --mjcf MJCF [--fps N]    (started by `Window`, not by hand)
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import signal
+import sys
+import time
+from pathlib import Path
+
+from so101.robot import ACTUATED_JOINTS
+from so101.viewer import ANGLES, DEFAULT_FPS, FRAME, OPEN, SHOWING, STATUS, lowest_priority, shared_array
+
+
+def run_viewer(shared_path: Path, mjcf: Path, fps: float) -> int:
+    import mujoco
+    import mujoco.viewer
+
+    from so101.mujoco_sim import scene_model
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the process group: the physics closes this
+    lowest_priority()
+    parent = os.getppid()
+    mapping, shared = shared_array(shared_path)
+    model = scene_model(mjcf)
+    data = mujoco.MjData(model)
+    qpos = [int(model.joint(joint.name).qposadr[0]) for joint in ACTUATED_JOINTS]
+    frame_period_s = 1.0 / fps
+    shown_frame = -1.0
+    try:
+        with mujoco.viewer.launch_passive(model, data, show_left_ui=False, show_right_ui=False) as viewer:
+            shared[STATUS] = OPEN
+            viewer.cam.lookat[:] = (0.1, 0.0, 0.15)
+            viewer.cam.distance, viewer.cam.azimuth, viewer.cam.elevation = 0.7, 135.0, -25.0
+            shared[STATUS] = SHOWING
+            # Ends with the physics (its close() terminates this process, or the parent changes) or the window.
+            while viewer.is_running() and os.getppid() == parent:
+                frame = shared[FRAME]
+                if frame != shown_frame:
+                    shown_frame = frame
+                    with viewer.lock():
+                        data.qpos[qpos] = shared[ANGLES:]
+                        mujoco.mj_kinematics(model, data)
+                    viewer.sync()
+                time.sleep(frame_period_s)
+    finally:
+        shared = None
+        mapping.close()
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m so101.mujoco_viewer", description=__doc__.splitlines()[0])
+    parser.add_argument("--shared", type=Path, required=True, help="the file the physics writes the angles to")
+    parser.add_argument("--mjcf", type=Path, required=True, help="the arm's MJCF")
+    parser.add_argument("--fps", type=float, default=DEFAULT_FPS, help=f"frames per second at most (default {DEFAULT_FPS:g})")
+    args = parser.parse_args(argv)
+    return run_viewer(args.shared, args.mjcf, args.fps)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
