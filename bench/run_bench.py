@@ -42,13 +42,16 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))  # run as a script: `nodes` and `so101` live at the top
 
+from so101.bodies import BODIES  # noqa: E402
 from so101.dataflow import TICK_PERIOD_S, dataflow_copy, write_dataflow  # noqa: E402
 from so101.display import DisplayError, display_available, virtual_display  # noqa: E402
 from so101.viewer import WINDOW_SHOWING  # noqa: E402
 from so101.venv import env_with_bin_first, executable  # noqa: E402
 
 PROBER = ROOT / "bench" / "nodes" / "prober.py"
-DEFAULT_OUT = ROOT / "bench" / "results" / "latest.json"
+DEFAULT_OUT = {"pybullet": ROOT / "bench" / "results" / "latest.json", "mujoco": ROOT / "bench" / "results" / "latest-mujoco.json"}
+# The engine's own call for one 4 ms tick, as the table names it.
+RAW_STEP_LABEL = {"pybullet": "raw stepSimulation, DIRECT", "mujoco": "raw mj_step x 2 (one 4 ms tick)"}
 FIRST_STATE_MARK = "bench: first joint_state"
 # A probe moves a joint by 8° (4° in its first move); the first step after it moves
 # the joint by 0.4° to 0.69°, the arm at rest drifts by far less than this.
@@ -243,41 +246,51 @@ def machine_facts() -> dict:
     return {
         "cpu": cpu, "cores": os.cpu_count(), "platform": platform.platform(),
         "python": platform.python_version(), "dora_rs": version("dora-rs"), "dora_rs_cli": version("dora-rs-cli"),
-        "pybullet": version("pybullet"), "pyarrow": version("pyarrow"), "numpy": version("numpy"),
+        "pybullet": version("pybullet"), "mujoco": version("mujoco"), "pyarrow": version("pyarrow"), "numpy": version("numpy"),
         "date": datetime.datetime.now().astimezone().isoformat(timespec="seconds"),
     }
 
 
 # -- in-process measurements ----------------------------------------------------------
-def measure_raw_step(steps: int, after_sleep_steps: int) -> dict:
-    """stepSimulation alone, the SO-101 holding home under its position motors (as in the node).
+def raw_stepper(body: str, sim):
+    """The engine's own call for one 4 ms period of `sim`, with nothing of this project around it."""
+    if body == "mujoco":
+        import mujoco
+
+        model, data, substeps = sim.model, sim.data, sim.substeps
+        return lambda: mujoco.mj_step(model, data, nstep=substeps)
+    import pybullet as p
+
+    client = sim.client
+    return lambda: p.stepSimulation(physicsClientId=client)
+
+
+def measure_raw_step(steps: int, after_sleep_steps: int, body: str = "pybullet") -> dict:
+    """One 4 ms step of the engine alone (PyBullet's stepSimulation, MuJoCo's mj_step), the SO-101
+    holding home under its position motors (as in the node).
 
     Also the same step taken after a 4 ms sleep, as a paced node takes it: on this kind
     of machine (a virtual CPU that idles between ticks) that step costs several times
     more, with no dora involved.
     """
-    import pybullet as p
-
-    from so101.simulator import SO101Sim
-
-    with SO101Sim(mode="direct", time_step_s=TICK_PERIOD_S, log=lambda message: None) as sim:
+    with body_simulator(body) as sim:
         sim.step(250)  # settle: the arm starts a hair off its resting pose
-        client = sim.client
+        step = raw_stepper(body, sim)
         clock = time.monotonic_ns
         each_ns = []
         for _ in range(steps):
             start = clock()
-            p.stepSimulation(physicsClientId=client)
+            step()
             each_ns.append(clock() - start)
         start = clock()
         for _ in range(steps):
-            p.stepSimulation(physicsClientId=client)
+            step()
         loop_us = (clock() - start) / 1e3 / steps
         after_sleep_ns = []
         for _ in range(after_sleep_steps):
             time.sleep(TICK_PERIOD_S)
             start = clock()
-            p.stepSimulation(physicsClientId=client)
+            step()
             after_sleep_ns.append(clock() - start)
     each = summary(each_ns, 1e-3)
     after_sleep = summary(after_sleep_ns, 1e-3)
@@ -286,12 +299,25 @@ def measure_raw_step(steps: int, after_sleep_steps: int) -> dict:
             "after_4ms_sleep_us_p50": after_sleep["p50"], "after_4ms_sleep_us_p99": after_sleep["p99"]}
 
 
-def measure_node_work_in_process(ticks: int, work_dir: Path) -> dict:
-    """nodes/simulation_node.py's main() over `ticks` timer ticks under MockNode, timed by its own tick log."""
+def body_simulator(body: str):
+    """A headless simulator of `body`, stepped by the tick's period."""
+    if body == "mujoco":
+        from so101.mujoco_sim import SO101MuJoCo
+
+        return SO101MuJoCo(mode="direct", time_step_s=TICK_PERIOD_S, renders=False, log=lambda message: None)
+    from so101.simulator import SO101Sim
+
+    return SO101Sim(mode="direct", time_step_s=TICK_PERIOD_S, log=lambda message: None)
+
+
+def measure_node_work_in_process(ticks: int, work_dir: Path, body: str = "pybullet") -> dict:
+    """The body's simulation node's main() over `ticks` timer ticks under MockNode, timed by its own tick log."""
+    import importlib
+
     import pyarrow as pa
     from dora.testing import MockNode
 
-    import nodes.simulation_node as simulation_node
+    simulation_node = importlib.import_module(f"nodes.{BODIES[body].node_file.stem}")
 
     tick_log = work_dir / "in_process_ticks.bin"
     config = {"inputs": {"tick": {"source": f"dora/timer/millis/{TICK_PERIOD_S * 1000:g}", "queue_size": 1}}}
@@ -362,10 +388,10 @@ def measure_memory_stages() -> dict:
 
 
 # -- dora run -------------------------------------------------------------------------
-def bench_dataflow(path: Path, sim_env: dict, probe_env: dict) -> None:
-    """dataflow.yml as it is, with absolute paths, the simulation headless unless sim_env says otherwise,
-    and the prober as keyboard_control."""
-    descriptor = dataflow_copy({"SO101_MODE": "direct", "SO101_LANG": "en", **sim_env})
+def bench_dataflow(path: Path, sim_env: dict, probe_env: dict, body: str = "pybullet") -> None:
+    """The body's dataflow file as it is, with absolute paths, the simulation headless unless sim_env
+    says otherwise, and the prober as keyboard_control."""
+    descriptor = dataflow_copy({"SO101_MODE": "direct", "SO101_LANG": "en", **sim_env}, BODIES[body].dataflow_file)
     for node in descriptor["nodes"]:
         if node["id"] == "keyboard_control":
             node["path"] = str(PROBER)
@@ -398,7 +424,8 @@ def peak_rss_mb(pid: int | None) -> float | None:
     return None
 
 
-def run_dataflow(run_dir: Path, duration_s: float, sim_env: dict, probe_env: dict, display: str | None = None) -> dict:
+def run_dataflow(run_dir: Path, duration_s: float, sim_env: dict, probe_env: dict, display: str | None = None,
+                 body: str = "pybullet") -> dict:
     """`dora run` for duration_s after the first joint_state, then Ctrl-C; the raw records.
 
     With `display` the nodes get that DISPLAY, and the measured time starts once the
@@ -408,7 +435,7 @@ def run_dataflow(run_dir: Path, duration_s: float, sim_env: dict, probe_env: dic
     tick_log = run_dir / "ticks.bin"
     probe_log = run_dir / "probe.json"
     dataflow = run_dir / "dataflow.yml"
-    bench_dataflow(dataflow, {**sim_env, "SO101_TICK_LOG": str(tick_log)}, {**probe_env, "PROBE_LOG": str(probe_log)})
+    bench_dataflow(dataflow, {**sim_env, "SO101_TICK_LOG": str(tick_log)}, {**probe_env, "PROBE_LOG": str(probe_log)}, body)
     env = env_with_bin_first()
     env.pop("DISPLAY", None)
     if display:
@@ -495,7 +522,7 @@ def realtime_figures(record: dict, period_s: float) -> dict:
     }
 
 
-def measure_gui(run_dir: Path, duration_s: float, probe_env: dict) -> dict:
+def measure_gui(run_dir: Path, duration_s: float, probe_env: dict, body: str = "pybullet") -> dict:
     """The paced run again with the window open: on this display, or on a fresh Xvfb server where none
     is reachable (the slow, software-rendered case the window must not hold the physics back in)."""
     try:
@@ -505,7 +532,7 @@ def measure_gui(run_dir: Path, duration_s: float, probe_env: dict) -> dict:
             display = display or stack.enter_context(virtual_display())
             print(f"dora run with the window open ({shown_on}), {duration_s:g} s ...", flush=True)
             record = run_dataflow(run_dir, duration_s + WARMUP_S, {"SO101_FAST_STEPS": "0", "SO101_MODE": "gui"},
-                                  probe_env, display=display)
+                                  probe_env, display=display, body=body)
     except DisplayError as error:
         print(f"  no window measured: {error}", flush=True)
         return {"skipped": str(error)}
@@ -520,26 +547,27 @@ def measure_gui(run_dir: Path, duration_s: float, probe_env: dict) -> dict:
 
 
 # -- the run --------------------------------------------------------------------------
-def run_benchmark(duration_s: float, fast_s: float, fast_steps: list[int], raw_steps: int, node_ticks: int, after_sleep_steps: int) -> dict:
+def run_benchmark(duration_s: float, fast_s: float, fast_steps: list[int], raw_steps: int, node_ticks: int,
+                  after_sleep_steps: int, body: str = "pybullet") -> dict:
     load_start = os.getloadavg()
     with tempfile.TemporaryDirectory(prefix="so101-bench-") as tmp:
         work_dir = Path(tmp)
-        print(f"raw stepSimulation ({raw_steps} steps) ...", flush=True)
-        raw = measure_raw_step(raw_steps, after_sleep_steps)
+        print(f"body: {body}; raw engine step ({raw_steps} steps) ...", flush=True)
+        raw = measure_raw_step(raw_steps, after_sleep_steps, body)
         print(f"node work in process ({node_ticks} ticks) ...", flush=True)
-        node_work = measure_node_work_in_process(node_ticks, work_dir)
+        node_work = measure_node_work_in_process(node_ticks, work_dir, body)
         node_work["ratio_to_raw_p50"] = node_work["p50"] / raw["us_per_step_p50"]
         print(f"dora run, paced by the 4 ms tick, {duration_s:g} s ...", flush=True)
         probe_env = {"PROBE_PERIOD_S": "0.075", "PROBE_STEP_DEG": PROBE_STEP_DEG}
-        paced = run_dataflow(work_dir / "paced", duration_s + WARMUP_S, {"SO101_FAST_STEPS": "0"}, probe_env)
+        paced = run_dataflow(work_dir / "paced", duration_s + WARMUP_S, {"SO101_FAST_STEPS": "0"}, probe_env, body=body)
         figures = {"raw_step": raw, "node_work_in_process": node_work, **realtime_figures(paced, TICK_PERIOD_S)}
-        figures["gui"] = measure_gui(work_dir / "gui", duration_s, probe_env)
+        figures["gui"] = measure_gui(work_dir / "gui", duration_s, probe_env, body)
         runs = []
         for steps in fast_steps:
             print(f"dora run, fast mode SO101_FAST_STEPS={steps}, {fast_s:g} s ...", flush=True)
             record = run_dataflow(
                 work_dir / f"fast{steps}", fast_s + WARMUP_S, {"SO101_FAST_STEPS": str(steps)},
-                {"PROBE_PERIOD_S": "0", "PROBE_COUNT_ONLY": "1"},
+                {"PROBE_PERIOD_S": "0", "PROBE_COUNT_ONLY": "1"}, body=body,
             )
             steady_from_ns = record["probe"]["first_state_ns"] + int(WARMUP_S * 1e9)
             ticks = tick_figures([tick for tick in record["ticks"] if tick[0] >= steady_from_ns], TICK_PERIOD_S)
@@ -550,10 +578,12 @@ def run_benchmark(duration_s: float, fast_s: float, fast_steps: list[int], raw_s
                 "measured_s": ticks["span_s"],
             })
         figures["fast_mode"] = {"runs": runs}
-        print("memory, stage by stage ...", flush=True)
-        figures["memory_stages_mb"] = measure_memory_stages()
+        if body == "pybullet":  # where PyBullet's loading spends memory; MuJoCo's node peaks far lower
+            print("memory, stage by stage ...", flush=True)
+            figures["memory_stages_mb"] = measure_memory_stages()
     figures["targets"] = target_rows(figures)
     return {
+        "body": body,
         "machine": machine_facts(),
         "load_average_1_5_15min": {"start": list(load_start), "end": list(os.getloadavg())},
         "settings": {"tick_ms": TICK_PERIOD_S * 1e3, "duration_s": duration_s, "fast_mode_s": fast_s,
@@ -565,15 +595,16 @@ def run_benchmark(duration_s: float, fast_s: float, fast_steps: list[int], raw_s
 
 def table(result: dict) -> str:
     raw, work, flow, latency = result["raw_step"], result["node_work_in_process"], result["dataflow"], result["command_latency_ms"]
+    body = result.get("body", "pybullet")
     machine = result["machine"]
     lines = [
-        f"SO-101 simulation node benchmark, {machine['date']}",
+        f"SO-101 simulation node benchmark ({body}), {machine['date']}",
         f"{machine['cpu']}, {machine['cores']} cores, Python {machine['python']}, dora-rs {machine['dora_rs']}, "
-        f"pybullet {machine['pybullet']}; load average at start/end "
+        + (f"mujoco {machine.get('mujoco')}" if body == "mujoco" else f"pybullet {machine['pybullet']}") + "; load average at start/end "
         + " / ".join("{:.2f}".format(result['load_average_1_5_15min'][key][0]) for key in ("start", "end")),
         "",
         f"{'figure':<52} {'value':>22}",
-        f"{'raw stepSimulation, DIRECT (us/step, p50 | loop mean)':<52} {raw['us_per_step_p50']:>10.1f} | {raw['us_per_step_loop_mean']:<9.1f}",
+        f"{RAW_STEP_LABEL[body] + ' (us/step, p50 | loop mean)':<52} {raw['us_per_step_p50']:>10.1f} | {raw['us_per_step_loop_mean']:<9.1f}",
         f"{'  the same step after a 4 ms sleep (us, p50 | p99)':<52} {raw['after_4ms_sleep_us_p50']:>10.1f} | {raw['after_4ms_sleep_us_p99']:<9.1f}",
         f"{'node work per tick in process (us, p50 | p99)':<52} {work['p50']:>10.1f} | {work['p99']:<9.1f}",
         f"{'  ratio to the raw step (p50)':<52} {work['ratio_to_raw_p50']:>10.2f}",
@@ -605,12 +636,13 @@ def table(result: dict) -> str:
     for run in result["fast_mode"]["runs"]:
         label = f"fast mode, SO101_FAST_STEPS={run['steps_per_state']} (steps/s, x raw)"
         lines.append(f"{label:<52} {run['steps_per_s']:>10.0f} | {run['ratio_to_raw']:<9.2f}")
-    stages = result["memory_stages_mb"]
-    lines += ["", f"{'memory, peak | current RSS (MB)':<52} " + " ".join(f"{way:>17}" for way in stages)]
-    for stage in next(iter(stages.values())):
-        cells = " ".join(f"{stages[way][stage]['peak']:>8.1f} |{stages[way][stage]['current']:>7.1f}" for way in stages)
-        lines.append(f"{'  ' + stage:<52} {cells}")
-    lines += [f"  {way}: {MEMORY_WAYS[way]}" for way in stages]
+    stages = result.get("memory_stages_mb")
+    if stages:
+        lines += ["", f"{'memory, peak | current RSS (MB)':<52} " + " ".join(f"{way:>17}" for way in stages)]
+        for stage in next(iter(stages.values())):
+            cells = " ".join(f"{stages[way][stage]['peak']:>8.1f} |{stages[way][stage]['current']:>7.1f}" for way in stages)
+            lines.append(f"{'  ' + stage:<52} {cells}")
+        lines += [f"  {way}: {MEMORY_WAYS[way]}" for way in stages]
     lines += ["", "targets:"]
     for row in result["targets"]:
         value = row["value"]
@@ -628,7 +660,10 @@ def parse_args(argv=None) -> argparse.Namespace:
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--duration", type=_positive_seconds, default=20.0,
                         help="seconds of the paced `dora run` measurement, after start-up (default 20)")
-    parser.add_argument("--out", type=Path, default=DEFAULT_OUT, help=f"JSON file to write (default {DEFAULT_OUT.relative_to(ROOT)})")
+    parser.add_argument("--body", choices=list(BODIES), default="pybullet",
+                        help="which simulation node to measure: pybullet (the course's, default) or mujoco")
+    parser.add_argument("--out", type=Path, default=None,
+                        help="JSON file to write (default " + ", ".join(f"{path.relative_to(ROOT)} for {body}" for body, path in DEFAULT_OUT.items()) + ")")
     parser.add_argument("--quick", action="store_true",
                         help="a short smoke run (3 s paced, 2 s per fast-mode run, fewer in-process steps; about 20 s in all); not for the README")
     parser.add_argument("--show", type=Path, metavar="JSON",
@@ -666,16 +701,17 @@ def run(args: argparse.Namespace) -> int:
     else:
         settings = dict(duration_s=args.duration, fast_s=5.0, fast_steps=[1, 10, 100], raw_steps=40000, node_ticks=10000, after_sleep_steps=1000)
     try:
-        result = run_benchmark(**settings)
+        result = run_benchmark(**settings, body=args.body)
     except RuntimeError as error:
         print(f"so101 bench: {error}", file=sys.stderr)
         return 1
     result["settings"]["quick"] = args.quick
     print()
     print(table(result))
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(result, indent=2) + "\n")
-    print(f"\nwrote {args.out}")
+    out = args.out or DEFAULT_OUT[args.body]
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(result, indent=2) + "\n")
+    print(f"\nwrote {out}")
     return 0
 
 

@@ -18,7 +18,7 @@ import sys
 from dora import Node
 
 from so101.assets import ModelFilesError
-from so101.body_node import NodeSettings, cannot_start, log, number_setting, run_body_node
+from so101.body_node import NodeSettings, cannot_start, check_pictures, log, number_setting, run_body_node
 from so101.dataflow import TICK_PERIOD_S
 from so101.display import DisplayError
 from so101.mujoco_sim import SO101MuJoCo
@@ -37,6 +37,7 @@ def main() -> int:
             mode=settings.mode, time_step_s=TICK_PERIOD_S, joint_damping_n_m_s=damping, log=log,
             renders=settings.image_hz > 0,
         )
+        check_pictures(sim, settings)
     except (ModelFilesError, DisplayError, ValueError) as error:
         return cannot_start(error)
     damping_n_m_s = sim.joint_damping_n_m_s()

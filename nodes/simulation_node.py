@@ -21,7 +21,7 @@ import sys
 from dora import Node
 
 from so101.assets import ModelFilesError
-from so101.body_node import NodeSettings, cannot_start, log, number_setting, run_body_node
+from so101.body_node import NodeSettings, cannot_start, check_pictures, log, number_setting, run_body_node
 from so101.dataflow import TICK_PERIOD_S
 from so101.display import DisplayError
 from so101.simulator import SO101Sim, release_freed_memory
@@ -42,6 +42,7 @@ def main() -> int:
             mode=settings.mode, time_step_s=TICK_PERIOD_S, control_mode=control_mode,
             servo_damping_ratio=servo_zeta, log=log, renders=settings.image_hz > 0,
         )
+        check_pictures(sim, settings)
     except (ModelFilesError, DisplayError, ValueError) as error:
         return cannot_start(error)
     # Course step C's `for event in node:` loop, shared with every body.

@@ -106,6 +106,13 @@ class NodeSettings:
         )
 
 
+def check_pictures(body, settings: NodeSettings) -> None:
+    """With the `image` output on, draw one picture before joining: a renderer that cannot
+    work (no OpenGL back end) must stop the node with its one-line reason, not in the loop."""
+    if settings.image_hz > 0:
+        body.render_rgb(*IMAGE_SIZE)
+
+
 # In fast mode a tick is made up whenever no input is waiting.
 FAST_TICK = {"type": "INPUT", "id": "tick", "value": None, "metadata": {}}
 

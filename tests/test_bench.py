@@ -158,15 +158,19 @@ def _positive(value):
 
 
 @pytest.mark.dataflow
-def test_quick_bench_writes_every_figure(tmp_path):
+@pytest.mark.parametrize("body", ["pybullet", "mujoco"])
+def test_quick_bench_writes_every_figure(tmp_path, body):
     out = tmp_path / "bench.json"
     so101 = Path(sys.executable).parent / "so101"
     result = subprocess.run(
-        [str(so101), "bench", "--quick", "--out", str(out)], capture_output=True, text=True, timeout=300, cwd=tmp_path,
+        [str(so101), "bench", "--quick", "--body", body, "--out", str(out)], capture_output=True, text=True, timeout=300,
+        cwd=tmp_path,
     )
     assert result.returncode == 0, result.stderr[-3000:]
     assert f"wrote {out}" in result.stdout
     figures = json.loads(out.read_text())
+    assert figures["body"] == body
+    assert f"SO-101 simulation node benchmark ({body})" in result.stdout
 
     machine = figures["machine"]
     assert machine["cores"] >= 1 and machine["cpu"] and machine["python"].startswith("3.11")
@@ -215,6 +219,10 @@ def test_quick_bench_writes_every_figure(tmp_path):
     # Fewer publications per step can only help: 100 steps per state beat 1.
     assert runs[1]["steps_per_s"] > runs[0]["steps_per_s"]
 
+    if body == "mujoco":
+        assert "memory_stages_mb" not in figures and machine["mujoco"].startswith("4.")
+        assert len(figures["targets"]) == 8 + window_rows
+        return
     stages = figures["memory_stages_mb"]
     assert list(stages) == ["course", "plugins", "node"]
     for way in stages.values():
@@ -233,7 +241,7 @@ def test_show_prints_a_saved_result_and_refuses_what_is_not_one(tmp_path, capsys
     latest = run_bench.ROOT / "bench" / "results" / "latest.json"
     assert run_bench.main(["--show", str(latest)]) == 0
     shown = capsys.readouterr().out
-    assert shown.startswith("SO-101 simulation node benchmark, ")
+    assert shown.startswith("SO-101 simulation node benchmark (pybullet), ")
     assert f"{json.loads(latest.read_text())['dataflow']['joint_state_per_s']:.2f}" in shown
 
     not_json = tmp_path / "notes.txt"

@@ -261,3 +261,18 @@ def test_the_tick_clock_counts_from_the_first_tick_so_timer_jitter_adds_no_steps
     assert owed == [1, 1, 2, 1, 1, 1]
     assert sum(owed) == 24 / 4 + 1  # the timer's own count: one step per period, and the first tick's
     assert TickClock(0.004).steps_due(None) == 1
+
+
+def test_mujoco_without_an_opengl_back_end_says_which_packages_in_one_line(monkeypatch, capsys):
+    import mujoco
+
+    def no_egl(*args, **kwargs):
+        raise RuntimeError("Cannot initialize a EGL device display.")
+
+    monkeypatch.setattr(mujoco, "Renderer", no_egl)
+    code, _ = run_simulation_node(monkeypatch, ticks(1), body="mujoco", SO101_IMAGE_HZ="10")
+    assert code == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1
+    assert "MuJoCo cannot draw offscreen (RuntimeError: Cannot initialize a EGL device display.)" in err
+    assert "apt-get install libegl1 libegl-mesa0 libgl1-mesa-dri" in err
