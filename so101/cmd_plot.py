@@ -215,8 +215,8 @@ def run(args: argparse.Namespace) -> int:
         )
     if len(far) > len(swinging):
         print(
-            "note: the joint ended more than 2° from the target; "
-            "the arm is probably touching the ground or itself on the way"
+            "note: the joint ended more than 2° from the target: gravity holds a soft servo off it, "
+            "or the arm touches the ground or itself"
         )
     print(f"wrote {args.out}")
     return 0

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import re
 
+import pytest
+
 from so101.cli import SUBCOMMANDS
 from tests.dataflow_helpers import ROOT
 
@@ -52,11 +54,13 @@ def test_every_so101_command_in_the_readme_exists():
     assert used <= set(SUBCOMMANDS), used - set(SUBCOMMANDS)
 
 
-def test_the_benchmark_table_in_the_readme_is_the_latest_result():
+@pytest.mark.parametrize("body", ["pybullet", "mujoco"])
+def test_the_benchmark_tables_in_the_readme_are_the_latest_results(body):
     import json
 
     from bench import run_bench
 
-    result = json.loads((ROOT / "bench" / "results" / "latest.json").read_text())
+    latest = run_bench.DEFAULT_OUT[body]
+    result = json.loads(latest.read_text())
     shown = "\n".join(("    " + line).rstrip() for line in run_bench.table(result).splitlines())
-    assert shown in README, "README's benchmark figures differ from bench/results/latest.json (so101 bench --show prints them)"
+    assert shown in README, f"README's benchmark figures differ from {latest.name} (so101 bench --show prints them)"
