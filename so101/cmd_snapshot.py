@@ -34,6 +34,11 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
     from so101.camera import DEFAULT_CAMERA
 
     parser.add_argument(
+        "--body", choices=("pybullet", "mujoco"), default="pybullet",
+        help="which simulator drives the arm to the pose and draws it: pybullet (default, its CPU renderer) "
+        "or mujoco (offscreen through EGL where there is no display)",
+    )
+    parser.add_argument(
         "--pose", type=float, nargs="+", metavar="DEG", default=None,
         help="joint angles in degrees: a0 a1 a2 a3 a4, optionally the gripper as a sixth (default: home, all 0)",
     )
@@ -65,7 +70,7 @@ def pose_error(pose_deg: list[float] | None) -> str | None:
 def run(args: argparse.Namespace) -> int:
     from PIL import Image
 
-    from so101.simulator import DEFAULT_CAMERA, Camera, SO101Sim
+    from so101.camera import DEFAULT_CAMERA, Camera
 
     error = pose_error(args.pose)
     if not args.distance > 0:
@@ -80,7 +85,11 @@ def run(args: argparse.Namespace) -> int:
         target_xyz_m=DEFAULT_CAMERA.target_xyz_m, distance_m=args.distance,
         yaw_deg=args.yaw, pitch_deg=args.pitch, fov_deg=DEFAULT_CAMERA.fov_deg,
     )
-    with SO101Sim(mode="direct", time_step_s=TICK_PERIOD_S, log=lambda message: None) as sim:
+    if args.body == "mujoco":
+        from so101.mujoco_sim import SO101MuJoCo as Body
+    else:
+        from so101.simulator import SO101Sim as Body
+    with Body(mode="direct", time_step_s=TICK_PERIOD_S, log=lambda message: None) as sim:
         sim.set_targets_deg(targets_deg)
         for _ in range(round(SETTLE_BUDGET_S / TICK_PERIOD_S)):
             sim.step()
@@ -103,6 +112,6 @@ def run(args: argparse.Namespace) -> int:
         names = ", ".join(ACTUATED_JOINTS[i].name for i in np.flatnonzero(missed))
         print(
             f"note: {names} did not reach the asked angle within {SETTLE_BUDGET_S:g} s; "
-            "the arm is probably touching the ground or itself in this pose"
+            "gravity holds a soft servo (MuJoCo's) off it, or the arm touches the ground or itself in this pose"
         )
     return 0

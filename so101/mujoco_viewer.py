@@ -10,7 +10,6 @@ right drag to move, wheel to zoom), never stepping the physics itself.
 
 from __future__ import annotations
 
-import argparse
 import os
 import signal
 import sys
@@ -18,7 +17,7 @@ import time
 from pathlib import Path
 
 from so101.robot import ACTUATED_JOINTS
-from so101.viewer import ANGLES, DEFAULT_FPS, FRAME, OPEN, SHOWING, STATUS, lowest_priority, shared_array
+from so101.viewer import ANGLES, FRAME, OPEN, SHOWING, STATUS, lowest_priority, shared_array, viewer_main
 
 
 def run_viewer(shared_path: Path, mjcf: Path, fps: float) -> int:
@@ -59,12 +58,7 @@ def run_viewer(shared_path: Path, mjcf: Path, fps: float) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m so101.mujoco_viewer", description=__doc__.splitlines()[0])
-    parser.add_argument("--shared", type=Path, required=True, help="the file the physics writes the angles to")
-    parser.add_argument("--mjcf", type=Path, required=True, help="the arm's MJCF")
-    parser.add_argument("--fps", type=float, default=DEFAULT_FPS, help=f"frames per second at most (default {DEFAULT_FPS:g})")
-    args = parser.parse_args(argv)
-    return run_viewer(args.shared, args.mjcf, args.fps)
+    return viewer_main(argv, "so101.mujoco_viewer", __doc__.splitlines()[0], "mjcf", run_viewer)
 
 
 if __name__ == "__main__":

@@ -201,13 +201,18 @@ def run_viewer(shared_path: Path, urdf: Path, fps: float) -> int:
     return 0
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m so101.viewer", description=__doc__.splitlines()[0])
+def viewer_main(argv: list[str] | None, module: str, description: str, model_option: str, run) -> int:
+    """The command line of a viewer process: `python -m MODULE --shared FILE --MODEL PATH [--fps N]`."""
+    parser = argparse.ArgumentParser(prog=f"python -m {module}", description=description)
     parser.add_argument("--shared", type=Path, required=True, help="the file the physics writes the angles to")
-    parser.add_argument("--urdf", type=Path, required=True, help="the arm's URDF")
+    parser.add_argument(f"--{model_option}", type=Path, required=True, help="the arm's model file")
     parser.add_argument("--fps", type=float, default=DEFAULT_FPS, help=f"frames per second at most (default {DEFAULT_FPS:g})")
     args = parser.parse_args(argv)
-    return run_viewer(args.shared, args.urdf, args.fps)
+    return run(args.shared, getattr(args, model_option), args.fps)
+
+
+def main(argv: list[str] | None = None) -> int:
+    return viewer_main(argv, "so101.viewer", __doc__.splitlines()[0], "urdf", run_viewer)
 
 
 if __name__ == "__main__":

@@ -72,7 +72,7 @@ def _alive(pid: int) -> bool:
     return state != "Z"
 
 
-def start_teleop(tmp_path: Path, lang: str, mode: str = "direct", **env: str) -> tuple[Terminal, Path, Path]:
+def start_teleop(tmp_path: Path, lang: str, mode: str = "direct", body: str = "pybullet", **env: str) -> tuple[Terminal, Path, Path]:
     """`so101 teleop` (headless by default) in a new terminal; returns it, the poses file and the dataflow's log."""
     poses_file = tmp_path / "poses.json"
     log_file = tmp_path / "dora.log"
@@ -80,7 +80,7 @@ def start_teleop(tmp_path: Path, lang: str, mode: str = "direct", **env: str) ->
         "SO101_POSES_FILE": str(poses_file), "SO101_HISTORY_FILE": str(tmp_path / "history"),
         "SO101_PROMPT_LOG": str(tmp_path / "prompt.log"), "SO101_LANG": lang, "PATH": os.environ["PATH"], **env,
     }
-    return Terminal(f"{SO101} teleop --mode {mode} --lang {lang} --log {log_file}", env), poses_file, log_file
+    return Terminal(f"{SO101} teleop --body {body} --mode {mode} --lang {lang} --log {log_file}", env), poses_file, log_file
 
 
 def test_a_person_drives_the_arm_from_the_prompt(tmp_path):
@@ -191,3 +191,31 @@ def test_no_dora_log_line_reaches_the_prompt_with_the_window_open(tmp_path):
     # Every line on the screen is the prompt's own: banner, help, commands and their replies.
     prompt_log = (tmp_path / "prompt.log").read_text(errors="replace")
     assert all(line.startswith("{") for line in prompt_log.splitlines()), prompt_log[-2000:]
+
+
+def test_teleop_drives_the_mujoco_body_with_the_same_prompt(tmp_path):
+    terminal, poses_file, log_file = start_teleop(tmp_path, "en", body="mujoco")
+    try:
+        end = terminal.wait_for(r"^=+\n>$", timeout_s=120).start()
+        terminal.type_line("0 60")
+        end = terminal.wait_for(r"^> 0 60\n  → joint 0 \(shoulder_pan\) → 60°$", timeout_s=20, after=end).end()
+        for _ in range(30):  # shoulder_pan carries no weight: MuJoCo's servo holds it within 1°
+            time.sleep(0.5)
+            terminal.type_line("state")
+            reached = terminal.wait_for(r"^> state\n  joint angles now: \[([-\d.]+),.*$", timeout_s=20, after=end)
+            end = reached.end()
+            if abs(float(reached.group(1)) - 60.0) <= 1.0:
+                break
+        assert abs(float(reached.group(1)) - 60.0) <= 1.0, terminal.screen()
+        terminal.type_line("save m")
+        end = terminal.wait_for(r"^  → pose 'm' saved: \[.*$", timeout_s=20, after=end).end()
+        terminal.type_line("quit")
+        terminal.wait_for(r"^TELEOP_EXIT=0$", timeout_s=60, after=end)
+        screen = terminal.screen()
+    finally:
+        terminal.close()
+    assert "Traceback" not in screen, screen
+    assert "MuJoCo so101_new_calib.xml" in log_file.read_text()  # the MuJoCo node ran, not PyBullet's
+    assert list(json.loads(poses_file.read_text())) == ["m"]
+    spawned = [int(pid) for pid in re.findall(r"spawned node with pid (\d+)", log_file.read_text())]
+    assert spawned and [pid for pid in spawned if _alive(pid)] == []

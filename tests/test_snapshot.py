@@ -103,3 +103,14 @@ def test_an_output_path_that_cannot_be_written_gives_one_line_and_exit_1(tmp_pat
     (tmp_path / "taken").write_text("a file where a folder is asked for")
     assert main(["snapshot", "--out", str(tmp_path / "taken" / "arm.png"), "--width", "32", "--height", "32"]) == 1
     assert capsys.readouterr().err == f"so101 snapshot: cannot use {tmp_path / 'taken'}: File exists\n"
+
+
+def test_mujoco_draws_the_pose_offscreen(tmp_path, capsys):
+    from tests.image_helpers import arm_pixels, png_rgb
+
+    out = tmp_path / "mujoco.png"
+    assert main(["snapshot", "--body", "mujoco", "--pose", "90", "0", "0", "0", "0", "--out", str(out),
+                 "--width", "160", "--height", "120"]) == 0
+    reply = capsys.readouterr().out
+    assert reply.startswith(f"wrote {out} (160x120), pose reached (deg, joints 0-4 and gripper): 90.0 ")
+    assert arm_pixels(png_rgb(out.read_bytes())).sum() > 0.02 * 160 * 120  # the yellow arm is in the picture
