@@ -22,6 +22,7 @@ from pathlib import Path
 import pytest
 
 from bench.run_bench import processes_with_env
+from so101.bodies import BODIES
 from tests.dataflow_helpers import PROMPT_COMMAND, DoraRun, dora_env, prompt_env, write_test_dataflow
 
 pytestmark = pytest.mark.dataflow
@@ -55,14 +56,16 @@ def wait_until_gone(marker: str, timeout_s: float = 15) -> list[int]:
     return processes_with_marker(marker)
 
 
-def test_killed_simulation_stops_the_dataflow_with_a_clear_report(tmp_path):
+@pytest.mark.parametrize("body", list(BODIES))
+def test_killed_simulation_stops_the_dataflow_with_a_clear_report(tmp_path, body):
     marker = uuid.uuid4().hex
     record_file = tmp_path / "joint_state.json"
-    dataflow = write_test_dataflow(tmp_path, sim_env={"SO101_LANG": "en"}, record_file=record_file)
+    dataflow = write_test_dataflow(tmp_path, sim_env={"SO101_LANG": "en"}, record_file=record_file, body=body)
     dora = DoraRun(dataflow, tmp_path / "dora.log", stop_after_s=120, SO101_TEST_RUN=marker)
     try:
         dora.wait_for("SO-101 loaded", timeout_s=60)
-        simulation = [pid for pid in processes_with_marker(marker) if "simulation_node.py" in command_line(pid)]
+        node_file = BODIES[body].node_file.name
+        simulation = [pid for pid in processes_with_marker(marker) if node_file in command_line(pid)]
         assert len(simulation) == 1, [command_line(pid) for pid in processes_with_marker(marker)]
         os.kill(simulation[0], signal.SIGKILL)
         # Under the `never` policy `dora run` ends by itself, long before --stop-after.
@@ -83,9 +86,10 @@ def test_killed_simulation_stops_the_dataflow_with_a_clear_report(tmp_path):
     assert left == [], [command_line(pid) for pid in left]
 
 
-def test_killed_prompt_leaves_the_simulation_running_and_a_new_prompt_drives_it(tmp_path):
+@pytest.mark.parametrize("body", list(BODIES))
+def test_killed_prompt_leaves_the_simulation_running_and_a_new_prompt_drives_it(tmp_path, body):
     record_file = tmp_path / "joint_state.json"
-    dataflow = write_test_dataflow(tmp_path, sim_env={"SO101_LANG": "en"}, record_file=record_file)
+    dataflow = write_test_dataflow(tmp_path, sim_env={"SO101_LANG": "en"}, record_file=record_file, body=body)
     dora = DoraRun(dataflow, tmp_path / "dora.log", stop_after_s=120)
     try:
         dora.wait_for("SO-101 loaded", timeout_s=60)
@@ -96,7 +100,7 @@ def test_killed_prompt_leaves_the_simulation_running_and_a_new_prompt_drives_it(
         first.stdin.write("0 45\n")
         first.stdin.flush()  # stdin stays open: the prompt waits for more, as at a keyboard
         dora.wait_for("joint 0 target -> 45°", timeout_s=30)
-        time.sleep(1.0)  # 45° at 3 rad/s takes 0.26 s
+        time.sleep(1.0)  # 45° at 3 rad/s takes 0.26 s in PyBullet; MuJoCo's servo settles in about 0.6 s
         first.kill()
         first.wait(10)
         killed_at = time.monotonic()
@@ -136,9 +140,10 @@ print("burst sent", flush=True)
 """
 
 
-def test_a_burst_of_commands_is_not_dropped(tmp_path):
+@pytest.mark.parametrize("body", list(BODIES))
+def test_a_burst_of_commands_is_not_dropped(tmp_path, body):
     burst = 5000
-    dataflow = write_test_dataflow(tmp_path, sim_env={"SO101_LANG": "en"})
+    dataflow = write_test_dataflow(tmp_path, sim_env={"SO101_LANG": "en"}, body=body)
     dora = DoraRun(dataflow, tmp_path / "dora.log", stop_after_s=120)
     try:
         dora.wait_for("SO-101 loaded", timeout_s=60)

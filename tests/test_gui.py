@@ -35,6 +35,7 @@ COMMAND_DEG = "90 0 0 0 0"
 MIN_ARM_PIXELS = 2000  # the arm covers about 15,000 pixels of the 1024x768 window
 MAX_OVERLAP_AFTER_MOVE = 0.5  # intersection over union of the arm's pixels before and after
 SAME_FRAME_OVERLAP = 0.98  # two screenshots of an arm at rest
+WINDOW_TITLES = {"pybullet": "Bullet Physics", "mujoco": "MuJoCo"}
 
 
 @pytest.fixture
@@ -119,10 +120,11 @@ def test_arm_is_drawn_and_moves_in_the_gui_window(tmp_path, xvfb_display, body):
 
 
 @pytest.mark.skipif(shutil.which("xdotool") is None, reason="xdotool is not installed (package xdotool)")
-def test_killed_gui_window_ends_the_simulation_and_is_not_reopened(tmp_path, xvfb_display):
-    """A window manager's forced close cuts the X connection, and Xlib ends the window's process
-    ("XIO: fatal IO error");
-    the simulation notices within a frame, says so and exits 1.
+@pytest.mark.parametrize("body", list(BODIES))
+def test_killed_gui_window_ends_the_simulation_and_is_not_reopened(tmp_path, xvfb_display, body):
+    """A window manager's forced close cuts the X connection, and the window's process ends
+    (PyBullet's Xlib: "XIO: fatal IO error"); the simulation notices within a frame, says so
+    and exits 1.
 
     Under the `never` restart policy dora reports it and does not start the
     simulation again; a restart policy would reopen the window the person closed.
@@ -130,13 +132,13 @@ def test_killed_gui_window_ends_the_simulation_and_is_not_reopened(tmp_path, xvf
     the prompt is the only other node.)
     """
     display_env = dict(os.environ, DISPLAY=xvfb_display)
-    dora = DoraRun(gui_dataflow(tmp_path, tmp_path / "unused"), tmp_path / "dora.log", stop_after_s=300,
+    dora = DoraRun(gui_dataflow(tmp_path, tmp_path / "unused", body), tmp_path / "dora.log", stop_after_s=300,
                    DISPLAY=xvfb_display)
     try:
         # The window opens in its own process, while the physics already runs.
         dora.wait_for("window open: it shows the arm", timeout_s=120)
         windows = subprocess.run(
-            ["xdotool", "search", "--name", "Bullet Physics"], capture_output=True, text=True,
+            ["xdotool", "search", "--name", WINDOW_TITLES[body]], capture_output=True, text=True,
             env=display_env, timeout=60,
         ).stdout.split()
         assert len(windows) == 1, windows
