@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from so101.bodies import BODIES, DEFAULT_BODY
 from so101.dataflow import TICK_PERIOD_S
 from so101.robot import ACTUATED_JOINTS, HOME_POSE_DEG, NUM_ARM_JOINTS
 
@@ -34,7 +35,7 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
     from so101.camera import DEFAULT_CAMERA
 
     parser.add_argument(
-        "--body", choices=("pybullet", "mujoco"), default="pybullet",
+        "--body", choices=list(BODIES), default=DEFAULT_BODY,
         help="which simulator drives the arm to the pose and draws it: pybullet (default, its CPU renderer) "
         "or mujoco (offscreen through EGL where there is no display)",
     )
@@ -85,11 +86,8 @@ def run(args: argparse.Namespace) -> int:
         target_xyz_m=DEFAULT_CAMERA.target_xyz_m, distance_m=args.distance,
         yaw_deg=args.yaw, pitch_deg=args.pitch, fov_deg=DEFAULT_CAMERA.fov_deg,
     )
-    if args.body == "mujoco":
-        from so101.mujoco_sim import SO101MuJoCo as Body
-    else:
-        from so101.simulator import SO101Sim as Body
-    with Body(mode="direct", time_step_s=TICK_PERIOD_S, log=lambda message: None) as sim:
+    simulator = BODIES[args.body].simulator_class()
+    with simulator(mode="direct", time_step_s=TICK_PERIOD_S, log=lambda message: None) as sim:
         sim.set_targets_deg(targets_deg)
         for _ in range(round(SETTLE_BUDGET_S / TICK_PERIOD_S)):
             sim.step()

@@ -24,11 +24,7 @@ GRAVITY_SAG_BOUND_DEG = {"pybullet": 1.0, "mujoco": 3.0}
 
 def settled_in_process(body: str, targets_deg: list[float]) -> list[float]:
     """Where the body itself, with no dataflow, holds the arm for these arm targets (gripper at 0)."""
-    if body == "mujoco":
-        from so101.mujoco_sim import SO101MuJoCo as Body
-    else:
-        from so101.simulator import SO101Sim as Body
-    with Body(mode="direct", time_step_s=0.004, log=lambda message: None) as sim:
+    with BODIES[body].simulator_class()(mode="direct", time_step_s=0.004, log=lambda message: None) as sim:
         sim.set_targets_deg(list(targets_deg) + [0.0])
         sim.step(round(SETTLE_S / 0.004))
         return list(sim.joint_angles_deg()[:5])

@@ -162,10 +162,7 @@ def test_unknown_control_mode_gives_one_line_and_exit_2(monkeypatch, capsys):
 def test_stop_and_ctrl_c_close_the_body_and_exit_0(monkeypatch, ending, body):
     from dora.testing import MockNode
 
-    from so101.mujoco_sim import SO101MuJoCo
-    from so101.simulator import SO101Sim
-
-    body_class = {"pybullet": SO101Sim, "mujoco": SO101MuJoCo}[body]
+    body_class = BODIES[body].simulator_class()
     closed = []
     close = body_class.close
     # What is closed: PyBullet's client id (it is gone after close), or the MuJoCo body itself.
