@@ -20,6 +20,14 @@ class Camera:
     fov_deg: float = 50.0
 
 
+def check_picture(renders: bool, width: int, height: int) -> None:
+    """What every body refuses before drawing: no renderer (made with renders=False), or no pixels."""
+    if not renders:
+        raise RuntimeError("this simulator was made without its renderer (renders=False): no pictures")
+    if width < 1 or height < 1:
+        raise ValueError(f"image size must be at least 1x1 pixels, got {width}x{height}")
+
+
 # Frames the whole arm from the front-right and a little above, whether it reaches
 # along +x (home) or is panned ±90° toward ∓y.
 DEFAULT_CAMERA = Camera()

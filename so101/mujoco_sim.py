@@ -17,9 +17,9 @@ from typing import Sequence
 import numpy as np
 
 from so101 import assets
-from so101.camera import DEFAULT_CAMERA, Camera
+from so101.camera import DEFAULT_CAMERA, Camera, check_picture
 from so101.display import DisplayError, display_available, resolve_mode
-from so101.robot import ACTUATED_JOINTS, HOME_POSE_DEG
+from so101.robot import ACTUATED_JOINTS, HOME_POSE_DEG, goal_deg
 from so101.viewer import WINDOW_SHOWING, Window
 
 # Offscreen drawing without a display needs an OpenGL back end: EGL, with Mesa's
@@ -89,10 +89,7 @@ class SO101MuJoCo:
     # -- control ---------------------------------------------------------------------
     def set_targets_deg(self, targets_deg: Sequence[float]) -> None:
         """Goal angles in degrees for all six actuated joints (arm 0-4, gripper)."""
-        goal = np.asarray(targets_deg, dtype=float)
-        if goal.shape != (len(ACTUATED_JOINTS),) or not np.all(np.isfinite(goal)):
-            raise ValueError(f"expected {len(ACTUATED_JOINTS)} finite angles in degrees, got {targets_deg!r}")
-        self.data.ctrl[self._actuators] = np.radians(goal)
+        self.data.ctrl[self._actuators] = np.radians(goal_deg(targets_deg))
 
     def joint_damping_n_m_s(self) -> float:
         """The joints' damping (one value for all, as the MJCF's STS3215 class and this class set it)."""
@@ -130,10 +127,7 @@ class SO101MuJoCo:
     # -- pictures --------------------------------------------------------------------
     def render_rgb(self, width: int = 640, height: int = 480, camera: Camera = DEFAULT_CAMERA) -> np.ndarray:
         """The scene as an RGB image, uint8 of shape (height, width, 3), drawn offscreen."""
-        if not self.renders:
-            raise RuntimeError("this simulator was made without its renderer (renders=False): no pictures")
-        if width < 1 or height < 1:
-            raise ValueError(f"image size must be at least 1x1 pixels, got {width}x{height}")
+        check_picture(self.renders, width, height)
         if self._renderer is None or (self._renderer.width, self._renderer.height) != (width, height):
             self._close_renderer()
             self.model.vis.global_.offwidth = max(self.model.vis.global_.offwidth, width)

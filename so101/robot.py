@@ -61,6 +61,18 @@ JOINT_TABLE: tuple[tuple[int, str, str], ...] = (
     (6, "gripper", "revolute"),
 )
 
+def goal_deg(targets_deg) -> tuple[float, ...]:
+    """Six goal angles in degrees (the five arm joints, then the gripper) as floats, checked
+    as every body takes them; ValueError for any other count or a NaN/infinite angle."""
+    try:
+        goal = () if isinstance(targets_deg, (str, bytes)) else tuple(float(angle) for angle in targets_deg)
+    except (TypeError, ValueError):
+        goal = ()
+    if len(goal) != len(ACTUATED_JOINTS) or not all(math.isfinite(angle) for angle in goal):
+        raise ValueError(f"expected {len(ACTUATED_JOINTS)} finite angles in degrees, got {targets_deg!r}")
+    return goal
+
+
 # The course's motor settings: `maxVelocity=3.0` rad/s and
 # `changeDynamics(linearDamping=0.2, angularDamping=0.2)`.
 COURSE_MAX_VELOCITY_RAD_S = 3.0

@@ -17,7 +17,7 @@ import pybullet as p
 import pybullet_data
 
 from so101 import assets
-from so101.camera import DEFAULT_CAMERA, Camera
+from so101.camera import DEFAULT_CAMERA, Camera, check_picture
 from so101.display import resolve_mode
 from so101.servo import (
     DEFAULT_DAMPING_RATIO,
@@ -31,6 +31,7 @@ from so101.robot import (
     COURSE_LINK_DAMPING,
     COURSE_MAX_VELOCITY_RAD_S,
     HOME_POSE_DEG,
+    goal_deg,
 )
 from so101.viewer import WINDOW_SHOWING, Window
 
@@ -199,10 +200,7 @@ class SO101Sim:
     # -- control ---------------------------------------------------------------------
     def set_targets_deg(self, targets_deg: Sequence[float]) -> None:
         """Goal angles in degrees for all six actuated joints (arm 0-4, gripper)."""
-        goal = np.asarray(targets_deg, dtype=float)
-        if goal.shape != (len(ACTUATED_JOINTS),) or not np.all(np.isfinite(goal)):
-            raise ValueError(f"expected {len(ACTUATED_JOINTS)} finite angles in degrees, got {targets_deg!r}")
-        self._goal_rad = np.radians(goal)
+        self._goal_rad = np.radians(goal_deg(targets_deg))
         self._motor_goals = list(zip(self._indices, self._goal_rad.tolist()))
 
     def set_time_step_s(self, time_step_s: float) -> None:
@@ -283,10 +281,7 @@ class SO101Sim:
         Uses the CPU renderer (ER_TINY_RENDERER), so it works in DIRECT mode with no
         display or GPU.
         """
-        if not self.renders:
-            raise RuntimeError("this simulator was made without its renderer (renders=False): no pictures")
-        if width < 1 or height < 1:
-            raise ValueError(f"image size must be at least 1x1 pixels, got {width}x{height}")
+        check_picture(self.renders, width, height)
         view = p.computeViewMatrixFromYawPitchRoll(
             cameraTargetPosition=list(camera.target_xyz_m), distance=camera.distance_m,
             yaw=camera.yaw_deg, pitch=camera.pitch_deg, roll=0.0, upAxisIndex=2,

@@ -81,3 +81,22 @@ def test_without_damping_the_mujoco_arm_overshoots_more():
     assert damping == pytest.approx(0.60)  # the STS3215 class's
     assert with_mjcf_damping > 90.0  # MuJoCo's servo is a spring: even damped it overshoots a little
     assert without > with_mjcf_damping + 10.0  # and without damping it swings far past
+
+
+def test_so101_teleop_knows_every_loaded_line():
+    # teleop waits for this line (so101.dataflow.LOADED_MARKS) without importing the loop's module.
+    from so101.body_node import TEXT
+    from so101.dataflow import LOADED_MARKS
+
+    for lang, text in TEXT.items():
+        loaded = text["loaded"].format(identity="robot_id = 1", mode="DIRECT", step_ms=4, detail="x")
+        assert any(mark in loaded for mark in LOADED_MARKS), lang
+
+
+@pytest.mark.parametrize("bad", [[0.0] * 5, [0.0] * 7, [0, 0, 0, float("nan"), 0, 0], "123456", None])
+def test_every_body_refuses_the_same_bad_goals(bad):
+    from so101.robot import goal_deg
+
+    with pytest.raises(ValueError, match="expected 6 finite angles in degrees"):
+        goal_deg(bad)
+    assert goal_deg([1, 2, 3, 4, 5, 6]) == (1.0, 2.0, 3.0, 4.0, 5.0, 6.0)
