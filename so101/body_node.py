@@ -1,12 +1,15 @@
-"""One dora event loop for any body of the SO-101 (PyBullet, MuJoCo): the simulation node's contract.
+"""One dora event loop for any body of the SO-101 (PyBullet, MuJoCo, the real arm): the node's contract.
 
-A body has the small surface `SO101Sim` and `SO101MuJoCo` share: set_targets_deg,
+A body has the small surface `SO101Sim`, `SO101MuJoCo` and `SO101Real` share: set_targets_deg,
 set_time_step_s, step(count), steps, joint_angles_deg, render_rgb, close. This loop turns
 one into the node dataflow.yml declares: each `tick` advances the physics by the tick's
 period (and the periods of ticks dora dropped while the node was late) and publishes
 `joint_state` and `gripper_state`; a `joint_cmd` is decoded, clamped to the joint limits
 and logged, and only updates the targets, which the next tick applies; bad ones are
-logged and ignored; STOP or Ctrl-C closes the body and ends with 0.
+logged and ignored; STOP or Ctrl-C closes the body and ends with 0. The real arm differs
+only where hardware must: it starts from where it stands (`start_targets_deg`), a tick whose
+read failed publishes nothing (`joint_angles_deg` is None), and a bus past saving ends the
+node with one line and exit code 1 (BodyFailed).
 
 Settings read from the node's environment (declared in the dataflow file):
   SO101_MODE        auto | gui | direct   (auto: a window where a display exists)
@@ -27,6 +30,7 @@ from typing import Mapping
 
 import pyarrow as pa
 
+from so101.bodies import BodyFailed
 from so101.dataflow import TICK_PERIOD_S, TickClock, timer_period_s
 from so101.joint_cmd import decode_joint_cmd
 from so101.robot import GRIPPER_COMMAND_INDEX, HOME_POSE_DEG, NUM_ARM_JOINTS
@@ -34,24 +38,32 @@ from so101.viewer import WindowClosed
 
 IMAGE_SIZE = (320, 240)
 
+# Each body node's log tag: the simulation's, or the real arm's (node id `arm`).
+TAGS = {
+    "simulation": {"zh": "[仿真节点]", "en": "[simulation]"},
+    "arm": {"zh": "[机械臂节点]", "en": "[arm]"},
+}
+
 TEXT = {
     "zh": {
-        "loaded": "[仿真节点] SO-101 加载完成,{identity}({mode} 模式,步长 {step_ms:g} ms,{detail})",
-        "one": "[仿真节点] 关节 {index} 目标 → {angle:g}°",
-        "all": "[仿真节点] 全关节目标 → {angles}°",
-        "clamped": "[仿真节点] 超出关节限位: {note}",
-        "rejected": "[仿真节点] 忽略无效 joint_cmd: {error}",
-        "no_timer": "[仿真节点] tick 不是 dora 定时器,物理步长取 {step_ms:g} ms",
-        "window_closed": "[仿真节点] 仿真停止: {reason}",
+        "loaded": "{tag} SO-101 加载完成,{identity}({mode} 模式,步长 {step_ms:g} ms,{detail})",
+        "one": "{tag} 关节 {index} 目标 → {angle:g}°",
+        "all": "{tag} 全关节目标 → {angles}°",
+        "clamped": "{tag} 超出关节限位: {note}",
+        "rejected": "{tag} 忽略无效 joint_cmd: {error}",
+        "no_timer": "{tag} tick 不是 dora 定时器,物理步长取 {step_ms:g} ms",
+        "window_closed": "{tag} 仿真停止: {reason}",
+        "failed": "{tag} 停止: {reason}",
     },
     "en": {
-        "loaded": "[simulation] SO-101 loaded, {identity} ({mode} mode, step {step_ms:g} ms, {detail})",
-        "one": "[simulation] joint {index} target -> {angle:g}°",
-        "all": "[simulation] all joint targets -> {angles}°",
-        "clamped": "[simulation] beyond the joint limits: {note}",
-        "rejected": "[simulation] ignored invalid joint_cmd: {error}",
-        "no_timer": "[simulation] tick is not a dora timer; physics step set to {step_ms:g} ms",
-        "window_closed": "[simulation] stopping: {reason}",
+        "loaded": "{tag} SO-101 loaded, {identity} ({mode} mode, step {step_ms:g} ms, {detail})",
+        "one": "{tag} joint {index} target -> {angle:g}°",
+        "all": "{tag} all joint targets -> {angles}°",
+        "clamped": "{tag} beyond the joint limits: {note}",
+        "rejected": "{tag} ignored invalid joint_cmd: {error}",
+        "no_timer": "{tag} tick is not a dora timer; physics step set to {step_ms:g} ms",
+        "window_closed": "{tag} stopping: {reason}",
+        "failed": "{tag} stopping: {reason}",
     },
 }
 
@@ -60,9 +72,9 @@ def log(line: str) -> None:
     print(line, flush=True)
 
 
-def cannot_start(error: Exception) -> int:
+def cannot_start(error: Exception, node_id: str = "simulation") -> int:
     """One line on stderr and the exit code for a setting or a model that is wrong."""
-    print(f"[simulation] cannot start: {error}", file=sys.stderr, flush=True)
+    print(f"[{node_id}] cannot start: {error}", file=sys.stderr, flush=True)
     return 2
 
 
@@ -129,10 +141,12 @@ def fast_events(node):
         yield FAST_TICK if event is None else event
 
 
-def run_body_node(body, node, settings: NodeSettings, identity: str, detail: Mapping[str, str]) -> int:
+def run_body_node(body, node, settings: NodeSettings, identity: str, detail: Mapping[str, str],
+                  node_id: str = "simulation") -> int:
     """The event loop, until STOP; closes `body`. `identity` and `detail[lang]` go into the
     "loaded" log line (`so101 teleop` waits for it). Returns the node's exit code."""
-    text = TEXT[settings.lang]
+    tag = TAGS[node_id][settings.lang]
+    text = {key: line.replace("{tag}", tag) for key, line in TEXT[settings.lang].items()}
     fast_steps = settings.fast_steps
     image_hz = settings.image_hz
     # The physics step equals the tick period, so simulated time keeps pace with the
@@ -144,7 +158,9 @@ def run_body_node(body, node, settings: NodeSettings, identity: str, detail: Map
     body.set_time_step_s(tick_s)
     log(text["loaded"].format(identity=identity, mode=body.mode.upper(), step_ms=tick_s * 1000, detail=detail[settings.lang]))
 
-    joint_targets_deg = tuple(HOME_POSE_DEG)
+    # A simulation starts at home; the real arm where it stands, so a one-joint command moves one joint.
+    start_targets = getattr(body, "start_targets_deg", None)
+    joint_targets_deg = tuple(start_targets() if start_targets else HOME_POSE_DEG)
     events = fast_events(node) if fast_steps else node
     # (start ns, end ns, physics steps so far) of each tick, in time.monotonic_ns, when asked for;
     # None costs nothing per tick.
@@ -164,8 +180,10 @@ def run_body_node(body, node, settings: NodeSettings, identity: str, detail: Map
                     else:
                         body.step(tick_clock.steps_due(event["metadata"].get("timestamp")))
                     angles_deg = body.joint_angles_deg()
-                    node.send_output("joint_state", pa.array(angles_deg[:NUM_ARM_JOINTS], type=pa.float64()))
-                    node.send_output("gripper_state", pa.array(angles_deg[NUM_ARM_JOINTS:], type=pa.float64()))
+                    # None: the real arm's read failed this tick; publishing nothing beats stale angles.
+                    if angles_deg is not None:
+                        node.send_output("joint_state", pa.array(angles_deg[:NUM_ARM_JOINTS], type=pa.float64()))
+                        node.send_output("gripper_state", pa.array(angles_deg[NUM_ARM_JOINTS:], type=pa.float64()))
                     if tick_log is not None:
                         tick_log.extend((time.monotonic_ns(), body.steps))
                     if steps_per_image and body.steps >= next_image_step:
@@ -200,6 +218,9 @@ def run_body_node(body, node, settings: NodeSettings, identity: str, detail: Map
         # As in the course, closing the window ends the simulation; exit code 1 makes dora
         # stop the dataflow and say so, rather than leave a prompt driving nothing.
         print(text["window_closed"].format(reason=closed), file=sys.stderr, flush=True)
+        return 1
+    except BodyFailed as failure:  # the real arm's bus, past its retries: exit 1 stops the dataflow
+        print(text["failed"].format(reason=failure), file=sys.stderr, flush=True)
         return 1
     finally:
         body.close()

@@ -40,6 +40,7 @@ TEXT = {
     "zh": {
         "starting": "启动数据流(dora run,{mode} 模式),日志写入 {log}",
         "ready": "仿真已就绪,启动键盘控制",
+        "ready_real": "机械臂已就绪(已上扭矩),启动键盘控制",
         "stopping": "停止数据流...",
         "stopped": "数据流已停止",
         "exited": "dora run 提前退出(退出码 {code}),日志 {log} 最后几行:",
@@ -49,6 +50,7 @@ TEXT = {
     "en": {
         "starting": "starting the dataflow (dora run, {mode} mode), log in {log}",
         "ready": "simulation ready, starting the keyboard prompt",
+        "ready_real": "the arm is ready (torque on), starting the keyboard prompt",
         "stopping": "stopping the dataflow...",
         "stopped": "dataflow stopped",
         "exited": "dora run exited early (exit code {code}); last lines of {log}:",
@@ -61,8 +63,18 @@ TEXT = {
 def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
     parser.add_argument(
         "--body", choices=list(BODIES), default=DEFAULT_BODY,
-        help=f"what simulates the arm: pybullet (the course's, default) or mujoco; runs {BODIES[DEFAULT_BODY].dataflow_file.name} "
-        f"or {BODIES['mujoco'].dataflow_file.name}",
+        help=f"what moves: pybullet (the course's simulation, default), mujoco, or real (an SO-101 follower arm, "
+        f"with --port and --calibration); runs {', '.join(body.dataflow_file.name for body in BODIES.values())}",
+    )
+    parser.add_argument(
+        "--port", metavar="PORT", default=None,
+        help="--body real: the arm's serial port (/dev/ttyACM0, ...; `so101 fake-arm` prints an emulated one); "
+        "passed to the arm node as SO101_PORT",
+    )
+    parser.add_argument(
+        "--calibration", type=Path, metavar="FILE", default=None,
+        help="--body real: the arm's calibration JSON (from `so101 calibrate`, or LeRobot's so101_follower one); "
+        "passed to the arm node as SO101_CALIBRATION",
     )
     parser.add_argument(
         "--mode", choices=MODES, default=os.environ.get("SO101_MODE", "auto"),
@@ -172,7 +184,8 @@ def run(args: argparse.Namespace) -> int:
     text = TEXT[args.lang]
     body = BODIES[args.body]
     try:
-        resolved_mode, notice = resolve_mode(args.mode)  # a GUI without a display fails here, in one line
+        # A GUI without a display fails here, in one line. The real arm has no window to choose.
+        resolved_mode, notice = resolve_mode(args.mode) if body.simulated else ("real", None)
     except ValueError as error:  # a bad $SO101_MODE: argparse does not check defaults against choices
         print(f"so101 teleop: {error} (from --mode or $SO101_MODE)", file=sys.stderr)
         return 2
@@ -187,16 +200,27 @@ def run(args: argparse.Namespace) -> int:
     if version_problem:
         print(f"so101 teleop: {version_problem}", file=sys.stderr)
         return 2
+    node_env = {"SO101_MODE": resolved_mode, "SO101_LANG": args.lang}
+    if body.simulated:
+        if args.port or args.calibration:
+            print(f"so101 teleop: --port and --calibration are for --body real, not {body.name}", file=sys.stderr)
+            return 2
+    else:
+        if not args.port or not args.calibration:
+            print("so101 teleop: --body real needs --port PORT and --calibration FILE "
+                  "(no arm? `so101 fake-arm` emulates one; `so101 calibrate` makes the file)", file=sys.stderr)
+            return 2
+        node_env.update(SO101_PORT=args.port, SO101_CALIBRATION=str(args.calibration.expanduser().resolve()))
     log = args.log.expanduser().resolve()
     env = env_with_bin_first(dict(os.environ, SO101_MODE=resolved_mode, SO101_LANG=args.lang))
 
     print(text["starting"].format(mode=resolved_mode, log=log), flush=True)
     with tempfile.TemporaryDirectory(prefix="so101-teleop-") as work_dir:
         copy = write_dataflow(
-            dataflow_copy({"SO101_MODE": resolved_mode, "SO101_LANG": args.lang}, dataflow_file), Path(work_dir) / "dataflow.yml",
+            dataflow_copy(node_env, dataflow_file), Path(work_dir) / "dataflow.yml",
         )
         dataflow = Dataflow(copy, log, env)
-        return _run_prompt(dataflow, env, text, log)
+        return _run_prompt(dataflow, env, text, log, body.simulated)
 
 
 class _HungUp(Exception):
@@ -214,7 +238,7 @@ def _show(line: str) -> None:
         pass
 
 
-def _run_prompt(dataflow: Dataflow, env: dict[str, str], text: dict, log: Path) -> int:
+def _run_prompt(dataflow: Dataflow, env: dict[str, str], text: dict, log: Path, simulated: bool) -> int:
     # dora runs in a session of its own and gets no hang-up from the terminal: teleop must stop it.
     signal.signal(signal.SIGHUP, _hang_up)
     signal.signal(signal.SIGTERM, _hang_up)
@@ -226,7 +250,7 @@ def _run_prompt(dataflow: Dataflow, env: dict[str, str], text: dict, log: Path) 
                        else text["timeout"].format(seconds=START_TIMEOUT_S, log=log))
             print(f"so101 teleop: {message}\n{_log_tail(log)}", file=sys.stderr, flush=True)
             return 1
-        _show(text["ready"])
+        _show(text["ready" if simulated else "ready_real"])
         prompt = subprocess.Popen([sys.executable, str(PROMPT)], env=env)
         # Ctrl-C at the terminal goes to the whole foreground group: the prompt quits on it,
         # teleop must outlive it to stop the dataflow.

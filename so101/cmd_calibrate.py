@@ -1,0 +1,172 @@
+"""`so101 calibrate`: calibrate an SO-101 follower arm without LeRobot, into LeRobot's JSON format.
+
+The steps LeRobot's `lerobot-calibrate` takes for the so101_follower: torque off; the
+person puts the arm in the middle of its range and presses Enter, and each servo's
+Homing_Offset is set so that it reads mid-scale (2047) there; the person moves every
+joint but wrist_roll to both ends of its travel and presses Enter, while the positions
+are read and the extremes kept; wrist_roll turns fully, so its range is the whole turn.
+The offsets and ranges go into the servos (Homing_Offset, Min/Max_Position_Limit) and
+into the file. Nothing is written to the file until the end; an existing file is kept
+as FILE.bak when --force replaces it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import select
+import sys
+from pathlib import Path
+
+from so101.calibration import (
+    MIN_RANGE_STEPS,
+    MOTOR_IDS,
+    MOTOR_NAMES,
+    MotorCalibration,
+    homing_offset,
+    save_calibration,
+)
+from so101.feetech import BusError, FeetechBus
+from so101.sts3215 import MAX_STEP, MODEL_NUMBER, SIGN_BITS, encode_signed
+
+FULL_TURN_JOINT = "wrist_roll"
+POLL_S = 0.01  # how often positions are read while the person moves the joints
+
+
+def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
+    parser.add_argument("--port", required=True, metavar="PORT",
+                        help="the arm's serial port (/dev/ttyACM0, ...; `so101 fake-arm` prints an emulated one)")
+    parser.add_argument("--out", required=True, type=Path, metavar="FILE",
+                        help="where to write the calibration (LeRobot's so101_follower JSON format)")
+    parser.add_argument("--force", action="store_true",
+                        help="replace FILE if it exists (the old one is kept as FILE.bak)")
+
+
+def _say(line: str = "", end: str = "\n") -> None:
+    print(line, end=end, flush=True)
+
+
+class _Lines:
+    """Lines typed on stdin, read from its file descriptor so select() sees every one
+    (Python's buffered reader could hold a second line where select cannot see it)."""
+
+    def __init__(self):
+        self._pending = b""
+
+    def wait_for_enter(self, poll=None) -> bool:
+        """Block until a line is typed; call `poll()` meanwhile. False on end of input."""
+        while b"\n" not in self._pending:
+            ready, _, _ = select.select([sys.stdin], [], [], POLL_S)
+            if ready:
+                chunk = os.read(sys.stdin.fileno(), 1024)
+                if not chunk:
+                    return False
+                self._pending += chunk
+            elif poll is not None:
+                poll()
+        self._pending = self._pending.split(b"\n", 1)[1]
+        return True
+
+
+def _check_servos(bus: FeetechBus) -> None:
+    for name, servo_id in zip(MOTOR_NAMES, MOTOR_IDS):
+        model = bus.ping(servo_id)
+        if model is None:
+            raise BusError(f"servo {servo_id} ({name}) does not answer on {bus.port_name}: "
+                           f"check its power and cable, and that it has ID {servo_id}")
+        if model != MODEL_NUMBER:
+            raise BusError(f"servo {servo_id} ({name}) is model {model}, not an STS3215 ({MODEL_NUMBER})")
+
+
+def _write_eeprom(bus: FeetechBus, name: str, values: dict[int, int]) -> None:
+    for servo_id, value in values.items():
+        bus.write(servo_id, name, value)
+
+
+def calibrate(bus: FeetechBus) -> dict[str, MotorCalibration] | None:
+    """The interactive steps on an open bus; the calibration, or None if the input ended first."""
+    _check_servos(bus)
+    lines = _Lines()
+    everyone = dict.fromkeys(MOTOR_IDS, 0)
+    bus.sync_write("Torque_Enable", everyone)
+    _write_eeprom(bus, "Lock", everyone)  # unlocked: the offsets and limits must persist
+    _write_eeprom(bus, "Homing_Offset", everyone)
+    _write_eeprom(bus, "Min_Position_Limit", everyone)
+    _write_eeprom(bus, "Max_Position_Limit", dict.fromkeys(MOTOR_IDS, MAX_STEP))
+
+    _say("Torque is off. Move the arm by hand to the middle of its range: the upper arm straight up, "
+         "the forearm and the gripper level, pointing forward, the gripper half open "
+         "(the course's home pose: `so101 snapshot` draws it). Then press Enter.")
+    if not lines.wait_for_enter():
+        return None
+    raw = bus.sync_read("Present_Position", MOTOR_IDS)
+    offsets = {servo_id: homing_offset(raw[servo_id]) for servo_id in MOTOR_IDS}
+    _write_eeprom(bus, "Homing_Offset", {i: encode_signed(offset, SIGN_BITS["Homing_Offset"]) for i, offset in offsets.items()})
+
+    ranged = [(name, servo_id) for name, servo_id in zip(MOTOR_NAMES, MOTOR_IDS) if name != FULL_TURN_JOINT]
+    low = bus.sync_read("Present_Position", MOTOR_IDS)
+    high = dict(low)
+
+    def record() -> None:
+        present = bus.sync_read("Present_Position", MOTOR_IDS)
+        for servo_id, position in present.items():
+            low[servo_id] = min(low[servo_id], position)
+            high[servo_id] = max(high[servo_id], position)
+        if sys.stdout.isatty():
+            _say("\r" + "  ".join(f"{name} {low[i]}..{high[i]}" for name, i in ranged), end="")
+
+    _say(f"Now move every joint except {FULL_TURN_JOINT} slowly to both ends of its travel, one at a time. "
+         "Press Enter when done.")
+    while True:
+        if not lines.wait_for_enter(record):
+            return None
+        short = [name for name, servo_id in ranged if high[servo_id] - low[servo_id] < MIN_RANGE_STEPS]
+        if not short:
+            break
+        _say(f"\n{', '.join(short)} moved less than {MIN_RANGE_STEPS} steps ({MIN_RANGE_STEPS * 360 / 4096:.0f}°): "
+             "move each to both of its ends, then press Enter (Ctrl-C gives up, nothing is written).")
+
+    calibration = {}
+    for name, servo_id in zip(MOTOR_NAMES, MOTOR_IDS):
+        range_min, range_max = (0, MAX_STEP) if name == FULL_TURN_JOINT else (low[servo_id], high[servo_id])
+        calibration[name] = MotorCalibration(servo_id, 0, offsets[servo_id], range_min, range_max)
+    _write_eeprom(bus, "Min_Position_Limit", {m.id: m.range_min for m in calibration.values()})
+    _write_eeprom(bus, "Max_Position_Limit", {m.id: m.range_max for m in calibration.values()})
+    _write_eeprom(bus, "Lock", dict.fromkeys(MOTOR_IDS, 1))
+    return calibration
+
+
+def run(args: argparse.Namespace) -> int:
+    out = args.out.expanduser()
+    if out.exists() and not args.force:
+        print(f"so101 calibrate: {out} exists: pass --force to replace it (the old one is kept as {out.name}.bak)",
+              file=sys.stderr)
+        return 2
+    if out.is_dir():
+        print(f"so101 calibrate: {out} is a folder: --out takes a file name", file=sys.stderr)
+        return 2
+    bus = FeetechBus(args.port)
+    try:
+        bus.open()
+        calibration = calibrate(bus)
+    except BusError as error:
+        print(f"\nso101 calibrate: {error}; nothing was written to {out}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print(f"\nso101 calibrate: interrupted; nothing was written to {out}", file=sys.stderr)
+        return 130
+    finally:
+        bus.close()
+    if calibration is None:
+        print(f"\nso101 calibrate: the input ended before the calibration did; nothing was written to {out}", file=sys.stderr)
+        return 1
+    if out.exists():
+        out.replace(out.with_name(out.name + ".bak"))
+    save_calibration(out, calibration)
+    _say(f"\nWrote {out}:")
+    for name, motor in calibration.items():
+        span_deg = (motor.range_max - motor.range_min) * 360 / 4096
+        _say(f"  {name:<14} id {motor.id}  homing_offset {motor.homing_offset:>5}  "
+             f"range {motor.range_min:>4}..{motor.range_max:<4} ({span_deg:.0f}°)")
+    _say(f"Use it: so101 teleop --body real --port {args.port} --calibration {out}")
+    return 0

@@ -1,0 +1,142 @@
+"""The Feetech bus: Feetech's SDK (`scservo_sdk`, over pyserial) behind a few calls by register name.
+
+Every failure becomes a BusError whose message is one line for the user: a port that
+cannot be opened (NoPort), a servo that does not answer or answers garbage (ServoSilent,
+naming its ID), or a port that went away mid-run (BusLost). The SDK signals those by
+result codes and, for a vanished port, by pyserial exceptions; nothing else leaks out.
+"""
+
+from __future__ import annotations
+
+import time
+
+import scservo_sdk as scs
+import serial
+
+from so101.sts3215 import BAUD_RATE, REGISTERS
+
+CHECK_SERVO = "check its power, its cable and that its ID is {servo_id}"
+
+
+class BusError(Exception):
+    """The bus failed; str() is one line naming what and what to check."""
+
+
+class NoPort(BusError):
+    pass
+
+
+class BusLost(BusError):
+    pass
+
+
+class ServoSilent(BusError):
+    def __init__(self, servo_id: int, corrupt: bool, what: str):
+        self.servo_id = servo_id
+        self.corrupt = corrupt
+        problem = "sent a corrupted reply" if corrupt else "did not answer"
+        super().__init__(f"servo {servo_id} {problem} to {what}: " + CHECK_SERVO.format(servo_id=servo_id))
+
+
+def _bytes(value: int, size: int) -> list[int]:
+    return list(int(value).to_bytes(size, "little"))
+
+
+class FeetechBus:
+    """One serial port with STS3215 servos on it. `open()` first; `close()` is safe twice."""
+
+    def __init__(self, port: str, baudrate: int = BAUD_RATE):
+        self.port_name = port
+        self.baudrate = baudrate
+        self._port = None
+        self._packets = None
+        self._readers: dict[tuple[str, tuple[int, ...]], scs.GroupSyncRead] = {}
+        self.last_round_trip_s = 0.0  # of the last sync read: request out, every reply in
+
+    def open(self) -> "FeetechBus":
+        port = scs.PortHandler(self.port_name)
+        try:
+            opened = port.openPort() and port.setBaudRate(self.baudrate)
+        except (serial.SerialException, OSError) as error:
+            raise NoPort(f"cannot open the serial port {self.port_name}: {_reason(error)}; "
+                         "is the arm's USB adapter plugged in (so101 fake-arm emulates one)?") from None
+        if not opened:
+            raise NoPort(f"cannot set {self.port_name} to {self.baudrate} baud")
+        self._port, self._packets = port, scs.PacketHandler(0)
+        return self
+
+    def close(self) -> None:
+        port, self._port = self._port, None
+        if port is not None:
+            try:
+                port.closePort()
+            except (serial.SerialException, OSError):
+                pass
+
+    def _call(self, function, *args):
+        """One SDK call; a port that went away becomes BusLost."""
+        if self._port is None:
+            raise BusLost(f"the serial port {self.port_name} is closed")
+        try:
+            return function(*args)
+        except (serial.SerialException, OSError, TypeError, IndexError) as error:
+            # TypeError/IndexError: the SDK indexing a reply that a dying port cut short.
+            raise BusLost(f"lost the serial port {self.port_name} ({_reason(error)}): "
+                          "check the USB cable and the servos' power supply") from None
+        finally:
+            # The SDK marks the port busy during a transfer and leaves it so if one raises.
+            self._port.is_using = False
+
+    def ping(self, servo_id: int) -> int | None:
+        """The servo's model number, or None if nothing answers at that ID."""
+        model, result, _ = self._call(self._packets.ping, self._port, servo_id)
+        return model if result == scs.COMM_SUCCESS else None
+
+    def read(self, servo_id: int, name: str) -> int:
+        address, size = REGISTERS[name]
+        self._call(self._port.ser.reset_input_buffer)
+        data, result, _ = self._call(self._packets.readTxRx, self._port, servo_id, address, size)
+        if result != scs.COMM_SUCCESS:
+            raise ServoSilent(servo_id, result == scs.COMM_RX_CORRUPT, f"a read of {name}")
+        return int.from_bytes(bytes(data[:size]), "little")
+
+    def write(self, servo_id: int, name: str, value: int) -> None:
+        """A write the servo acknowledges."""
+        address, size = REGISTERS[name]
+        self._call(self._port.ser.reset_input_buffer)
+        result, _ = self._call(self._packets.writeTxRx, self._port, servo_id, address, size, _bytes(value, size))
+        if result != scs.COMM_SUCCESS:
+            raise ServoSilent(servo_id, result == scs.COMM_RX_CORRUPT, f"a write of {name}")
+
+    def sync_read(self, name: str, servo_ids: tuple[int, ...]) -> dict[int, int]:
+        """One SYNC READ of `name` from every servo; ServoSilent names the first that failed."""
+        address, size = REGISTERS[name]
+        reader = self._readers.get((name, servo_ids))
+        if reader is None:
+            reader = self._readers[(name, servo_ids)] = scs.GroupSyncRead(self._port, self._packets, address, size)
+            for servo_id in servo_ids:
+                reader.addParam(servo_id)
+        # A late reply to an earlier request must not pass for this one.
+        self._call(self._port.ser.reset_input_buffer)
+        start = time.perf_counter()
+        result = self._call(reader.txRxPacket)
+        self.last_round_trip_s = time.perf_counter() - start
+        if result != scs.COMM_SUCCESS:
+            # The SDK stops at the first servo that failed and leaves it without data.
+            failed = next((i for i in servo_ids if len(reader.data_dict.get(i, [])) < size), servo_ids[0])
+            raise ServoSilent(failed, result == scs.COMM_RX_CORRUPT, f"a sync read of {name}")
+        return {servo_id: reader.getData(servo_id, address, size) for servo_id in servo_ids}
+
+    def sync_write(self, name: str, values: dict[int, int]) -> None:
+        """One SYNC WRITE (no reply: the servos cannot say whether they heard it)."""
+        address, size = REGISTERS[name]
+        writer = scs.GroupSyncWrite(self._port, self._packets, address, size)
+        for servo_id, value in values.items():
+            writer.addParam(servo_id, _bytes(value, size))
+        if self._call(writer.txPacket) != scs.COMM_SUCCESS:
+            raise BusLost(f"could not send to {self.port_name}: check the USB cable")
+
+
+def _reason(error: Exception) -> str:
+    text = getattr(error, "strerror", None) or str(error) or type(error).__name__
+    return " ".join(text.split())

@@ -1,0 +1,269 @@
+"""The real SO-101 follower arm behind the simulators' surface: six STS3215 servos on a Feetech bus.
+
+`SO101Real` takes goals in the URDF's degrees and, once per tick (`step`), writes the
+next Goal_Position of each servo with one SYNC WRITE and reads every Present_Position
+with one SYNC READ. The safety rules live here, so every user of the body has them:
+- it starts only with a calibration that matches the servos on the bus;
+- torque goes on with each goal equal to where the joint stands (no jump);
+- goals are clamped to the URDF's limits and to the calibrated range;
+- the goal sent moves by at most `max_speed_deg_s` x the tick per tick (a ramp, not a slam);
+- `close()` switches torque off (the node calls it on STOP, Ctrl-C, SIGTERM, an exception
+  and a lost bus);
+- a servo that stops answering is retried for `retries` ticks, publishing no angle meanwhile,
+  then the body fails with one line naming the servo.
+"""
+
+from __future__ import annotations
+
+import os
+import statistics
+from array import array
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Mapping
+
+from so101.bodies import BodyFailed
+from so101.calibration import (
+    MOTOR_IDS,
+    MOTOR_NAMES,
+    Calibration,
+    load_calibration,
+    goal_steps,
+    parse_joint_signs,
+    step_toward,
+    steps_to_deg,
+)
+from so101.feetech import BusError, FeetechBus
+from so101.robot import ACTUATED_JOINTS, goal_deg
+from so101.sts3215 import MODEL_NUMBER, SIGN_BITS, decode_signed
+
+DEFAULT_MAX_SPEED_DEG_S = 90.0
+DEFAULT_RETRIES = 5
+CALIBRATE_HINT = "make one with `so101 calibrate --port {port} --out FILE`, or use LeRobot's so101_follower calibration"
+# Round trips measured before the first tick, for the log's "bus round trip" figure.
+PROBE_READS = 20
+
+
+class ArmFailed(BodyFailed):
+    """The arm cannot start or go on; the message is one line for the user."""
+
+
+@dataclass(frozen=True)
+class ArmSettings:
+    """The arm node's own settings, from its environment (dataflow_real.yml's `env:`)."""
+
+    port: str
+    calibration_file: Path
+    max_speed_deg_s: float
+    joint_signs: tuple[int, ...]
+    torque_limit_percent: float
+    retries: int
+
+    @classmethod
+    def from_environ(cls, environ: Mapping[str, str]) -> "ArmSettings":
+        """Raises ValueError naming a missing or bad value and what is accepted."""
+        from so101.body_node import number_setting, whole_number_setting
+
+        port = environ.get("SO101_PORT", "").strip()
+        if not port:
+            raise ValueError("SO101_PORT is empty: set it to the arm's serial port (/dev/ttyACM0, ...; "
+                             "`so101 fake-arm` prints an emulated one)")
+        calibration = environ.get("SO101_CALIBRATION", "").strip()
+        if not calibration:
+            raise ValueError("SO101_CALIBRATION is empty: " + CALIBRATE_HINT.format(port=port))
+        torque = number_setting(environ, "SO101_TORQUE_LIMIT", "100", 1.0)
+        if torque > 100:
+            raise ValueError(f"SO101_TORQUE_LIMIT={torque:g} is above 100 (a percentage of the servo's maximum)")
+        return cls(
+            port=port,
+            calibration_file=Path(calibration).expanduser(),
+            max_speed_deg_s=number_setting(environ, "SO101_MAX_SPEED_DEG_S", str(DEFAULT_MAX_SPEED_DEG_S), 1.0),
+            joint_signs=parse_joint_signs(environ.get("SO101_JOINT_SIGNS", "1,1,1,1,1,1")),
+            torque_limit_percent=torque,
+            retries=whole_number_setting(environ, "SO101_BUS_RETRIES", str(DEFAULT_RETRIES)),
+        )
+
+
+def _percentiles_ms(samples_s) -> str:
+    ordered = sorted(samples_s)
+    if not ordered:
+        return "no reads"
+    p99 = ordered[min(len(ordered) - 1, round(0.99 * (len(ordered) - 1)))]
+    return f"p50 {statistics.median(ordered) * 1000:.2f} ms, p99 {p99 * 1000:.2f} ms, max {ordered[-1] * 1000:.2f} ms"
+
+
+class SO101Real:
+    """The arm on `port`, with `calibration` (LeRobot's format). Raises ArmFailed if it must not start."""
+
+    mode = "real"
+
+    def __init__(self, port: str, calibration: Calibration, *, calibration_name: str = "the calibration",
+                 joint_signs: tuple[int, ...] = (1,) * 6, max_speed_deg_s: float = DEFAULT_MAX_SPEED_DEG_S,
+                 torque_limit_percent: float = 100.0, retries: int = DEFAULT_RETRIES,
+                 time_step_s: float = 0.02, log: Callable[[str], None] = print):
+        self.port = port
+        self._motors = [calibration[name] for name in MOTOR_NAMES]
+        self._signs = joint_signs
+        self.max_speed_deg_s = max_speed_deg_s
+        self.retries = retries
+        self._log = log
+        self.steps = 0
+        self.round_trips_s = array("d")
+        self._failed_reads = 0
+        self.set_time_step_s(time_step_s)
+        self.bus = None
+        try:
+            self.bus = FeetechBus(port).open()
+            self._check_servos(calibration_name)
+            present = self._read_present()
+            self._angles_deg: tuple[float, ...] | None = self._to_deg(present)
+            self._check_in_range(present)
+            # Torque on with each goal where the joint stands: the arm holds still.
+            self.bus.sync_write("Goal_Position", present)
+            self.bus.sync_write("Torque_Limit", {i: round(torque_limit_percent * 10) for i in MOTOR_IDS})
+            self.bus.sync_write("Torque_Enable", {i: 1 for i in MOTOR_IDS})
+            for _ in range(PROBE_READS):
+                self._read_present()
+        except BusError as error:
+            self.close()
+            raise ArmFailed(str(error)) from None
+        except BaseException:
+            self.close()
+            raise
+        self._sent_deg = self._targets_deg = self._start_deg = self._angles_deg
+
+    @classmethod
+    def from_settings(cls, settings: ArmSettings, log: Callable[[str], None] = print) -> "SO101Real":
+        return cls(
+            settings.port, load_calibration(settings.calibration_file), calibration_name=str(settings.calibration_file),
+            joint_signs=settings.joint_signs, max_speed_deg_s=settings.max_speed_deg_s,
+            torque_limit_percent=settings.torque_limit_percent, retries=settings.retries, log=log,
+        )
+
+    # -- start-up checks ------------------------------------------------------------------
+
+    def _check_servos(self, calibration_name: str) -> None:
+        for name, servo_id, motor in zip(MOTOR_NAMES, MOTOR_IDS, self._motors):
+            model = self.bus.ping(servo_id)
+            if model is None:
+                raise ArmFailed(f"servo {servo_id} ({name}) does not answer on {self.port}: "
+                                f"check its power and cable, and that it has ID {servo_id}")
+            if model != MODEL_NUMBER:
+                raise ArmFailed(f"servo {servo_id} ({name}) is model {model}, not an STS3215 ({MODEL_NUMBER})")
+            on_servo = {
+                "homing_offset": decode_signed(self.bus.read(servo_id, "Homing_Offset"), SIGN_BITS["Homing_Offset"]),
+                "range_min": self.bus.read(servo_id, "Min_Position_Limit"),
+                "range_max": self.bus.read(servo_id, "Max_Position_Limit"),
+            }
+            for field_name, value in on_servo.items():
+                if value != getattr(motor, field_name):
+                    raise ArmFailed(
+                        f"{calibration_name} does not match the arm on {self.port}: servo {servo_id} ({name}) has "
+                        f"{field_name} {value}, the file says {getattr(motor, field_name)}; "
+                        + CALIBRATE_HINT.format(port=self.port) + " for this arm"
+                    )
+            if self.bus.read(servo_id, "Operating_Mode") != 0:
+                raise ArmFailed(f"servo {servo_id} ({name}) is not in position mode (Operating_Mode 0)")
+
+    def _check_in_range(self, present: dict[int, int]) -> None:
+        # The servo clamps goals to its limits: torque on outside them would jump to the limit.
+        for name, servo_id, motor, angle in zip(MOTOR_NAMES, MOTOR_IDS, self._motors, self._angles_deg):
+            if not motor.range_min <= present[servo_id] <= motor.range_max:
+                raise ArmFailed(f"{name} stands at {angle:.1f}°, outside its calibrated range: "
+                                "move it inside by hand (torque is off) and start again")
+
+    # -- the simulators' surface ----------------------------------------------------------
+
+    def _read_present(self) -> dict[int, int]:
+        present = self.bus.sync_read("Present_Position", MOTOR_IDS)
+        self.round_trips_s.append(self.bus.last_round_trip_s)
+        return present
+
+    def _to_deg(self, present: dict[int, int]) -> tuple[float, ...]:
+        return tuple(
+            steps_to_deg(index, present[servo_id], motor, sign)
+            for index, (servo_id, motor, sign) in enumerate(zip(MOTOR_IDS, self._motors, self._signs))
+        )
+
+    def start_targets_deg(self) -> tuple[float, ...]:
+        """Where the arm stood at start: a one-joint command leaves the other joints there."""
+        return self._start_deg
+
+    def set_time_step_s(self, time_step_s: float) -> None:
+        self.time_step_s = time_step_s
+        self.max_step_deg = self.max_speed_deg_s * time_step_s
+
+    def set_targets_deg(self, targets_deg) -> None:
+        """New goals, clamped to the URDF's limits; `step` ramps toward them."""
+        goal = goal_deg(targets_deg)
+        self._targets_deg = tuple(min(max(angle, joint.lower_deg), joint.upper_deg) for angle, joint in zip(goal, ACTUATED_JOINTS))
+
+    def step(self, count: int = 1) -> None:
+        """One bus exchange, whatever `count` (a late tick does not make the arm hurry):
+        the ramped goals out, the present positions in."""
+        try:
+            self._exchange()
+        except BusError as error:
+            raise ArmFailed(str(error)) from None
+        self.steps += 1
+
+    def _exchange(self) -> None:
+        self._sent_deg = step_toward(self._sent_deg, self._targets_deg, self.max_step_deg)
+        self.bus.sync_write("Goal_Position", {
+            servo_id: goal_steps(index, angle, motor, sign)
+            for index, (servo_id, motor, sign, angle) in enumerate(zip(MOTOR_IDS, self._motors, self._signs, self._sent_deg))
+        })
+        try:
+            present = self._read_present()
+        except BusError as error:
+            self._angles_deg = None  # nothing fresh to publish this tick
+            self._failed_reads += 1
+            if self._failed_reads > self.retries:
+                raise BusError(f"{error}; still failing after {self.retries} retries, torque off") from None
+            if self._failed_reads == 1:
+                self._log(f"[arm] {error}; retrying ({self.retries} tries)")
+            return
+        if self._failed_reads:
+            self._log(f"[arm] the servos answer again after {self._failed_reads} failed read(s)")
+            self._failed_reads = 0
+        self._angles_deg = self._to_deg(present)
+
+    def joint_angles_deg(self) -> tuple[float, ...] | None:
+        """The six angles read this tick, or None when this tick's read failed (never stale ones)."""
+        return self._angles_deg
+
+    @property
+    def sim_time_s(self) -> float:
+        return self.steps * self.time_step_s
+
+    def render_rgb(self, width: int, height: int):
+        raise ValueError("the real arm has no camera: set SO101_IMAGE_HZ to 0")
+
+    def round_trip_summary(self) -> str:
+        return _percentiles_ms(self.round_trips_s)
+
+    def close(self) -> None:
+        """Torque off on every servo, then the port closed; safe twice."""
+        bus, self.bus = self.bus, None
+        if bus is None:
+            return
+        try:
+            bus.sync_write("Torque_Enable", {i: 0 for i in MOTOR_IDS})
+            if any(bus.sync_read("Torque_Enable", MOTOR_IDS).values()):
+                self._log("[arm] a servo still reports torque on: switch the arm's power off")
+            else:
+                self._log(f"[arm] torque off on servos 1-6; bus round trip over the run: {self.round_trip_summary()}")
+        except BusError as error:
+            self._log(f"[arm] could not confirm torque off ({error}): switch the arm's power off")
+        finally:
+            bus.close()
+
+    def __enter__(self) -> "SO101Real":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def arm_from_environ(environ: Mapping[str, str] = os.environ, log: Callable[[str], None] = print) -> SO101Real:
+    return SO101Real.from_settings(ArmSettings.from_environ(environ), log)
