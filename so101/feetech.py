@@ -8,6 +8,7 @@ result codes and, for a vanished port, by pyserial exceptions; nothing else leak
 
 from __future__ import annotations
 
+import termios
 import time
 
 import scservo_sdk as scs
@@ -79,8 +80,9 @@ class FeetechBus:
             raise BusLost(f"the serial port {self.port_name} is closed")
         try:
             return function(*args)
-        except (serial.SerialException, OSError, TypeError, IndexError) as error:
-            # TypeError/IndexError: the SDK indexing a reply that a dying port cut short.
+        except (serial.SerialException, OSError, termios.error, TypeError, IndexError) as error:
+            # termios.error: an unplugged adapter, from the SDK's flush(); TypeError/IndexError: the
+            # SDK indexing a reply that a dying port cut short.
             raise BusLost(f"lost the serial port {self.port_name} ({_reason(error)}): "
                           "check the USB cable and the servos' power supply") from None
         finally:

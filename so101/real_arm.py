@@ -221,7 +221,7 @@ class SO101Real:
             if self._failed_reads > self.retries:
                 raise BusError(f"{error}; still failing after {self.retries} retries, torque off") from None
             if self._failed_reads == 1:
-                self._log(f"[arm] {error}; retrying ({self.retries} tries)")
+                self._log(f"[arm] {error}; retrying, up to {self.retries} times")
             return
         if self._failed_reads:
             self._log(f"[arm] the servos answer again after {self._failed_reads} failed read(s)")

@@ -1,6 +1,6 @@
 """Every body speaks the same contract: registered once, the same graph, the same facts.
 
-A simulation node added under nodes/ without an entry in so101.bodies would escape the
+A body node added under nodes/ without an entry in so101.bodies would escape the
 contract suite (the `body` fixture of tests/test_simulation_node.py runs over that table):
 the first test fails then.
 """
@@ -19,19 +19,26 @@ from so101.robot import ACTUATED_JOINTS
 from tests.dataflow_helpers import ROOT
 
 
-def test_every_simulation_node_is_a_registered_body():
-    node_files = sorted((ROOT / "nodes").glob("simulation*.py"))
+def test_every_body_node_is_registered():
+    node_files = sorted(path for path in (ROOT / "nodes").glob("*.py") if path.name != "keyboard_control.py")
     assert node_files == sorted(body.node_file for body in BODIES.values())
     assert DEFAULT_BODY == "pybullet"  # the course's choice
 
 
-def graph(dataflow_file):
-    """The dataflow's nodes without what may differ between bodies: the simulation's path and env."""
-    nodes = yaml.safe_load(dataflow_file.read_text(encoding="utf-8"))["nodes"]
+def graph(body):
+    """The body's dataflow without what may differ between bodies: the body node's id, path,
+    env and tick period (the real arm's bus ticks at 50 Hz), and the camera the real arm lacks."""
+    nodes = yaml.safe_load(body.dataflow_file.read_text(encoding="utf-8"))["nodes"]
     for node in nodes:
-        if node["id"] == "simulation":
+        if node["id"] == body.node_id:
+            node["id"] = "simulation"
             node.pop("path")
             node.pop("env")
+            node["inputs"]["tick"].pop("source")
+            node["outputs"] = [output for output in node["outputs"] if output != "image"]
+        for spec in node.get("inputs", {}).values():
+            if "source" in spec:
+                spec["source"] = spec["source"].replace(f"{body.node_id}/", "simulation/")
     return nodes
 
 
@@ -39,9 +46,9 @@ def graph(dataflow_file):
 def test_each_body_has_the_courses_graph(name):
     body = BODIES[name]
     assert body.dataflow_file.is_file() and body.node_file.is_file()
-    assert graph(body.dataflow_file) == graph(BODIES[DEFAULT_BODY].dataflow_file)
-    simulation = next(node for node in yaml.safe_load(body.dataflow_file.read_text())["nodes"] if node["id"] == "simulation")
-    assert (ROOT / simulation["path"]) == body.node_file
+    assert graph(body) == graph(BODIES[DEFAULT_BODY])
+    node = next(node for node in yaml.safe_load(body.dataflow_file.read_text())["nodes"] if node["id"] == body.node_id)
+    assert (ROOT / node["path"]) == body.node_file
 
 
 def test_the_joint_facts_equal_the_mjcf():
@@ -85,12 +92,13 @@ def test_without_damping_the_mujoco_arm_overshoots_more():
 
 def test_so101_teleop_knows_every_loaded_line():
     # teleop waits for this line (so101.dataflow.LOADED_MARKS) without importing the loop's module.
-    from so101.body_node import TEXT
+    from so101.body_node import TAGS, TEXT
     from so101.dataflow import LOADED_MARKS
 
     for lang, text in TEXT.items():
-        loaded = text["loaded"].format(identity="robot_id = 1", mode="DIRECT", step_ms=4, detail="x")
-        assert any(mark in loaded for mark in LOADED_MARKS), lang
+        for tags in TAGS.values():
+            loaded = text["loaded"].format(tag=tags[lang], identity="robot_id = 1", mode="DIRECT", step_ms=4, detail="x")
+            assert any(mark in loaded for mark in LOADED_MARKS), lang
 
 
 @pytest.mark.parametrize("bad", [[0.0] * 5, [0.0] * 7, [0, 0, 0, float("nan"), 0, 0], "123456", None])

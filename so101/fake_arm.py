@@ -1,0 +1,1127 @@
+"""`so101 fake-arm`: an emulated SO-101 servo bus on a pseudo-terminal.
+
+Six Feetech STS3215 servos (IDs 1-6) answer Feetech's serial protocol ("protocol 0", the
+one `scservo_sdk.PacketHandler(0)` speaks) on a pseudo-terminal such as /dev/pts/7, so the
+real-arm driver, `so101 calibrate` and their tests run without hardware. It emulates the
+protocol, the register table (so101/sts3215.py) and an assembled arm's hard stops; it is not
+a physics model: no gravity, no load, no inertia, a constant speed.
+
+The protocol, from Feetech's published description:
+
+    instruction  FF FF ID LEN INSTR PARAM... CHK     LEN = len(PARAM) + 2
+    status       FF FF ID LEN ERR   PARAM... CHK     CHK = ~(ID + LEN + INSTR/ERR + sum(PARAM)) & 0xFF
+
+PING 0x01, READ 0x02 (address, length), WRITE 0x03 (address, data...), REG_WRITE 0x04 +
+ACTION 0x05 (a write held until ACTION), SYNC_READ 0x82 (to the broadcast ID 0xFE: address,
+length, id1, id2, ...; each listed servo answers with its own status packet, in the listed
+order) and SYNC_WRITE 0x83 (broadcast: address, length, then id + length bytes per servo; no
+answer). As on a real bus: a packet with a bad checksum is ignored, broadcast instructions
+(other than SYNC_READ) get no answer, an ID that is not on the bus gets no answer, and the
+byte stream is resynchronised on FF FF (a packet may arrive in pieces; one left incomplete
+for PARTIAL_PACKET_TIMEOUT_S is dropped).
+
+Positions, as the STS3215 does them (all in encoder steps, 4096 per turn):
+    Present_Position = (physical - Homing_Offset) mod 4096     (Homing_Offset: sign bit 11)
+    Goal_Position g  -> the servo drives its Present_Position to g, clamped to
+                        [Min_Position_Limit, Max_Position_Limit] unless both are 0
+With Torque_Enable = 1 the motor moves toward the goal at a constant speed (Goal_Velocity if
+not 0, capped at the motor's speed) without crossing the 0/4095 seam of its own (offset)
+frame, as a servo in position mode does; the hard stops stop it. The motion is computed
+lazily from time.monotonic() whenever a register is read or written, so it is exact however
+often, or seldom, the bus is polled. Torque_Enable = 0: the motor does not move by itself,
+but a hand can move it (`move_by_hand`, `sweep`). Writing 128 to Torque_Enable sets
+Homing_Offset so that the current position reads 2048 (Feetech's "middle position
+calibration"). Only position mode (Operating_Mode 0) is emulated; Goal_Time and Acceleration
+are stored but not emulated (the speed is constant, a new goal takes effect at once).
+
+EEPROM (addresses below 40) behaves as Feetech describes the Lock register: a write takes
+effect at once; it is kept through `power_cycle()` only if it was made with Lock = 0. A servo
+whose Baud_Rate register is set to anything but 0 (1,000,000 baud) no longer hears the bus,
+as a real one listening at another speed. A write to ID moves the servo to its new ID (it
+answers that write from the old one). Two servos that answer at once collide: the host gets
+one packet with a wrong checksum.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import select
+import signal
+import sys
+import threading
+import time
+import tty
+from dataclasses import dataclass
+
+from so101 import sts3215
+from so101.robot import ACTUATED_JOINTS
+
+# -- the protocol ------------------------------------------------------------------------
+
+HEADER = b"\xff\xff"
+BROADCAST_ID = 0xFE
+PING, READ, WRITE, REG_WRITE, ACTION = 0x01, 0x02, 0x03, 0x04, 0x05
+SYNC_READ, SYNC_WRITE = 0x82, 0x83
+MEMORY_SIZE = 256  # the register memory, addresses 0-255; a READ past its end gets no answer
+# A packet whose remaining bytes do not come within this time is dropped (at 1,000,000 baud
+# a whole 250-byte packet takes 2.5 ms; a client writes a packet in one go).
+PARTIAL_PACKET_TIMEOUT_S = 0.05
+
+_ADDRESS = {name: address for name, (address, _) in sts3215.REGISTERS.items()}
+# Addresses 0-4 (firmware version, Model_Number) and everything from Present_Position on are
+# the servo's to write; a host's write to them is ignored, as by a real servo.
+FIRST_WRITABLE = _ADDRESS["ID"]
+FIRST_READ_ONLY = _ADDRESS["Present_Position"]
+CALIBRATE_MIDDLE = 128  # written to Torque_Enable: the current position becomes 2048
+MIDDLE = sts3215.STEPS_PER_TURN // 2
+BAUD_INDEX_1M = 0  # Baud_Rate register value for 1,000,000 baud: the bus this emulates
+
+# The motor's top speed with Goal_Velocity = 0, in steps/s: 3000 steps/s ≈ 264°/s, near an
+# STS3215's no-load speed at 7.4 V (0.222 s per 60°, ≈ 270°/s). Load would slow a real one.
+DEFAULT_SPEED_STEPS_S = 3000.0
+SUPPLY_DECIVOLTS = 120  # Present_Voltage: 12.0 V
+TEMPERATURE_C = 30  # Present_Temperature
+
+# What each servo holds at power-up (all other addresses 0). Goal_Position = the present
+# position and the read-only registers are filled in from the physical state.
+POWER_UP: dict[str, int] = {
+    "Model_Number": sts3215.MODEL_NUMBER,
+    "Baud_Rate": BAUD_INDEX_1M,
+    "Return_Delay_Time": 0,
+    "Min_Position_Limit": 0,
+    "Max_Position_Limit": sts3215.MAX_STEP,
+    "Max_Torque_Limit": 1000,
+    "P_Coefficient": 32,
+    "D_Coefficient": 32,
+    "I_Coefficient": 0,
+    "Homing_Offset": 0,
+    "Operating_Mode": 0,
+    "Torque_Enable": 0,
+    "Acceleration": 0,
+    "Goal_Time": 0,
+    "Goal_Velocity": 0,
+    "Torque_Limit": 1000,
+    "Lock": 1,
+}
+
+
+def checksum(body: bytes) -> int:
+    """The checksum of a packet's ID, LEN, INSTR/ERR and parameters."""
+    return ~sum(body) & 0xFF
+
+
+def instruction_packet(servo_id: int, instruction: int, params: bytes = b"") -> bytes:
+    """An instruction packet, as a host sends it (for tests and tools that bypass the SDK)."""
+    body = bytes([servo_id, len(params) + 2, instruction]) + bytes(params)
+    return HEADER + body + bytes([checksum(body)])
+
+
+# -- the assembled arm ----------------------------------------------------------------------
+
+# The mechanical model, one row per servo: (ID, joint, assembly offset, hard stops?).
+# The assembly offset is where the middle of the joint's travel lands on the servo's encoder,
+# relative to 2048: a servo horn is never fitted exactly at mid-scale, so a calibration has real
+# homing offsets to find (distinct, some negative, a few hundred steps). Joints with hard stops
+# travel over their URDF range (so101/robot.py, converted at 4096 steps per 360°) centred on
+# that middle; wrist_roll has no stops (it turns fully, its encoder wrapping 0..4095); the
+# gripper's travel is its URDF span (-10° to 100°: 110°). At power-up every joint rests at its
+# middle. No joint's travel crosses its encoder's 0/4095 seam.
+MECHANICAL_TABLE: tuple[tuple[int, str, int, bool], ...] = (
+    (1, "shoulder_pan", +310, True),
+    (2, "shoulder_lift", -420, True),
+    (3, "elbow_flex", +190, True),
+    (4, "wrist_flex", -275, True),
+    (5, "wrist_roll", +530, False),
+    (6, "gripper", -360, True),
+)
+
+
+@dataclass(frozen=True)
+class Mechanics:
+    """One joint as assembled: physical encoder positions (steps) of its middle and stops."""
+
+    servo_id: int
+    joint: str
+    centre: int
+    lower: int | None  # hard stops; None for a joint that turns fully
+    upper: int | None
+
+    @property
+    def has_stops(self) -> bool:
+        return self.lower is not None
+
+    def clamp(self, physical: float) -> float:
+        """Where the joint can be: inside its stops, or on its encoder's turn."""
+        if self.lower is None:
+            return physical % sts3215.STEPS_PER_TURN
+        return min(max(physical, self.lower), self.upper)
+
+
+def _mechanics() -> dict[int, Mechanics]:
+    by_name = {joint.name: joint for joint in ACTUATED_JOINTS}
+    table = {}
+    for servo_id, name, offset, has_stops in MECHANICAL_TABLE:
+        centre = MIDDLE + offset
+        lower = upper = None
+        if has_stops:
+            joint = by_name[name]
+            half = round((joint.upper_deg - joint.lower_deg) / 360.0 * sts3215.STEPS_PER_TURN / 2)
+            lower, upper = centre - half, centre + half
+        table[servo_id] = Mechanics(servo_id, name, centre, lower, upper)
+    return table
+
+
+MECHANICS: dict[int, Mechanics] = _mechanics()
+ALL_IDS = tuple(MECHANICS)
+
+# `sweep`: how long the hand rests on each stop, as a share of the whole sweep.
+SWEEP_DWELL_SHARE = 0.1
+
+
+class _HandPath:
+    """A hand moving a joint: straight lines between (time, unwrapped physical position) points."""
+
+    def __init__(self, points: list[tuple[float, float]]):
+        self.points = points
+
+    @property
+    def end_time(self) -> float:
+        return self.points[-1][0]
+
+    def at(self, now: float) -> tuple[float, float]:
+        """(position, velocity in steps/s) at `now`."""
+        if now >= self.end_time:
+            return self.points[-1][1], 0.0
+        if now <= self.points[0][0]:
+            return self.points[0][1], 0.0
+        for (t0, p0), (t1, p1) in zip(self.points, self.points[1:]):
+            if now < t1:
+                slope = (p1 - p0) / (t1 - t0) if t1 > t0 else 0.0
+                return p0 + slope * (now - t0), slope
+        return self.points[-1][1], 0.0
+
+
+class _Servo:
+    """One STS3215: its register memory and the physical position of its joint."""
+
+    def __init__(self, mechanics: Mechanics, physical: float, now: float):
+        self.mechanics = mechanics
+        self.memory = bytearray(MEMORY_SIZE)
+        self.physical = float(physical)  # encoder steps, inside the stops (or 0..4096 without)
+        self.velocity = 0.0  # steps/s at self.time
+        self.time = now
+        self.hand: _HandPath | None = None
+        self.pending: tuple[int, bytes] | None = None  # REG_WRITE, until ACTION
+        self.fault = ""  # "", "silent" or "corrupt"
+        for name, value in POWER_UP.items():
+            self.set(name, value)
+        self.set("ID", mechanics.servo_id)
+        self.saved_eeprom = bytes(self.memory[: sts3215.EEPROM_END])
+        self.power_up_ram()
+
+    # registers, raw (as stored)
+    def get(self, name: str) -> int:
+        address, size = sts3215.REGISTERS[name]
+        return int.from_bytes(self.memory[address : address + size], "little")
+
+    def set(self, name: str, raw: int) -> None:
+        address, size = sts3215.REGISTERS[name]
+        self.memory[address : address + size] = (raw & ((1 << (8 * size)) - 1)).to_bytes(size, "little")
+
+    def power_up_ram(self) -> None:
+        ram = sts3215.EEPROM_END
+        self.memory[ram:] = bytes(MEMORY_SIZE - ram)
+        for name, value in POWER_UP.items():
+            if sts3215.REGISTERS[name][0] >= ram:
+                self.set(name, value)
+        self.velocity = 0.0
+        self.pending = None
+        self.refresh()
+        self.set("Goal_Position", self.get("Present_Position"))
+
+    @property
+    def bus_id(self) -> int:
+        return self.get("ID")
+
+    @property
+    def hears_bus(self) -> bool:
+        return self.get("Baud_Rate") == BAUD_INDEX_1M
+
+    @property
+    def torque_on(self) -> bool:
+        return self.get("Torque_Enable") != 0
+
+    @property
+    def homing_offset(self) -> int:
+        return sts3215.decode_signed(self.get("Homing_Offset"), sts3215.SIGN_BITS["Homing_Offset"])
+
+    def goal(self) -> int:
+        """The position the motor drives to, in the offset frame, after the limits."""
+        goal = sts3215.decode_signed(self.get("Goal_Position"), 15)
+        low, high = self.get("Min_Position_Limit"), self.get("Max_Position_Limit")
+        if low == 0 and high == 0:
+            # No limits: the STS3215's multi-turn use. Approximated: goals past 0..4095 add turns.
+            return goal
+        return min(max(goal, low), high)
+
+    def speed(self, top_speed: float) -> float:
+        asked = abs(sts3215.decode_signed(self.get("Goal_Velocity"), sts3215.SIGN_BITS["Goal_Velocity"]))
+        return min(float(asked), top_speed) if asked else top_speed
+
+    def advance(self, now: float, top_speed: float) -> None:
+        """Bring the joint to `now`: the hand's path, or the motor toward its goal."""
+        elapsed = max(0.0, now - self.time)
+        self.time = max(self.time, now)
+        if self.hand is not None and not self.torque_on:
+            position, self.velocity = self.hand.at(now)
+            self.physical = self.mechanics.clamp(position)
+            if now >= self.hand.end_time:
+                self.hand = None
+        elif self.torque_on:
+            self.hand = None
+            present = (self.physical - self.homing_offset) % sts3215.STEPS_PER_TURN
+            error = self.goal() - present
+            speed = self.speed(top_speed)
+            direction = 1.0 if error > 0 else -1.0
+            travel = min(abs(error), speed * elapsed)
+            arrived = travel >= abs(error)
+            wanted = self.physical + (error if arrived else direction * travel)
+            self.physical = self.mechanics.clamp(wanted)
+            blocked = self.mechanics.has_stops and self.physical != wanted
+            self.velocity = 0.0 if arrived or blocked else direction * speed
+        else:
+            self.velocity = 0.0
+        self.refresh()
+
+    def refresh(self) -> None:
+        """The registers the servo writes itself, from the physical state."""
+        self.set("Present_Position", (round(self.physical) - self.homing_offset) % sts3215.STEPS_PER_TURN)
+        speed = min(round(abs(self.velocity)), (1 << 15) - 1)
+        self.set("Present_Velocity", sts3215.encode_signed(speed if self.velocity >= 0 else -speed, 15))
+        self.set("Moving", 1 if self.velocity else 0)
+        self.set("Present_Load", 0)
+        self.set("Present_Current", 0)
+        self.set("Present_Voltage", SUPPLY_DECIVOLTS)
+        self.set("Present_Temperature", TEMPERATURE_C)
+
+    def write(self, address: int, data: bytes) -> None:
+        """A host's write, byte by byte as the servo takes it (call advance() first)."""
+        torque_address = _ADDRESS["Torque_Enable"]
+        for index, value in enumerate(data):
+            where = address + index
+            if where >= MEMORY_SIZE:
+                break
+            if not FIRST_WRITABLE <= where < FIRST_READ_ONLY:
+                continue
+            if where == torque_address and value == CALIBRATE_MIDDLE:
+                self.calibrate_middle()
+                continue
+            self.memory[where] = value
+            if where < sts3215.EEPROM_END and self.get("Lock") == 0:
+                self.saved_eeprom = self.saved_eeprom[:where] + bytes([value]) + self.saved_eeprom[where + 1 :]
+        if self.torque_on:
+            self.hand = None  # the motor holds: a hand cannot move it
+        elif self.hand is None:
+            self.velocity = 0.0
+        self.refresh()
+
+    def calibrate_middle(self) -> None:
+        bit = sts3215.SIGN_BITS["Homing_Offset"]
+        limit = (1 << bit) - 1
+        offset = max(-limit, min(limit, round(self.physical) % sts3215.STEPS_PER_TURN - MIDDLE))
+        self.set("Homing_Offset", sts3215.encode_signed(offset, bit))
+        address, size = sts3215.REGISTERS["Homing_Offset"]
+        saved = bytearray(self.saved_eeprom)
+        saved[address : address + size] = self.memory[address : address + size]
+        self.saved_eeprom = bytes(saved)
+
+
+# -- the emulator ----------------------------------------------------------------------------
+
+
+class FakeArm:
+    """Six emulated STS3215 servos on a pseudo-terminal; `.port` is the path a driver opens.
+
+        with FakeArm() as arm:
+            port = PortHandler(arm.port)   # scservo_sdk, as for a real arm
+
+    `servo_id` in this API is a servo's power-up ID (its joint, 1-6), whatever its ID register
+    says later. Registers are read and written by name (so101/sts3215.py), signed ones as
+    signed numbers. All methods are safe to call from any thread.
+    """
+
+    def __init__(
+        self,
+        ids: tuple[int, ...] | list[int] = ALL_IDS,
+        speed_steps_s: float = DEFAULT_SPEED_STEPS_S,
+        start_positions: dict[int, int] | None = None,
+    ):
+        ids = tuple(ids)
+        unknown = [servo_id for servo_id in ids if servo_id not in MECHANICS]
+        if unknown or not ids or len(set(ids)) != len(ids):
+            raise ValueError(f"servo ids must be distinct, from {ALL_IDS[0]} to {ALL_IDS[-1]}; got {ids}")
+        if not speed_steps_s > 0:
+            raise ValueError(f"speed_steps_s must be positive, got {speed_steps_s}")
+        start_positions = dict(start_positions or {})
+        for servo_id, position in start_positions.items():
+            mechanics = MECHANICS.get(servo_id)
+            if servo_id not in ids or mechanics is None:
+                raise ValueError(f"start_positions names servo {servo_id}, which is not on this bus ({ids})")
+            low, high = (mechanics.lower, mechanics.upper) if mechanics.has_stops else (0, sts3215.MAX_STEP)
+            if not low <= position <= high:
+                raise ValueError(
+                    f"start position {position} of servo {servo_id} ({mechanics.joint}) is outside "
+                    f"its travel, {low}..{high} steps"
+                )
+        self.speed_steps_s = float(speed_steps_s)
+        self._lock = threading.RLock()
+        now = time.monotonic()
+        self._servos = {
+            servo_id: _Servo(MECHANICS[servo_id], start_positions.get(servo_id, MECHANICS[servo_id].centre), now)
+            for servo_id in ids
+        }
+        self._muted = False
+        self._counts = {"packets": 0, "replies": 0, "bad_checksums": 0, "dropped_bytes": 0}
+        self._master, self._slave = os.openpty()
+        tty.setraw(self._slave)
+        os.set_blocking(self._master, False)
+        self.port = os.ttyname(self._slave)
+        self._wake_read, self._wake_write = os.pipe()
+        self._thread: threading.Thread | None = None
+        self._port_open = True
+        self._buffer = bytearray()
+
+    # -- life cycle
+
+    def start(self) -> "FakeArm":
+        """Start serving the bus (a daemon thread). Returns self."""
+        with self._lock:
+            if self._thread is None and self._port_open:
+                self._thread = threading.Thread(target=self._serve, name="fake-arm-bus", daemon=True)
+                self._thread.start()
+        return self
+
+    def close_port(self) -> None:
+        """The pseudo-terminal goes away, as an unplugged USB adapter: the client's next read
+        or write fails and the path no longer exists. The servos stay readable here."""
+        with self._lock:
+            if not self._port_open:
+                return
+            self._port_open = False
+            thread, self._thread = self._thread, None
+        os.write(self._wake_write, b"x")
+        if thread is not None and thread is not threading.current_thread():
+            thread.join(timeout=2.0)
+        for fd in (self._master, self._slave, self._wake_read, self._wake_write):
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+
+    def close(self) -> None:
+        """Stop serving and release the pseudo-terminal; safe to call twice."""
+        self.close_port()
+
+    def __enter__(self) -> "FakeArm":
+        return self.start()
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    @property
+    def port_open(self) -> bool:
+        return self._port_open
+
+    @property
+    def ids(self) -> tuple[int, ...]:
+        return tuple(self._servos)
+
+    @property
+    def packets_served(self) -> int:
+        """Instruction packets received with a good checksum (to any ID), since the start."""
+        return self._counts["packets"]
+
+    def stats(self) -> dict[str, int]:
+        """Counters: packets (good ones received), replies (status packets sent),
+        bad_checksums (packets ignored), dropped_bytes (noise and stale partial packets)."""
+        with self._lock:
+            return dict(self._counts)
+
+    # -- registers and the joint, for tests and tools
+
+    def _servo(self, servo_id: int) -> _Servo:
+        try:
+            return self._servos[servo_id]
+        except KeyError:
+            raise ValueError(f"no servo {servo_id} on this bus; ids: {self.ids}") from None
+
+    def read_register(self, servo_id: int, name: str) -> int:
+        """A register's value now (signed registers decoded)."""
+        if name not in sts3215.REGISTERS:
+            raise KeyError(f"no register {name!r}; see so101/sts3215.py")
+        with self._lock:
+            servo = self._servo(servo_id)
+            servo.advance(time.monotonic(), self.speed_steps_s)
+            raw = servo.get(name)
+        bit = sts3215.SIGN_BITS.get(name)
+        return sts3215.decode_signed(raw, bit) if bit is not None else raw
+
+    def write_register(self, servo_id: int, name: str, value: int) -> None:
+        """Write a register as a host's WRITE would (same rules: EEPROM and Lock, 128 to
+        Torque_Enable, ...), but whatever the faults. ValueError for a read-only register."""
+        if name not in sts3215.REGISTERS:
+            raise KeyError(f"no register {name!r}; see so101/sts3215.py")
+        address, size = sts3215.REGISTERS[name]
+        if not FIRST_WRITABLE <= address < FIRST_READ_ONLY:
+            raise ValueError(f"{name} is read-only: the servo writes it")
+        bit = sts3215.SIGN_BITS.get(name)
+        raw = sts3215.encode_signed(value, bit) if bit is not None else int(value)
+        if not 0 <= raw < 1 << (8 * size):
+            raise ValueError(f"{value} does not fit {name} ({size} byte{'s' if size > 1 else ''})")
+        with self._lock:
+            servo = self._servo(servo_id)
+            servo.advance(time.monotonic(), self.speed_steps_s)
+            servo.write(address, raw.to_bytes(size, "little"))
+
+    def physical_position(self, servo_id: int) -> int:
+        """The joint's encoder reading before the homing offset (steps, 0..4095)."""
+        with self._lock:
+            servo = self._servo(servo_id)
+            servo.advance(time.monotonic(), self.speed_steps_s)
+            return round(servo.physical) % sts3215.STEPS_PER_TURN
+
+    def mechanics(self, servo_id: int) -> Mechanics:
+        """The joint's middle and hard stops (physical steps)."""
+        return self._servo(servo_id).mechanics
+
+    def power_cycle(self) -> None:
+        """Power off and on: EEPROM back to what was saved (written with Lock = 0), RAM to its
+        power-up values (torque off, Goal_Position = present, Lock = 1). The joints stay put."""
+        with self._lock:
+            now = time.monotonic()
+            for servo in self._servos.values():
+                servo.advance(now, self.speed_steps_s)
+                servo.hand = None
+                servo.memory[: sts3215.EEPROM_END] = servo.saved_eeprom
+                servo.power_up_ram()
+
+    # -- a hand
+
+    def move_by_hand(self, servo_id: int, physical_steps: int, relative: bool = False) -> int:
+        """Move a joint by hand to a physical encoder position (or by `physical_steps` with
+        relative=True), stopped by its hard stops; returns where it is. With torque on the
+        servo holds its position against the hand (modelled as perfectly stiff): nothing moves."""
+        with self._lock:
+            servo = self._servo(servo_id)
+            servo.advance(time.monotonic(), self.speed_steps_s)
+            if not servo.torque_on:
+                servo.hand = None
+                target = servo.physical + physical_steps if relative else float(physical_steps)
+                servo.physical = servo.mechanics.clamp(round(target))
+                servo.velocity = 0.0
+                servo.refresh()
+            return round(servo.physical) % sts3215.STEPS_PER_TURN
+
+    def sweep(self, duration_s: float = 4.0, ids: tuple[int, ...] | None = None) -> tuple[int, ...]:
+        """A person calibrating: over `duration_s`, every torque-off joint (of `ids`) moves from
+        where it is to one stop, rests there, goes to the other stop, rests, and comes back to
+        its middle; wrist_roll, which has no stops, turns half a turn each way from its middle
+        (a full turn). Returns at once with the ids it moves; the motion happens in the background
+        (evaluated from the clock as the motor's is). A joint whose torque is turned on stops
+        following the hand. `wait_hand()` waits for the end."""
+        if not duration_s > 0:
+            raise ValueError(f"duration_s must be positive, got {duration_s}")
+        swept = []
+        with self._lock:
+            now = time.monotonic()
+            for servo_id in ids if ids is not None else self.ids:
+                servo = self._servo(servo_id)
+                servo.advance(now, self.speed_steps_s)
+                if servo.torque_on:
+                    continue
+                swept.append(servo_id)
+                servo.hand = _HandPath(self._sweep_points(servo, now, duration_s))
+        return tuple(swept)
+
+    @staticmethod
+    def _sweep_points(servo: _Servo, now: float, duration_s: float) -> list[tuple[float, float]]:
+        m = servo.mechanics
+        start = servo.physical
+        if m.has_stops:
+            lower, upper = float(m.lower), float(m.upper)
+        else:  # unwrap around the middle: the hand turns it 180° each way
+            turn = sts3215.STEPS_PER_TURN
+            start = m.centre + ((start - m.centre + MIDDLE) % turn - MIDDLE)
+            lower, upper = float(m.centre - MIDDLE), float(m.centre + MIDDLE)
+        dwell = SWEEP_DWELL_SHARE * duration_s
+        legs = (abs(lower - start), upper - lower, abs(upper - m.centre))
+        moving = duration_s - 2 * dwell
+        per_step = moving / sum(legs)
+        t = now
+        points = [(t, start)]
+        t += legs[0] * per_step
+        points.append((t, lower))
+        t += dwell
+        points.append((t, lower))
+        t += legs[1] * per_step
+        points.append((t, upper))
+        t += dwell
+        points.append((t, upper))
+        points.append((now + duration_s, float(m.centre)))
+        return points
+
+    def hand_busy(self) -> bool:
+        """Whether a sweep is still moving some joint."""
+        with self._lock:
+            now = time.monotonic()
+            return any(s.hand is not None and now < s.hand.end_time and not s.torque_on for s in self._servos.values())
+
+    def wait_hand(self, timeout: float | None = None) -> bool:
+        """Wait for the sweep to end; False if `timeout` (s) passed first."""
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while self.hand_busy():
+            if deadline is not None and time.monotonic() >= deadline:
+                return False
+            time.sleep(0.01)
+        return True
+
+    # -- faults
+
+    def silence(self, servo_id: int) -> None:
+        """The servo still receives and obeys, but never replies."""
+        with self._lock:
+            self._servo(servo_id).fault = "silent"
+
+    def corrupt(self, servo_id: int) -> None:
+        """The servo's replies carry a wrong checksum."""
+        with self._lock:
+            self._servo(servo_id).fault = "corrupt"
+
+    def answer(self, servo_id: int) -> None:
+        """The servo replies normally again (its own fault cleared; see answer_all for mute)."""
+        with self._lock:
+            self._servo(servo_id).fault = ""
+
+    def mute_all(self) -> None:
+        """No servo replies, all still receive and obey: a broken return line, or servo power
+        lost, as the host sees it."""
+        with self._lock:
+            self._muted = True
+
+    def answer_all(self) -> None:
+        """Every fault cleared, mute included."""
+        with self._lock:
+            self._muted = False
+            for servo in self._servos.values():
+                servo.fault = ""
+
+    def faults(self) -> dict[int, str]:
+        """Each servo's reply state: "answers", "silent", "corrupt" or "muted"."""
+        with self._lock:
+            return {
+                servo_id: "muted" if self._muted else (servo.fault or "answers")
+                for servo_id, servo in self._servos.items()
+            }
+
+    def status_rows(self) -> list[dict[str, object]]:
+        """One dict per servo, for a table: registers (signed decoded) and the joint."""
+        rows = []
+        with self._lock:
+            now = time.monotonic()
+            faults = self.faults()
+            for servo_id, servo in self._servos.items():
+                servo.advance(now, self.speed_steps_s)
+                rows.append(
+                    {
+                        "id": servo_id,
+                        "bus_id": servo.bus_id,
+                        "joint": servo.mechanics.joint,
+                        "torque": servo.torque_on,
+                        "goal": sts3215.decode_signed(servo.get("Goal_Position"), 15),
+                        "present": servo.get("Present_Position"),
+                        "homing_offset": servo.homing_offset,
+                        "limits": (servo.get("Min_Position_Limit"), servo.get("Max_Position_Limit")),
+                        "physical": round(servo.physical) % sts3215.STEPS_PER_TURN,
+                        "stops": (servo.mechanics.lower, servo.mechanics.upper),
+                        "replies": faults[servo_id],
+                    }
+                )
+        return rows
+
+    # -- the bus
+
+    def _serve(self) -> None:
+        master, wake = self._master, self._wake_read
+        buffer = self._buffer
+        poller = select.poll()  # not select.select: it fails on descriptors past 1023
+        poller.register(master, select.POLLIN)
+        poller.register(wake, select.POLLIN)
+        while True:
+            timeout_ms = PARTIAL_PACKET_TIMEOUT_S * 1000 if buffer else None
+            ready = {fd for fd, _ in poller.poll(timeout_ms)}
+            if wake in ready:
+                return
+            if master in ready:
+                try:
+                    data = os.read(master, 4096)
+                except BlockingIOError:
+                    continue
+                except OSError:
+                    return
+                if not data:
+                    return
+                buffer += data
+            elif buffer:  # a partial packet that was never finished: drop it, look for the next header
+                self._drop_head(buffer)
+            reply = self._take_packets(buffer)
+            if reply:
+                try:
+                    os.write(master, reply)
+                except BlockingIOError:
+                    pass  # nobody reads the port and its buffer is full: the bytes are lost, as on a bus
+                except OSError:
+                    return
+
+    def _drop_head(self, buffer: bytearray) -> None:
+        following = buffer.find(HEADER, 1)
+        cut = following if following > 0 else len(buffer)
+        with self._lock:
+            self._counts["dropped_bytes"] += cut
+        del buffer[:cut]
+
+    def _take_packets(self, buffer: bytearray) -> bytes:
+        """Handle every complete packet in `buffer` (removing it); the replies, in order."""
+        replies = []
+        while True:
+            start = buffer.find(HEADER)
+            if start < 0:
+                keep = 1 if buffer[-1:] == b"\xff" else 0
+                self._count_dropped(len(buffer) - keep)
+                del buffer[: len(buffer) - keep]
+                break
+            if start:
+                self._count_dropped(start)
+                del buffer[:start]
+            if len(buffer) < 4:
+                break
+            if buffer[2] == 0xFF:  # FF FF FF: the header is the later pair
+                self._count_dropped(1)
+                del buffer[0]
+                continue
+            length = buffer[3]
+            if length < 2:
+                self._count_dropped(2)
+                del buffer[:2]
+                continue
+            total = length + 4
+            if len(buffer) < total:
+                break
+            packet = bytes(buffer[:total])
+            if checksum(packet[2:-1]) != packet[-1]:
+                with self._lock:
+                    self._counts["bad_checksums"] += 1
+                del buffer[:2]  # resynchronise on the next FF FF
+                continue
+            del buffer[:total]
+            replies.append(self._handle(packet[2], packet[4], packet[5:-1]))
+        return b"".join(replies)
+
+    def _count_dropped(self, count: int) -> None:
+        if count:
+            with self._lock:
+                self._counts["dropped_bytes"] += count
+
+    def _handle(self, target: int, instruction: int, params: bytes) -> bytes:
+        with self._lock:
+            self._counts["packets"] += 1
+            now = time.monotonic()
+            listening = [servo for servo in self._servos.values() if servo.hears_bus]
+            broadcast = target == BROADCAST_ID
+            servos = listening if broadcast else [s for s in listening if s.bus_id == target]
+            if instruction == SYNC_READ:
+                return self._sync_read(target, params, listening, now)
+            if instruction == SYNC_WRITE:
+                self._sync_write(target, params, listening, now)
+                return b""
+            if not servos:
+                return b""
+            for servo in servos:
+                servo.advance(now, self.speed_steps_s)
+            data = b""
+            if instruction == PING:
+                pass
+            elif instruction == READ:
+                if len(params) != 2 or params[0] + params[1] > MEMORY_SIZE:
+                    return b""
+                address, size = params
+                data = bytes(servos[0].memory[address : address + size])
+            elif instruction == WRITE:
+                if len(params) < 2:
+                    return b""
+                for servo in servos:
+                    servo.write(params[0], params[1:])
+            elif instruction == REG_WRITE:
+                if len(params) < 2:
+                    return b""
+                for servo in servos:
+                    servo.pending = (params[0], bytes(params[1:]))
+            elif instruction == ACTION:
+                for servo in servos:
+                    if servo.pending is not None:
+                        servo.write(*servo.pending)
+                        servo.pending = None
+            else:
+                return b""  # an instruction the STS3215 does not know: no answer
+            if broadcast:
+                return b""
+            return self._status(servos, target, data)
+
+    def _status(self, servos: list[_Servo], reply_id: int, data: bytes) -> bytes:
+        speaking = [] if self._muted else [servo for servo in servos if servo.fault != "silent"]
+        if not speaking:
+            return b""
+        body = bytes([reply_id, len(data) + 2, 0]) + data
+        check = checksum(body)
+        if len(speaking) > 1 or speaking[0].fault == "corrupt":
+            check ^= 0xFF  # two servos talking at once garble each other
+        self._counts["replies"] += 1
+        return HEADER + body + bytes([check])
+
+    def _sync_read(self, target: int, params: bytes, listening: list[_Servo], now: float) -> bytes:
+        if target != BROADCAST_ID or len(params) < 3:
+            return b""
+        address, size = params[0], params[1]
+        if address + size > MEMORY_SIZE:
+            return b""
+        replies = []
+        for servo_id in params[2:]:
+            servos = [servo for servo in listening if servo.bus_id == servo_id]
+            if not servos:
+                continue
+            for servo in servos:
+                servo.advance(now, self.speed_steps_s)
+            replies.append(self._status(servos, servo_id, bytes(servos[0].memory[address : address + size])))
+        return b"".join(replies)
+
+    def _sync_write(self, target: int, params: bytes, listening: list[_Servo], now: float) -> None:
+        if target != BROADCAST_ID or len(params) < 3:
+            return
+        address, size = params[0], params[1]
+        chunks = params[2:]
+        if size == 0 or len(chunks) % (size + 1):
+            return  # malformed: the servos cannot tell where each one's data starts
+        for start in range(0, len(chunks), size + 1):
+            servo_id, data = chunks[start], chunks[start + 1 : start + 1 + size]
+            for servo in listening:
+                if servo.bus_id == servo_id:
+                    servo.advance(now, self.speed_steps_s)
+                    servo.write(address, data)
+
+
+# -- the command line --------------------------------------------------------------------------
+
+def calibrate_as_at_the_factory(arm: FakeArm):
+    """Write into `arm`'s servos the calibration a person's `so101 calibrate` would find (the
+    middle pose at each joint's centre, the ranges at its stops, wrist_roll the whole turn) and
+    return it, in so101.calibration's form: an emulated arm ready for the driver, for tests and
+    `so101 bench --body real`."""
+    from so101.calibration import MOTOR_NAMES, MotorCalibration, homing_offset
+
+    calibration = {}
+    for servo_id in arm.ids:
+        mechanics = arm.mechanics(servo_id)
+        offset = homing_offset(mechanics.centre)
+        low, high = ((mechanics.lower - offset, mechanics.upper - offset) if mechanics.has_stops
+                     else (0, sts3215.MAX_STEP))
+        for name, value in (("Homing_Offset", offset), ("Min_Position_Limit", low), ("Max_Position_Limit", high)):
+            arm.write_register(servo_id, name, value)
+        arm.write_register(servo_id, "Goal_Position", arm.read_register(servo_id, "Present_Position"))
+        calibration[MOTOR_NAMES[servo_id - 1]] = MotorCalibration(servo_id, 0, offset, low, high)
+    return calibration
+
+
+COMMANDS_HELP = """\
+commands (one per line):
+  help               this list
+  status             every servo: torque, goal, present position, homing offset, limits, joint
+  sweep [SECONDS]    a hand moves every torque-off joint to both stops and back (default 4 s)
+  move ID STEPS      a hand moves joint ID to physical encoder position STEPS (torque off only);
+                     +STEPS or -STEPS moves it by that much
+  silent ID          servo ID keeps obeying but stops replying
+  corrupt ID         servo ID replies with a wrong checksum
+  answer ID|all      servo ID (or every servo, mute included) replies normally again
+  mute               no servo replies (a broken return line; they all still obey)
+  close              the port goes away, as an unplugged USB adapter
+  quit               stop the emulator (Ctrl-C and SIGTERM too)"""
+
+
+def _ids(text: str) -> tuple[int, ...]:
+    ids: list[int] = []
+    try:
+        for part in text.split(","):
+            if "-" in part:
+                first, last = (int(value) for value in part.split("-", 1))
+                ids.extend(range(first, last + 1))
+            else:
+                ids.append(int(part))
+    except ValueError:
+        ids = []
+    if not ids or len(set(ids)) != len(ids) or any(i not in MECHANICS for i in ids):
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not a set of servo ids: use distinct ids from 1 to 6, like 1,2,3,4,5,6 or 1-6"
+        )
+    return tuple(ids)
+
+
+def _servo_id(text: str) -> int:
+    if text not in {str(i) for i in ALL_IDS}:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a servo id: use 1 to 6")
+    return int(text)
+
+
+def _seconds(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not 0 <= value < 1e6:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a time: use seconds, 0 or more")
+    return value
+
+
+def _speed(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not 0 < value <= 100_000:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a speed: use steps per second, more than 0 (the default is 3000)")
+    return value
+
+
+def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
+    parser.formatter_class = argparse.RawDescriptionHelpFormatter
+    parser.epilog = (
+        "The first line printed is the port alone (e.g. /dev/pts/7), for `so101 fake-arm | head -1`\n"
+        "or a script; open it at 1,000,000 baud as the arm's serial port. Then type commands.\n"
+        "End of input does not stop the emulator; quit, Ctrl-C or SIGTERM does.\n\n" + COMMANDS_HELP
+    )
+    parser.add_argument(
+        "--ids", type=_ids, default=ALL_IDS, metavar="IDS",
+        help="which servos are on the bus, e.g. 1,2,3,4,5,6 (the default) or 1-3; "
+        "1 shoulder_pan, 2 shoulder_lift, 3 elbow_flex, 4 wrist_flex, 5 wrist_roll, 6 gripper",
+    )
+    parser.add_argument(
+        "--speed", type=_speed, default=DEFAULT_SPEED_STEPS_S, metavar="STEPS_PER_S",
+        help="the motors' top speed in encoder steps per second, used when Goal_Velocity is 0 "
+        "(default 3000 ≈ 264°/s, an STS3215's no-load speed at 7.4 V)",
+    )
+    parser.add_argument(
+        "--silent", type=_servo_id, action="append", default=[], metavar="ID",
+        help="servo ID obeys but never replies (repeatable)",
+    )
+    parser.add_argument(
+        "--corrupt", type=_servo_id, action="append", default=[], metavar="ID",
+        help="servo ID replies with a wrong checksum (repeatable)",
+    )
+    parser.add_argument(
+        "--fault-after", type=_seconds, default=0.0, metavar="SECONDS",
+        help="start the --silent/--corrupt faults this long after start-up (default 0: from the start)",
+    )
+    parser.add_argument(
+        "--close-after", type=_seconds, default=None, metavar="SECONDS",
+        help="close the port this long after start-up, as an unplugged USB adapter (the emulator keeps running)",
+    )
+
+
+class _Stop(Exception):
+    """SIGTERM, turned into an exception in the main thread."""
+
+
+class _Output:
+    """Lines for a person; a reader that went away (`| head -1`) silences it, not the emulator."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._gone = False
+
+    def say(self, text: str) -> None:
+        with self._lock:
+            if self._gone:
+                return
+            try:
+                print(text, flush=True)
+            except (BrokenPipeError, ValueError, OSError):
+                self._gone = True
+                try:  # later writes (and the interpreter's own flush at exit) go nowhere
+                    null = os.open(os.devnull, os.O_WRONLY)
+                    os.dup2(null, sys.stdout.fileno())
+                    os.close(null)
+                except (OSError, ValueError):
+                    pass
+
+
+def _status_table(arm: FakeArm) -> str:
+    def span(pair) -> str:
+        return "free" if pair[0] is None else f"{pair[0]}..{pair[1]}"
+
+    lines = [
+        f"{'id':>2}  {'joint':<13} {'torque':<6} {'goal':>5} {'present':>7} {'offset':>6}  "
+        f"{'limits':<9}  {'physical':>8}  {'stops':<10}  replies"
+    ]
+    for row in arm.status_rows():
+        ident = str(row["id"]) if row["bus_id"] == row["id"] else f"{row['id']}>{row['bus_id']}"
+        lines.append(
+            f"{ident:>2}  {row['joint']:<13} {'on' if row['torque'] else 'off':<6} {row['goal']:>5} "
+            f"{row['present']:>7} {row['homing_offset']:>6}  {span(row['limits']):<9}  {row['physical']:>8}  "
+            f"{span(row['stops']):<10}  {row['replies']}"
+        )
+    if not arm.port_open:
+        lines.append(f"port {arm.port} is closed (unplugged): no host can reach these servos")
+    return "\n".join(lines)
+
+
+def _command(arm: FakeArm, line: str, say) -> bool:
+    """Carry out one typed command; False for quit."""
+    words = line.split()
+    if not words:
+        return True
+    verb, rest = words[0].lower(), words[1:]
+    accepted = "help, status, sweep [SECONDS], move ID STEPS, silent ID, corrupt ID, answer ID|all, mute, close, quit"
+
+    def servo_of(text: str) -> int | None:
+        if text.isdigit() and int(text) in arm.ids:
+            return int(text)
+        say(f"no servo {text!r} on this bus; ids: {', '.join(map(str, arm.ids))}")
+        return None
+
+    def wrong_arguments(usage: str) -> bool:
+        say(f"usage: {verb} {usage}; commands: {accepted}")
+        return True
+
+    if verb in ("quit", "exit"):
+        return False
+    if verb == "help":
+        say(COMMANDS_HELP)
+    elif verb == "status":
+        say(_status_table(arm))
+    elif verb == "sweep":
+        if len(rest) > 1:
+            return wrong_arguments("[SECONDS]")
+        try:
+            duration = float(rest[0]) if rest else 4.0
+        except ValueError:
+            duration = float("nan")
+        if not 0 < duration <= 600:
+            say(f"sweep takes a duration in seconds, more than 0 and at most 600; got {rest[0]!r}")
+            return True
+        swept = arm.sweep(duration)
+        held = [i for i in arm.ids if i not in swept]
+        note = f"; torque holds {', '.join(map(str, held))}" if held else ""
+        say(f"sweeping {', '.join(map(str, swept)) or 'no joint'} over {duration:g} s{note}")
+    elif verb == "move":
+        if len(rest) != 2:
+            return wrong_arguments("ID STEPS")
+        servo_id = servo_of(rest[0])
+        if servo_id is None:
+            return True
+        text = rest[1]
+        relative = text[:1] in "+-"
+        digits = text[1:] if relative else text
+        if not digits.isdigit() or (not relative and int(digits) > sts3215.MAX_STEP):
+            say(f"move takes STEPS as a physical position 0-4095, or +N / -N to move by N steps; got {text!r}")
+            return True
+        before = arm.physical_position(servo_id)
+        reached = arm.move_by_hand(servo_id, int(text), relative=relative)
+        if arm.read_register(servo_id, "Torque_Enable"):
+            say(f"servo {servo_id} has torque on: it holds at {reached}; the hand cannot move it")
+        else:
+            say(f"servo {servo_id} moved by hand from {before} to {reached}")
+    elif verb in ("silent", "corrupt", "answer"):
+        if len(rest) != 1:
+            return wrong_arguments("ID" if verb != "answer" else "ID|all")
+        if verb == "answer" and rest[0].lower() == "all":
+            arm.answer_all()
+            say("every servo replies normally")
+            return True
+        servo_id = servo_of(rest[0])
+        if servo_id is None:
+            return True
+        {"silent": arm.silence, "corrupt": arm.corrupt, "answer": arm.answer}[verb](servo_id)
+        say(f"servo {servo_id}: {arm.faults()[servo_id]}")
+    elif verb == "mute":
+        arm.mute_all()
+        say("every servo muted: they obey, none replies (answer all undoes it)")
+    elif verb == "close":
+        arm.close_port()
+        say(f"port {arm.port} closed, as an unplugged adapter; quit to end")
+    else:
+        say(f"unknown command {words[0]!r}; commands: {accepted}")
+    return True
+
+
+def run(args: argparse.Namespace) -> int:
+    def stop(signum, frame):
+        raise _Stop
+
+    previous = signal.signal(signal.SIGTERM, stop)
+    out = _Output()
+    timers: list[threading.Timer] = []
+    arm = FakeArm(ids=args.ids, speed_steps_s=args.speed).start()
+    try:
+        out.say(arm.port)
+        out.say(
+            f"an emulated SO-101 bus: {len(arm.ids)} STS3215 servos, ids {', '.join(map(str, arm.ids))}, "
+            f"1,000,000 baud; it emulates the protocol and the registers, not the physics (no gravity, "
+            f"no load); type help for its commands"
+        )
+
+        def faults() -> None:
+            for servo_id in args.silent:
+                if servo_id in arm.ids:
+                    arm.silence(servo_id)
+            for servo_id in args.corrupt:
+                if servo_id in arm.ids:
+                    arm.corrupt(servo_id)
+            if args.fault_after:
+                out.say(f"faults on: silent {args.silent or 'none'}, corrupt {args.corrupt or 'none'}")
+
+        def unplug() -> None:
+            arm.close_port()
+            out.say(f"port {arm.port} closed after {args.close_after:g} s, as an unplugged adapter")
+
+        missing = [i for i in args.silent + args.corrupt if i not in arm.ids]
+        if missing:
+            out.say(f"note: {', '.join(map(str, missing))} not on this bus (--ids); no fault for them")
+        if args.silent or args.corrupt:
+            if args.fault_after:
+                timers.append(threading.Timer(args.fault_after, faults))
+            else:
+                faults()
+        if args.close_after is not None:
+            timers.append(threading.Timer(args.close_after, unplug))
+        for timer in timers:
+            timer.daemon = True
+            timer.start()
+
+        interactive = sys.stdin is not None and sys.stdin.isatty()
+        while True:
+            if interactive:
+                print("fake-arm> ", end="", flush=True)
+            line = sys.stdin.readline() if sys.stdin is not None else ""
+            if not line:
+                out.say("end of input: the emulator keeps running until Ctrl-C or SIGTERM")
+                while True:
+                    time.sleep(3600)
+            if not _command(arm, line, out.say):
+                break
+    except (KeyboardInterrupt, _Stop):
+        pass
+    finally:
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)  # a second SIGTERM must not interrupt the clean-up
+        for timer in timers:
+            timer.cancel()
+        arm.close()
+        signal.signal(signal.SIGTERM, previous)
+    return 0

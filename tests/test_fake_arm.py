@@ -1,0 +1,578 @@
+"""The emulated SO-101 bus (so101/fake_arm.py), driven through Feetech's own SDK as a driver would.
+
+Every test talks to the emulator over its pseudo-terminal with scservo_sdk (PortHandler,
+PacketHandler(0), GroupSyncRead/GroupSyncWrite) and checks values: the numbers a real
+STS3215 would give, the timing of its motion, what the SDK reports for each fault.
+`arm.read_register` / `physical_position` look inside where the bus cannot.
+"""
+
+from __future__ import annotations
+
+import os
+import select
+import signal
+import subprocess
+import sys
+import termios
+import time
+from pathlib import Path
+
+import pytest
+import serial
+import scservo_sdk as scs
+
+from so101.fake_arm import MECHANICAL_TABLE, MECHANICS, FakeArm
+from so101.robot import ACTUATED_JOINTS
+
+SO101 = Path(sys.executable).parent / "so101"
+IDS = (1, 2, 3, 4, 5, 6)
+JOINT_NAMES = ("shoulder_pan", "shoulder_lift", "elbow_flex", "wrist_flex", "wrist_roll", "gripper")
+
+# Addresses from Feetech's STS memory table, written out here as the oracle
+# (so101/sts3215.py holds the same numbers for the code).
+MODEL_NUMBER, ID, BAUD_RATE, MIN_LIMIT, MAX_LIMIT, HOMING_OFFSET, OPERATING_MODE = 3, 5, 6, 9, 11, 31, 33
+TORQUE_ENABLE, ACCELERATION, GOAL_POSITION, GOAL_VELOCITY, LOCK = 40, 41, 42, 46, 55
+PRESENT_POSITION, PRESENT_VELOCITY, PRESENT_VOLTAGE, PRESENT_TEMPERATURE, MOVING = 56, 58, 62, 63, 66
+
+
+@pytest.fixture
+def arm():
+    fake = FakeArm().start()
+    yield fake
+    fake.close()
+
+
+def open_bus(path: str):
+    port = scs.PortHandler(path)
+    assert port.openPort()
+    assert port.setBaudRate(1_000_000)
+    return port, scs.PacketHandler(0)
+
+
+@pytest.fixture
+def bus(arm):
+    port, packets = open_bus(arm.port)
+    yield port, packets
+    try:
+        port.closePort()
+    except Exception:
+        pass
+
+
+def sync_read(port, packets, address, size, ids=IDS):
+    group = scs.GroupSyncRead(port, packets, address, size)
+    for servo_id in ids:
+        group.addParam(servo_id)
+    result = group.txRxPacket()
+    values = {i: group.getData(i, address, size) for i in ids if group.isAvailable(i, address, size)}
+    return result, values, group
+
+
+def sync_write(port, packets, address, size, values: dict[int, int]):
+    group = scs.GroupSyncWrite(port, packets, address, size)
+    for servo_id, value in values.items():
+        data = [value & 0xFF, (value >> 8) & 0xFF][:size]
+        assert group.addParam(servo_id, data)
+    assert group.txPacket() == scs.COMM_SUCCESS
+
+
+def eventually(check, timeout: float = 1.0):
+    """A sync write gets no reply: the host cannot know when the servos have taken it."""
+    deadline = time.monotonic() + timeout
+    while not check():
+        assert time.monotonic() < deadline, "not within the timeout"
+        time.sleep(0.001)
+
+
+def signed15(raw: int) -> int:
+    return -(raw & 0x7FFF) if raw & 0x8000 else raw
+
+
+# -- the assembled arm -------------------------------------------------------------------------
+
+
+def test_mechanical_table_gives_each_joint_its_urdf_travel_off_centre():
+    offsets = [offset for _, _, offset, _ in MECHANICAL_TABLE]
+    assert [row[1] for row in MECHANICAL_TABLE] == list(JOINT_NAMES)
+    assert len(set(offsets)) == 6 and all(abs(offset) >= 100 for offset in offsets)
+    assert any(offset < 0 for offset in offsets) and any(offset > 0 for offset in offsets)
+    for joint in ACTUATED_JOINTS:
+        m = next(m for m in MECHANICS.values() if m.joint == joint.name)
+        if joint.name == "wrist_roll":
+            assert (m.lower, m.upper) == (None, None)
+            continue
+        travel_deg = (m.upper - m.lower) * 360 / 4096
+        assert travel_deg == pytest.approx(joint.upper_deg - joint.lower_deg, abs=0.1)
+        assert m.lower + m.upper == 2 * m.centre  # the middle of the travel
+        assert 0 < m.lower < m.upper < 4095  # no stop range crosses the encoder's seam
+    assert MECHANICS[6].upper - MECHANICS[6].lower == pytest.approx(110 / 360 * 4096, abs=1)  # gripper: -10°..100°
+
+
+def test_ping_answers_model_777_for_ids_1_to_6_and_nothing_for_7(bus):
+    port, packets = bus
+    for servo_id in IDS:
+        assert packets.ping(port, servo_id) == (777, scs.COMM_SUCCESS, 0)
+    model, result, _ = packets.ping(port, 7)
+    assert (model, result) == (0, scs.COMM_RX_TIMEOUT)
+
+
+def test_power_up_registers(arm, bus):
+    port, packets = bus
+    for servo_id, m in MECHANICS.items():
+        def read(address, size):
+            read_n = packets.read1ByteTxRx if size == 1 else packets.read2ByteTxRx
+            value, result, error = read_n(port, servo_id, address)
+            assert (result, error) == (scs.COMM_SUCCESS, 0)
+            return value
+
+        assert read(MODEL_NUMBER, 2) == 777 and read(ID, 1) == servo_id and read(BAUD_RATE, 1) == 0
+        assert (read(MIN_LIMIT, 2), read(MAX_LIMIT, 2), read(HOMING_OFFSET, 2)) == (0, 4095, 0)
+        assert (read(OPERATING_MODE, 1), read(TORQUE_ENABLE, 1), read(LOCK, 1)) == (0, 0, 1)
+        assert read(PRESENT_POSITION, 2) == read(GOAL_POSITION, 2) == m.centre  # resting at the middle
+        assert (read(PRESENT_VOLTAGE, 1), read(PRESENT_TEMPERATURE, 1), read(MOVING, 1)) == (120, 30, 0)
+        assert arm.read_register(servo_id, "Model_Number") == 777
+
+
+def test_start_positions_choose_where_the_joints_rest():
+    with FakeArm(start_positions={1: 1500, 5: 10}) as fake:
+        port, packets = open_bus(fake.port)
+        result, values, _ = sync_read(port, packets, PRESENT_POSITION, 2)
+        port.closePort()
+    assert result == scs.COMM_SUCCESS
+    assert values == {1: 1500, 2: 1628, 3: 2238, 4: 1773, 5: 10, 6: 1688}
+    with pytest.raises(ValueError, match="outside its travel"):
+        FakeArm(start_positions={2: 100})  # below shoulder_lift's stop
+    with pytest.raises(ValueError):
+        FakeArm(ids=(1, 7))
+
+
+def test_single_register_writes_are_acknowledged_and_read_back(arm, bus):
+    port, packets = bus
+    assert packets.write2ByteTxRx(port, 4, GOAL_VELOCITY, 1234) == (scs.COMM_SUCCESS, 0)
+    assert packets.write1ByteTxRx(port, 4, ACCELERATION, 50) == (scs.COMM_SUCCESS, 0)
+    assert packets.read2ByteTxRx(port, 4, GOAL_VELOCITY) == (1234, scs.COMM_SUCCESS, 0)
+    assert packets.read1ByteTxRx(port, 4, ACCELERATION) == (50, scs.COMM_SUCCESS, 0)
+    assert arm.read_register(4, "Goal_Velocity") == 1234
+    # Present_Position is the servo's to write: acknowledged, ignored.
+    assert packets.write2ByteTxRx(port, 4, PRESENT_POSITION, 100) == (scs.COMM_SUCCESS, 0)
+    assert packets.read2ByteTxRx(port, 4, PRESENT_POSITION)[0] == MECHANICS[4].centre
+    # The test side writes too, signed registers as signed numbers.
+    arm.write_register(4, "Goal_Velocity", -300)
+    assert packets.read2ByteTxRx(port, 4, GOAL_VELOCITY)[0] == 300 | 0x8000
+    with pytest.raises(ValueError, match="read-only"):
+        arm.write_register(4, "Present_Position", 5)
+
+
+def test_sync_read_of_all_six_present_positions(bus):
+    result, values, _ = sync_read(*bus, PRESENT_POSITION, 2)
+    assert result == scs.COMM_SUCCESS
+    assert values == {i: MECHANICS[i].centre for i in IDS}
+
+
+# -- motion --------------------------------------------------------------------------------
+
+
+def test_sync_written_goals_are_reached_at_the_servo_speed():
+    speed = 2000.0
+    with FakeArm(speed_steps_s=speed) as fake:
+        port, packets = open_bus(fake.port)
+        start = {i: MECHANICS[i].centre for i in IDS}
+        goals = {i: start[i] + (400 if i % 2 else -400) for i in IDS}
+        goals[1] = start[1] + 200  # servo 1 at its own Goal_Velocity: 1000 steps/s
+        assert packets.write2ByteTxRx(port, 1, GOAL_VELOCITY, 1000)[0] == scs.COMM_SUCCESS
+        sync_write(port, packets, TORQUE_ENABLE, 1, {i: 1 for i in IDS})
+        t0 = time.monotonic()
+        sync_write(port, packets, GOAL_POSITION, 2, goals)
+        t1 = time.monotonic()
+        time.sleep(0.08)
+        t2 = time.monotonic()
+        result, mid, _ = sync_read(port, packets, PRESENT_POSITION, 2)
+        t3 = time.monotonic()
+        assert result == scs.COMM_SUCCESS
+        for i in IDS:
+            v = 1000.0 if i == 1 else speed
+            travelled = (mid[i] - start[i]) * (1 if goals[i] > start[i] else -1)
+            # The goal took effect between t0 and a few ms after t1; the position was read between t2 and t3.
+            assert v * (t2 - t1 - 0.010) - 1 <= travelled <= v * (t3 - t0) + 1, (i, travelled)
+        velocity, result, _ = packets.read2ByteTxRx(port, 2, PRESENT_VELOCITY)
+        assert signed15(velocity) == -2000  # servo 2 goes down
+        assert packets.read1ByteTxRx(port, 2, MOVING)[0] == 1
+        time.sleep(max(0.0, t0 + 0.2 + 0.03 - time.monotonic()))  # 400 steps at 2000/s, 200 at 1000/s
+        result, final, _ = sync_read(port, packets, PRESENT_POSITION, 2)
+        assert result == scs.COMM_SUCCESS and final == goals
+        assert packets.read2ByteTxRx(port, 2, PRESENT_VELOCITY)[0] == 0
+        assert packets.read1ByteTxRx(port, 2, MOVING)[0] == 0
+        port.closePort()
+
+
+def test_torque_off_the_motor_does_not_move(arm, bus):
+    port, packets = bus
+    centre = MECHANICS[3].centre
+    assert packets.write2ByteTxRx(port, 3, GOAL_POSITION, centre + 300)[0] == scs.COMM_SUCCESS
+    time.sleep(0.15)  # 300 steps take 0.1 s at the default speed
+    assert packets.read2ByteTxRx(port, 3, PRESENT_POSITION)[0] == centre
+    assert packets.read1ByteTxRx(port, 3, MOVING)[0] == 0
+    assert packets.write1ByteTxRx(port, 3, TORQUE_ENABLE, 1)[0] == scs.COMM_SUCCESS
+    time.sleep(0.15)
+    assert packets.read2ByteTxRx(port, 3, PRESENT_POSITION)[0] == centre + 300
+
+
+@pytest.mark.parametrize("offset", [300, -250])
+def test_homing_offset_shifts_present_position_and_goals(arm, bus, offset):
+    port, packets = bus
+    physical = MECHANICS[1].centre  # 2358
+    raw = offset if offset >= 0 else (-offset | 1 << 11)  # sign-magnitude, bit 11
+    assert packets.write2ByteTxRx(port, 1, HOMING_OFFSET, raw)[0] == scs.COMM_SUCCESS
+    assert arm.read_register(1, "Homing_Offset") == offset
+    assert packets.read2ByteTxRx(port, 1, PRESENT_POSITION)[0] == physical - offset
+    assert arm.physical_position(1) == physical  # the joint did not move
+    # A goal is in the offset frame: goal 2048 puts the joint at 2048 + offset.
+    assert packets.write2ByteTxRx(port, 1, GOAL_POSITION, 2048)[0] == scs.COMM_SUCCESS
+    assert packets.write1ByteTxRx(port, 1, TORQUE_ENABLE, 1)[0] == scs.COMM_SUCCESS
+    time.sleep(abs(physical - offset - 2048) / 3000 + 0.05)
+    assert packets.read2ByteTxRx(port, 1, PRESENT_POSITION)[0] == 2048
+    assert arm.physical_position(1) == 2048 + offset
+
+
+def test_torque_enable_128_makes_the_present_position_read_2048(arm, bus):
+    port, packets = bus
+    assert packets.write1ByteTxRx(port, 4, TORQUE_ENABLE, 128)[0] == scs.COMM_SUCCESS
+    assert packets.read2ByteTxRx(port, 4, PRESENT_POSITION)[0] == 2048
+    assert arm.read_register(4, "Homing_Offset") == MECHANICS[4].centre - 2048 == -275
+    assert arm.read_register(4, "Torque_Enable") == 0
+
+
+def test_position_limits_clamp_goals(arm, bus):
+    port, packets = bus
+    assert packets.write2ByteTxRx(port, 1, MIN_LIMIT, 2000)[0] == scs.COMM_SUCCESS
+    assert packets.write2ByteTxRx(port, 1, MAX_LIMIT, 2500)[0] == scs.COMM_SUCCESS
+    assert packets.write1ByteTxRx(port, 1, TORQUE_ENABLE, 1)[0] == scs.COMM_SUCCESS
+    assert packets.write2ByteTxRx(port, 1, GOAL_POSITION, 3000)[0] == scs.COMM_SUCCESS
+    time.sleep(0.1)  # 142 steps from 2358 at 3000/s: 47 ms; 3000 would take 0.21 s
+    assert packets.read2ByteTxRx(port, 1, PRESENT_POSITION)[0] == 2500
+    assert packets.read2ByteTxRx(port, 1, GOAL_POSITION)[0] == 3000  # the register keeps what was written
+    assert packets.write2ByteTxRx(port, 1, GOAL_POSITION, 100)[0] == scs.COMM_SUCCESS
+    time.sleep(0.25)
+    assert packets.read2ByteTxRx(port, 1, PRESENT_POSITION)[0] == 2000
+
+
+def test_hard_stops_hold_the_motor_and_the_hand(arm, bus):
+    port, packets = bus
+    lower, upper = MECHANICS[2].lower, MECHANICS[2].upper  # shoulder_lift: 490..2766
+    assert arm.move_by_hand(2, upper - 150) == upper - 150
+    assert packets.write2ByteTxRx(port, 2, GOAL_POSITION, 4000)[0] == scs.COMM_SUCCESS
+    assert packets.write1ByteTxRx(port, 2, TORQUE_ENABLE, 1)[0] == scs.COMM_SUCCESS
+    time.sleep(150 / 3000 + 0.03)
+    assert packets.read2ByteTxRx(port, 2, PRESENT_POSITION)[0] == upper
+    time.sleep(0.05)
+    assert packets.read2ByteTxRx(port, 2, PRESENT_POSITION)[0] == upper  # pushing against the stop, still
+    assert packets.read1ByteTxRx(port, 2, MOVING)[0] == 0
+    assert packets.read2ByteTxRx(port, 2, PRESENT_VELOCITY)[0] == 0
+    # With torque on the hand cannot move it; with torque off it stops at the stops.
+    assert arm.move_by_hand(2, 1000) == upper
+    assert packets.write1ByteTxRx(port, 2, TORQUE_ENABLE, 0)[0] == scs.COMM_SUCCESS
+    assert arm.move_by_hand(2, 0) == lower
+    assert arm.move_by_hand(2, -100, relative=True) == lower
+    assert arm.move_by_hand(2, 4095) == upper
+    assert packets.read2ByteTxRx(port, 2, PRESENT_POSITION)[0] == upper
+    # wrist_roll has no stops: its encoder wraps.
+    assert arm.move_by_hand(5, 4000) == 4000
+    assert arm.move_by_hand(5, 200, relative=True) == 104
+    assert packets.read2ByteTxRx(port, 5, PRESENT_POSITION)[0] == 104
+
+
+def test_power_cycle_keeps_only_eeprom_written_unlocked(arm, bus):
+    port, packets = bus
+    assert packets.write2ByteTxRx(port, 1, HOMING_OFFSET, 100)[0] == scs.COMM_SUCCESS  # Lock = 1: not saved
+    assert packets.write1ByteTxRx(port, 2, LOCK, 0)[0] == scs.COMM_SUCCESS
+    assert packets.write2ByteTxRx(port, 2, HOMING_OFFSET, 200)[0] == scs.COMM_SUCCESS  # saved
+    # Goal_Position is still 1628, now 200 steps off the present 1428: torque would move the joint.
+    assert packets.read2ByteTxRx(port, 2, GOAL_POSITION)[0] == MECHANICS[2].centre
+    assert packets.write1ByteTxRx(port, 3, TORQUE_ENABLE, 1)[0] == scs.COMM_SUCCESS  # 3 holds where it is
+    arm.power_cycle()
+    assert packets.read2ByteTxRx(port, 1, HOMING_OFFSET)[0] == 0
+    assert packets.read2ByteTxRx(port, 2, HOMING_OFFSET)[0] == 200
+    assert (packets.read1ByteTxRx(port, 3, TORQUE_ENABLE)[0], packets.read1ByteTxRx(port, 2, LOCK)[0]) == (0, 1)
+    assert packets.read2ByteTxRx(port, 2, GOAL_POSITION)[0] == MECHANICS[2].centre - 200  # = present again
+
+
+def test_a_new_id_moves_the_servo(arm, bus):
+    port, packets = bus
+    assert packets.write1ByteTxRx(port, 6, ID, 9) == (scs.COMM_SUCCESS, 0)  # answered from the old ID
+    assert packets.ping(port, 9) == (777, scs.COMM_SUCCESS, 0)
+    assert packets.ping(port, 6)[1] == scs.COMM_RX_TIMEOUT
+    assert arm.read_register(6, "ID") == 9
+
+
+def test_a_servo_set_to_another_baud_rate_drops_off_the_bus(arm, bus):
+    port, packets = bus
+    assert packets.write1ByteTxRx(port, 4, BAUD_RATE, 1) == (scs.COMM_SUCCESS, 0)  # 500,000: answered, then gone
+    assert packets.ping(port, 4)[1] == scs.COMM_RX_TIMEOUT
+    assert packets.ping(port, 3)[0] == 777
+    assert arm.read_register(4, "Baud_Rate") == 1
+
+
+# -- the wire ------------------------------------------------------------------------------------
+
+# READ id 1, address 56 (Present_Position), 2 bytes; checksum ~(1+4+2+56+2) & 0xFF = 0xBE.
+READ_PRESENT_1 = bytes([0xFF, 0xFF, 0x01, 0x04, 0x02, 0x38, 0x02, 0xBE])
+
+
+def reply_within(ser, seconds: float) -> bytes:
+    deadline = time.monotonic() + seconds
+    data = b""
+    while time.monotonic() < deadline:
+        data += ser.read(64)
+        time.sleep(0.002)
+    return data
+
+
+def test_raw_packets_bad_checksum_ignored_partial_and_noisy_packets_answered(arm, bus):
+    port, _ = bus
+    ser = port.ser
+    centre = MECHANICS[1].centre  # 2358 = 0x0936
+    answer = bytes([0xFF, 0xFF, 0x01, 0x04, 0x00, 0x36, 0x09, (~(1 + 4 + 0 + 0x36 + 0x09)) & 0xFF])
+    assert centre == 0x0936
+    ser.write(READ_PRESENT_1[:-1] + b"\xbf")  # wrong checksum
+    assert reply_within(ser, 0.05) == b""
+    ser.write(READ_PRESENT_1)
+    assert reply_within(ser, 0.05) == answer
+    ser.write(READ_PRESENT_1[:3])  # a packet in two pieces
+    time.sleep(0.01)
+    ser.write(READ_PRESENT_1[3:])
+    assert reply_within(ser, 0.05) == answer
+    ser.write(b"\x00\x13\xff" + READ_PRESENT_1)  # noise before the header
+    assert reply_within(ser, 0.05) == answer
+    assert arm.stats()["bad_checksums"] == 1
+
+
+# -- faults ---------------------------------------------------------------------------------------
+
+
+def test_a_silent_servo_times_out_in_a_sync_read_after_the_others_answered(arm, bus):
+    port, packets = bus
+    arm.silence(3)
+    result, values, group = sync_read(port, packets, PRESENT_POSITION, 2)
+    assert result == scs.COMM_RX_TIMEOUT
+    # The SDK stops at the first servo that fails: 1 and 2 are fresh, 3-6 have no data.
+    assert values == {1: MECHANICS[1].centre, 2: MECHANICS[2].centre}
+    # It still obeys.
+    assert packets.write1ByteTxRx(port, 3, TORQUE_ENABLE, 1)[0] == scs.COMM_RX_TIMEOUT
+    assert arm.read_register(3, "Torque_Enable") == 1
+    arm.answer(3)
+    port.ser.reset_input_buffer()
+    assert sync_read(port, packets, PRESENT_POSITION, 2)[0] == scs.COMM_SUCCESS
+
+
+def test_a_corrupt_servo_gives_rx_corrupt_and_leaves_the_later_replies_waiting(arm, bus):
+    port, packets = bus
+    arm.corrupt(2)
+    assert packets.read2ByteTxRx(port, 2, PRESENT_POSITION)[1] == scs.COMM_RX_CORRUPT
+    assert packets.read2ByteTxRx(port, 1, PRESENT_POSITION) == (MECHANICS[1].centre, scs.COMM_SUCCESS, 0)
+    result, values, _ = sync_read(port, packets, PRESENT_POSITION, 2)
+    assert result == scs.COMM_RX_CORRUPT and list(values) == [1]
+    # Servos 3-6 answered; the SDK left their replies in the input buffer. Its next transaction
+    # does not clear them (clearPort() flushes output only): a driver must reset_input_buffer().
+    time.sleep(0.01)
+    assert port.ser.in_waiting == 4 * 8
+    arm.answer(2)
+
+
+def test_mute_all_nobody_answers_but_everybody_obeys(arm, bus):
+    port, packets = bus
+    arm.mute_all()
+    assert packets.ping(port, 1)[1] == scs.COMM_RX_TIMEOUT
+    sync_write(port, packets, TORQUE_ENABLE, 1, {i: 1 for i in IDS})
+    eventually(lambda: [arm.read_register(i, "Torque_Enable") for i in IDS] == [1] * 6)
+    assert packets.write1ByteTxRx(port, 4, TORQUE_ENABLE, 0)[0] == scs.COMM_RX_TIMEOUT
+    assert arm.read_register(4, "Torque_Enable") == 0
+    assert set(arm.faults().values()) == {"muted"}
+    arm.answer_all()
+    assert packets.ping(port, 1) == (777, scs.COMM_SUCCESS, 0)
+
+
+def test_close_port_is_an_unplugged_adapter(arm, bus):
+    port, packets = bus
+    assert packets.ping(port, 1)[1] == scs.COMM_SUCCESS
+    arm.close_port()
+    # The SDK's txPacket flushes first (tcdrain): termios.error, which is not an OSError.
+    with pytest.raises((serial.SerialException, OSError, termios.error)):
+        packets.read2ByteTxRx(port, 1, PRESENT_POSITION)
+    assert port.is_using  # and the SDK's port stays "busy": every later call says COMM_PORT_BUSY
+    with pytest.raises(serial.SerialException):
+        port.ser.write(READ_PRESENT_1)
+    with pytest.raises(serial.SerialException):
+        port.ser.read(1)
+    assert not os.path.exists(arm.port)
+    with pytest.raises(serial.SerialException):
+        serial.Serial(arm.port, 1_000_000, timeout=0)
+    assert arm.read_register(1, "Present_Position") == MECHANICS[1].centre  # the servos are still here
+    arm.close()
+    arm.close()
+
+
+def test_the_port_survives_the_client_closing_and_reopening_it(arm):
+    for _ in range(2):
+        port, packets = open_bus(arm.port)
+        assert packets.ping(port, 5)[1] == scs.COMM_SUCCESS
+        port.closePort()
+
+
+# -- a hand -----------------------------------------------------------------------------------------
+
+
+def test_sweep_moves_torque_off_joints_to_both_stops_and_back(arm, bus):
+    port, packets = bus
+    assert packets.write1ByteTxRx(port, 2, TORQUE_ENABLE, 1)[0] == scs.COMM_SUCCESS  # held
+    assert arm.sweep(duration_s=0.6) == (1, 3, 4, 5, 6)
+    seen: dict[int, set[int]] = {i: set() for i in IDS}
+    moving = set()
+    while arm.hand_busy():
+        result, values, _ = sync_read(port, packets, PRESENT_POSITION, 2)
+        assert result == scs.COMM_SUCCESS
+        for i, value in values.items():
+            seen[i].add(value)
+        moving |= {i for i in IDS if packets.read1ByteTxRx(port, i, MOVING)[0]}
+        time.sleep(0.002)
+    for i in (1, 3, 4, 6):
+        m = MECHANICS[i]
+        assert min(seen[i]) == m.lower and max(seen[i]) == m.upper, (i, min(seen[i]), max(seen[i]))
+    assert min(seen[5]) < 100 and max(seen[5]) > 3995  # wrist_roll turned through the seam
+    assert seen[2] == {MECHANICS[2].centre}
+    assert moving >= {1, 3, 4, 6}
+    result, values, _ = sync_read(port, packets, PRESENT_POSITION, 2)
+    assert values == {i: MECHANICS[i].centre for i in IDS}  # back in the middle
+    assert arm.wait_hand(timeout=0)
+
+
+def test_torque_on_mid_sweep_the_joint_stops_following_the_hand(arm, bus):
+    port, packets = bus
+    arm.sweep(duration_s=1.0, ids=(1,))
+    time.sleep(0.1)
+    present = packets.read2ByteTxRx(port, 1, PRESENT_POSITION)[0]
+    assert present < MECHANICS[1].centre - 50  # on its way to the lower stop
+    # As a driver does: goal = present, then torque on.
+    assert packets.write2ByteTxRx(port, 1, GOAL_POSITION, present)[0] == scs.COMM_SUCCESS
+    assert packets.write1ByteTxRx(port, 1, TORQUE_ENABLE, 1)[0] == scs.COMM_SUCCESS
+    time.sleep(0.1)
+    assert abs(packets.read2ByteTxRx(port, 1, PRESENT_POSITION)[0] - present) <= 3  # moved with the hand until torque
+    assert not arm.hand_busy()
+
+
+# -- performance -------------------------------------------------------------------------------------
+
+
+def test_a_sync_read_is_answered_in_a_few_milliseconds_and_idle_costs_nothing(arm, bus):
+    port, packets = bus
+    group = scs.GroupSyncRead(port, packets, PRESENT_POSITION, 2)
+    for i in IDS:
+        group.addParam(i)
+    times = []
+    for _ in range(50):
+        t = time.perf_counter()
+        assert group.txRxPacket() == scs.COMM_SUCCESS
+        times.append(time.perf_counter() - t)
+    times.sort()
+    assert times[len(times) // 2] < 0.003, times  # ~0.4 ms here; the SDK's own timeout is 34 ms
+    served = arm.packets_served
+    cpu = time.process_time()
+    time.sleep(0.3)
+    assert time.process_time() - cpu < 0.03  # the emulator blocks in select
+    assert arm.packets_served == served
+
+
+# -- the command line -----------------------------------------------------------------------------------
+
+
+class Lines:
+    """Lines from a subprocess's stdout, with a timeout."""
+
+    def __init__(self, stream):
+        self.fd = stream.fileno()
+        self.pending = b""
+
+    def next(self, timeout: float = 10.0) -> str:
+        deadline = time.monotonic() + timeout
+        while b"\n" not in self.pending:
+            left = deadline - time.monotonic()
+            if left <= 0 or not select.select([self.fd], [], [], left)[0]:
+                raise TimeoutError(f"no line within {timeout} s; so far {self.pending!r}")
+            chunk = os.read(self.fd, 4096)
+            if not chunk:
+                raise EOFError(f"output ended; so far {self.pending!r}")
+            self.pending += chunk
+        line, self.pending = self.pending.split(b"\n", 1)
+        return line.decode()
+
+
+@pytest.fixture
+def start_cli():
+    started = []
+
+    def start(*options, stdin=subprocess.PIPE):
+        process = subprocess.Popen(
+            [str(SO101), "fake-arm", *options], stdin=stdin, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+        )
+        started.append(process)
+        lines = Lines(process.stdout)
+        return process, lines, lines.next()
+
+    yield start
+    for process in started:
+        if process.poll() is None:
+            process.kill()
+        process.wait(timeout=10)
+        for stream in (process.stdin, process.stdout, process.stderr):
+            if stream:
+                stream.close()
+
+
+def test_cli_prints_the_port_and_serves_it_and_takes_commands(start_cli):
+    process, lines, port_path = start_cli("--silent", "6")
+    assert port_path.startswith("/dev/pts/")
+    about = lines.next()
+    assert "emulated SO-101" in about and "1,000,000 baud" in about and "help" in about and "gravity" in about
+    port, packets = open_bus(port_path)
+    assert packets.ping(port, 1) == (777, scs.COMM_SUCCESS, 0)
+    assert packets.ping(port, 6)[1] == scs.COMM_RX_TIMEOUT  # --silent 6
+    assert packets.write1ByteTxRx(port, 2, TORQUE_ENABLE, 1)[0] == scs.COMM_SUCCESS
+    port.closePort()
+    process.stdin.write(b"status\n")
+    process.stdin.flush()
+    header = lines.next()
+    assert "joint" in header and "present" in header and "offset" in header
+    rows = [lines.next() for _ in IDS]
+    assert rows[0].split()[:5] == ["1", "shoulder_pan", "off", "2358", "2358"]
+    assert rows[1].split()[:3] == ["2", "shoulder_lift", "on"]
+    assert rows[5].split()[-1] == "silent"
+    process.stdin.write(b"jump 3\nmove 9 100\nmove 3 +100\n")
+    process.stdin.flush()
+    assert lines.next().startswith("unknown command 'jump'; commands: help, status")
+    assert lines.next().startswith("no servo '9' on this bus")
+    assert lines.next() == "servo 3 moved by hand from 2238 to 2338"
+    process.stdin.write(b"quit\n")
+    process.stdin.flush()
+    assert process.wait(timeout=10) == 0
+    assert process.stderr.read() == b""
+
+
+def test_cli_sigterm_ends_it_cleanly(start_cli):
+    process, lines, port_path = start_cli()
+    process.send_signal(signal.SIGTERM)
+    assert process.wait(timeout=10) == 0
+    assert process.stderr.read() == b""
+    assert not os.path.exists(port_path)
+
+
+def test_cli_runs_on_after_end_of_input_until_sigterm(start_cli):
+    process, lines, port_path = start_cli(stdin=subprocess.DEVNULL)
+    lines.next()
+    assert "keeps running" in lines.next()
+    time.sleep(0.2)
+    assert process.poll() is None
+    port, packets = open_bus(port_path)
+    assert packets.ping(port, 4) == (777, scs.COMM_SUCCESS, 0)
+    port.closePort()
+    process.send_signal(signal.SIGTERM)
+    assert process.wait(timeout=10) == 0
+    assert process.stderr.read() == b""
