@@ -9,6 +9,7 @@ import os
 import signal
 import subprocess
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 import pyarrow as pa
@@ -27,23 +28,64 @@ TICK_TIMER_CONFIG = {"inputs": {"tick": {"source": f"dora/timer/millis/{TICK_PER
 TICK = ("tick", pa.array([], type=pa.null()))
 
 
+@contextmanager
+def body_environment(body: str, tmp_path: Path):
+    """What a body's node needs besides its dataflow file: (environment, emulated arm or None).
+    Nothing for a simulation; for the real arm, `so101 fake-arm`'s emulated bus, calibrated,
+    its calibration file, and a goal speed that keeps the tests' waits short."""
+    from so101.bodies import BODIES
+
+    if BODIES[body].simulated:
+        yield {}, None
+        return
+    from so101.calibration import save_calibration
+    from so101.fake_arm import FakeArm, calibrate_as_at_the_factory
+
+    with FakeArm() as arm:
+        calibration_file = tmp_path / "so101_follower.json"
+        save_calibration(calibration_file, calibrate_as_at_the_factory(arm))
+        yield {"SO101_PORT": arm.port, "SO101_CALIBRATION": str(calibration_file), "SO101_MAX_SPEED_DEG_S": "180"}, arm
+
+
 def run_simulation_node(monkeypatch, events, node_config=TICK_TIMER_CONFIG, body="pybullet", **env):
-    """Run a body's simulation node (so101.bodies; nodes/simulation_node.py by default) headless
-    over `events`; returns (exit code, the MockNode)."""
+    """Run a body's node (so101.bodies; nodes/simulation_node.py by default) headless over
+    `events`; returns (exit code, the MockNode). The real arm's ticks come at the timer's pace,
+    for its emulated servos move in wall-clock time."""
     import importlib
 
     from dora.testing import MockNode
 
     from so101.bodies import BODIES
+    from so101.dataflow import timer_period_s
 
-    simulation_node = importlib.import_module(f"nodes.{BODIES[body].node_file.stem}")
+    body_node = importlib.import_module(f"nodes.{BODIES[body].node_file.stem}")
     monkeypatch.setenv("SO101_MODE", "direct")
     monkeypatch.setenv("SO101_LANG", "en")
     for name, value in env.items():
         monkeypatch.setenv(name, value)
     node = MockNode(events, node_config=node_config)
-    monkeypatch.setattr(simulation_node, "Node", lambda: node)
-    return simulation_node.main(), node
+    if not BODIES[body].simulated:
+        node = _paced(node, timer_period_s(node_config) or TICK_PERIOD_S)
+    monkeypatch.setattr(body_node, "Node", lambda: node)
+    return body_node.main(), node
+
+
+def _paced(node, period_s: float):
+    """`node` (a MockNode) with each tick delivered no sooner than `period_s` after the last."""
+    from dora.testing import MockNode
+
+    class PacedMockNode(type(node)):
+        def __next__(self):
+            event = MockNode.__next__(self)
+            if event.get("id") == "tick":
+                now = time.monotonic()
+                self.next_tick_at = max(getattr(self, "next_tick_at", now), now)
+                time.sleep(self.next_tick_at - now)
+                self.next_tick_at += period_s
+            return event
+
+    node.__class__ = PacedMockNode
+    return node
 
 
 def dora_env(**extra: str) -> dict[str, str]:
@@ -108,7 +150,7 @@ def write_test_dataflow(tmp_path: Path, sim_env: dict[str, str] | None = None, r
             {
                 "id": "recorder",
                 "path": str(RECORDER),
-                "inputs": {"joint_state": "simulation/joint_state"},
+                "inputs": {"joint_state": f"{BODIES[body].node_id}/joint_state"},
                 "env": {"RECORD_FILE": str(record_file)},
             }
         )

@@ -1,7 +1,9 @@
-"""The simulation node's event loop, driven by dora.testing.MockNode (no daemon).
+"""The body nodes' event loop, driven by dora.testing.MockNode (no daemon).
 
 The contract tests take the `body` fixture and run on every body in so101.bodies
-(PyBullet's node and MuJoCo's); the rest are PyBullet's own (the course's motion, servo mode).
+(PyBullet's node, MuJoCo's, and the real arm's on `so101 fake-arm`'s emulated bus); the
+`simulated_body` ones on the simulations only (a model file, a camera); the rest are
+PyBullet's own (the course's motion, servo mode).
 """
 
 from __future__ import annotations
@@ -12,13 +14,21 @@ import math
 import pyarrow as pa
 import pytest
 
-from so101.bodies import BODIES
+from so101.bodies import BODIES, SIMULATED_BODIES
 from so101.dataflow import MAX_STEPS_PER_TICK, TickClock
-from tests.dataflow_helpers import TICK, run_simulation_node
+from tests.dataflow_helpers import TICK, body_environment, run_simulation_node
 
 
 @pytest.fixture(params=list(BODIES))
-def body(request) -> str:
+def body(request, monkeypatch, tmp_path) -> str:
+    with body_environment(request.param, tmp_path) as (env, _):
+        for name, value in env.items():
+            monkeypatch.setenv(name, value)
+        yield request.param
+
+
+@pytest.fixture(params=SIMULATED_BODIES)
+def simulated_body(request) -> str:
     return request.param
 
 
@@ -186,14 +196,15 @@ def test_stop_and_ctrl_c_close_the_body_and_exit_0(monkeypatch, ending, body):
         assert not p.isConnected(physicsClientId=closed[0])
 
 
-def test_missing_model_gives_one_line_and_exit_2(monkeypatch, capsys, tmp_path, body):
-    code, _ = run_simulation_node(monkeypatch, ticks(1), body=body, SO101_ASSETS_DIR=str(tmp_path))
+def test_missing_model_gives_one_line_and_exit_2(monkeypatch, capsys, tmp_path, simulated_body):
+    code, _ = run_simulation_node(monkeypatch, ticks(1), body=simulated_body, SO101_ASSETS_DIR=str(tmp_path))
     assert code == 2
     err = capsys.readouterr().err
     assert "model file missing" in err and "so101 assets" in err
 
 
-def test_image_output_shows_the_arm_at_the_asked_rate(monkeypatch, body):
+def test_image_output_shows_the_arm_at_the_asked_rate(monkeypatch, simulated_body):
+    body = simulated_body
     import numpy as np
     from dora.testing import MockNode
 
