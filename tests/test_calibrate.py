@@ -1,0 +1,135 @@
+"""`so101 calibrate`, typed at by a script while `so101 fake-arm`'s emulated hand moves the joints."""
+
+from __future__ import annotations
+
+import json
+import select
+import subprocess
+import time
+
+import pytest
+
+from so101.calibration import MOTOR_IDS, MOTOR_NAMES, load_calibration
+from so101.fake_arm import FakeArm
+from so101.real_arm import SO101Real
+from tests.dataflow_helpers import SO101, dora_env
+
+
+class Calibrate:
+    """`so101 calibrate` as a person runs it: its output read as it comes, lines typed on its stdin."""
+
+    def __init__(self, *args: str):
+        self.process = subprocess.Popen([str(SO101), "calibrate", *args], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                        stderr=subprocess.PIPE, env=dora_env())
+        self.output = b""
+
+    def wait_for(self, text: str, timeout_s: float = 20) -> None:
+        deadline = time.monotonic() + timeout_s
+        while text.encode() not in self.output:
+            assert time.monotonic() < deadline and self.process.poll() is None, self.output.decode()
+            if select.select([self.process.stdout], [], [], 0.1)[0]:
+                self.output += self.process.stdout.read1(4096)
+
+    def enter(self) -> None:
+        self.process.stdin.write(b"\n")
+        self.process.stdin.flush()
+
+    def end_input(self) -> None:
+        """Ctrl-D: the end of the input."""
+        self.process.stdin.close()
+        self.process.stdin = None  # communicate() must not flush it again
+
+    def finish(self) -> tuple[int, str, str]:
+        out, err = self.process.communicate(timeout=30)
+        return self.process.returncode, (self.output + out).decode(), err.decode()
+
+
+def test_a_scripted_calibration_finds_the_emulated_arms_offsets_and_ranges(tmp_path):
+    out = tmp_path / "arm.json"
+    with FakeArm() as arm:
+        arm.write_register(1, "Torque_Enable", 1)  # left on by an earlier program: calibrate switches it off
+        calibrate = Calibrate("--port", arm.port, "--out", str(out))
+        calibrate.wait_for("Then press Enter.")
+        assert [arm.read_register(i, "Torque_Enable") for i in MOTOR_IDS] == [0] * 6
+        calibrate.enter()  # the emulated arm rests in the middle pose
+        calibrate.wait_for("Press Enter when done.")
+        calibrate.enter()  # too soon: nothing moved yet
+        calibrate.wait_for("moved less than 100 steps")
+        arm.sweep(duration_s=1.5)
+        assert arm.wait_hand(timeout=10)
+        calibrate.enter()
+        code, output, err = calibrate.finish()
+        assert code == 0, output + err
+        registers = {i: {name: arm.read_register(i, name) for name in ("Homing_Offset", "Min_Position_Limit",
+                                                                         "Max_Position_Limit", "Lock")}
+                     for i in MOTOR_IDS}
+        # The file drives the arm: at the middle pose every arm joint reads 0°.
+        with SO101Real(arm.port, load_calibration(out), log=lambda line: None) as body:
+            angles = body.joint_angles_deg()
+
+    written = json.loads(out.read_text())
+    assert list(written) == list(MOTOR_NAMES)
+    # Worked out from the emulator's assembly (so101/fake_arm.py MECHANICAL_TABLE): the middle
+    # pose reads 2047 after homing, so homing_offset = centre - 2047, and the range is the hard
+    # stops in that frame; wrist_roll turns fully (0..4095), as LeRobot records it.
+    centres = {1: 2048 + 310, 2: 2048 - 420, 3: 2048 + 190, 4: 2048 - 275, 5: 2048 + 530, 6: 2048 - 360}
+    half_travel = {1: 1252, 2: 1138, 3: 1102, 4: 1081, 6: 626}  # the URDF ranges at 4096 steps per turn, halved
+    for name, servo_id in zip(MOTOR_NAMES, MOTOR_IDS):
+        offset = centres[servo_id] - 2047
+        expected = {"id": servo_id, "drive_mode": 0, "homing_offset": offset,
+                    "range_min": 0 if servo_id == 5 else centres[servo_id] - half_travel[servo_id] - offset,
+                    "range_max": 4095 if servo_id == 5 else centres[servo_id] + half_travel[servo_id] - offset}
+        assert written[name] == expected, name
+        assert registers[servo_id] == {"Homing_Offset": offset, "Min_Position_Limit": expected["range_min"],
+                                       "Max_Position_Limit": expected["range_max"], "Lock": 1}
+    assert angles[:5] == pytest.approx([0.0] * 5, abs=0.1)
+    assert f"Wrote {out}:" in output and f"so101 teleop --body real --port {arm.port} --calibration {out}" in output
+
+
+def test_an_existing_file_is_kept_unless_forced_and_then_backed_up(tmp_path):
+    out = tmp_path / "arm.json"
+    out.write_text('{"kept": true}')
+    with FakeArm() as arm:
+        refused = subprocess.run([str(SO101), "calibrate", "--port", arm.port, "--out", str(out)],
+                                 capture_output=True, text=True, env=dora_env(), timeout=30)
+        assert refused.returncode == 2
+        assert refused.stderr == f"so101 calibrate: {out} exists: pass --force to replace it (the old one is kept as arm.json.bak)\n"
+        calibrate = Calibrate("--port", arm.port, "--out", str(out), "--force")
+        calibrate.wait_for("Then press Enter.")
+        calibrate.enter()
+        calibrate.wait_for("Press Enter when done.")
+        arm.sweep(duration_s=1.0)
+        assert arm.wait_hand(timeout=10)
+        calibrate.enter()
+        code, output, err = calibrate.finish()
+    assert code == 0, output + err
+    assert json.loads((tmp_path / "arm.json.bak").read_text()) == {"kept": True}
+    assert set(json.loads(out.read_text())) == set(MOTOR_NAMES)
+
+
+@pytest.mark.parametrize("ids, ending, message", [
+    ((1, 2, 3, 4, 5), None, "so101 calibrate: servo 6 (gripper) does not answer on {port}"),
+    ((1, 2, 3, 4, 5, 6), "eof", "so101 calibrate: the input ended before the calibration did; nothing was written to {out}"),
+])
+def test_failures_write_nothing_and_say_so_in_one_line(tmp_path, ids, ending, message):
+    out = tmp_path / "arm.json"
+    with FakeArm(ids=ids) as arm:
+        calibrate = Calibrate("--port", arm.port, "--out", str(out))
+        if ending == "eof":
+            calibrate.wait_for("Then press Enter.")
+            calibrate.enter()
+            calibrate.wait_for("Press Enter when done.")
+            calibrate.end_input()
+        code, output, err = calibrate.finish()
+    assert code == 1
+    assert message.format(port=arm.port, out=out) in err
+    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
+    assert not out.exists()
+
+
+def test_a_missing_port_is_one_line(tmp_path):
+    result = subprocess.run([str(SO101), "calibrate", "--port", "/dev/no-such-adapter", "--out", str(tmp_path / "a.json")],
+                            capture_output=True, text=True, env=dora_env(), timeout=30)
+    assert result.returncode == 1
+    assert result.stderr.strip().startswith("so101 calibrate: cannot open the serial port /dev/no-such-adapter")
+    assert len(result.stderr.strip().splitlines()) == 1
