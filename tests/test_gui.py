@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from so101.bodies import BODIES
+from so101.bodies import BODIES, SIMULATED_BODIES
 from so101.dataflow import dataflow_copy, write_dataflow
 from so101.display import DisplayError, virtual_display
 from tests.dataflow_helpers import ROOT, DoraRun
@@ -91,7 +91,7 @@ def settled_arm(display, path, accept, timeout_s=60):
         previous = mask
 
 
-@pytest.mark.parametrize("body", list(BODIES))
+@pytest.mark.parametrize("body", SIMULATED_BODIES)
 def test_arm_is_drawn_and_moves_in_the_gui_window(tmp_path, xvfb_display, body):
     empty = arm_pixels(screenshot(xvfb_display, tmp_path / "empty.png"))
     assert empty.sum() == 0  # the bare X screen has nothing yellow: a yellow pixel later is the arm
@@ -120,7 +120,7 @@ def test_arm_is_drawn_and_moves_in_the_gui_window(tmp_path, xvfb_display, body):
 
 
 @pytest.mark.skipif(shutil.which("xdotool") is None, reason="xdotool is not installed (package xdotool)")
-@pytest.mark.parametrize("body", list(BODIES))
+@pytest.mark.parametrize("body", SIMULATED_BODIES)
 def test_killed_gui_window_ends_the_simulation_and_is_not_reopened(tmp_path, xvfb_display, body):
     """A window manager's forced close cuts the X connection, and the window's process ends
     (PyBullet's Xlib: "XIO: fatal IO error"); the simulation notices within a frame, says so
