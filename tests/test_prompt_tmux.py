@@ -219,3 +219,69 @@ def test_teleop_drives_the_mujoco_body_with_the_same_prompt(tmp_path):
     assert list(json.loads(poses_file.read_text())) == ["m"]
     spawned = [int(pid) for pid in re.findall(r"spawned node with pid (\d+)", log_file.read_text())]
     assert spawned and [pid for pid in spawned if _alive(pid)] == []
+
+
+def test_a_person_without_an_arm_calibrates_the_emulated_one_and_drives_it(tmp_path):
+    """The real arm's "done when": `so101 fake-arm`, `so101 calibrate` with its printed port, then
+    `so101 teleop --body real` typed at as in the course; torque off after quit."""
+    calibration_file = tmp_path / "my_arm.json"
+    fake_arm = Terminal(f"{SO101} fake-arm", {"PATH": os.environ["PATH"]})
+    terminal = None
+    try:
+        port = fake_arm.wait_for(r"^(/dev/\S+)$", timeout_s=30).group(1)
+        calibrate = Terminal(f"{SO101} calibrate --port {port} --out {calibration_file}", {"PATH": os.environ["PATH"]})
+        try:
+            calibrate.wait_for(r"Then press Enter\.", timeout_s=30)
+            calibrate.type_line("")
+            calibrate.wait_for(r"Press Enter when done\.", timeout_s=30)
+            fake_arm.type_line("sweep 2")  # the emulated hand takes each joint to both of its stops
+            time.sleep(2.5)
+            calibrate.type_line("")
+            calibrate.wait_for(r"^TELEOP_EXIT=0$", timeout_s=30)
+            assert f"Wrote {calibration_file}:" in calibrate.screen()
+        finally:
+            calibrate.close()
+
+        terminal, poses_file, log_file = start_teleop(
+            tmp_path, "en", body=f"real --port {port} --calibration {calibration_file}")
+        end = terminal.wait_for(r"^=+\n>$", timeout_s=120).start()
+        assert "the arm is ready (torque on)" in terminal.screen()
+
+        def state_reaches(target_deg: list[float]) -> list[float]:
+            nonlocal end
+            for _ in range(40):
+                time.sleep(0.5)
+                terminal.type_line("state")
+                reached = terminal.wait_for(r"^> state\n  joint angles now: \[(.*)\]°.*$", timeout_s=20, after=end)
+                end = reached.end()
+                angles = [float(word) for word in reached.group(1).split(",")]
+                if all(abs(angle - target) <= 1.0 for angle, target in zip(angles, target_deg)):
+                    return angles
+            raise AssertionError(f"the arm did not reach {target_deg}: last state {angles}\n{terminal.screen()}")
+
+        for line, target in (("0 90", [90.0, 0, 0, 0, 0]), ("batch -30 45 -60 30 0", TARGET_DEG)):
+            terminal.type_line(line)
+            end = terminal.wait_for(rf"^> {re.escape(line)}\n  → .*$", timeout_s=20, after=end).end()
+            state_reaches(target)
+        terminal.type_line("save a")
+        end = terminal.wait_for(r"^  → pose 'a' saved: \[.*$", timeout_s=20, after=end).end()
+        terminal.type_line("home")
+        state_reaches([0.0] * 5)
+        terminal.type_line("go a")
+        state_reaches(TARGET_DEG)
+        terminal.type_line("quit")
+        terminal.wait_for(r"^TELEOP_EXIT=0$", timeout_s=60, after=end)
+        screen = terminal.screen()
+        fake_arm.type_line("status")
+        status = fake_arm.wait_for(r"^id  joint.*\n((?:.*\n){5}.*)$", timeout_s=20, after=0)
+        fake_arm.type_line("quit")
+    finally:
+        if terminal is not None:
+            terminal.close()
+        fake_arm.close()
+    assert "Traceback" not in screen, screen
+    assert "torque off on servos 1-6" in log_file.read_text()
+    assert [row.split()[2] for row in status.group(0).splitlines()[1:]] == ["off"] * 6  # the emulator's own view
+    assert list(json.loads(poses_file.read_text())) == ["a"]
+    spawned = [int(pid) for pid in re.findall(r"spawned node with pid (\d+)", log_file.read_text())]
+    assert spawned and [pid for pid in spawned if _alive(pid)] == []
