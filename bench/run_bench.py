@@ -49,7 +49,8 @@ from so101.viewer import WINDOW_SHOWING  # noqa: E402
 from so101.venv import env_with_bin_first, executable  # noqa: E402
 
 PROBER = ROOT / "bench" / "nodes" / "prober.py"
-DEFAULT_OUT = {"pybullet": ROOT / "bench" / "results" / "latest.json", "mujoco": ROOT / "bench" / "results" / "latest-mujoco.json"}
+DEFAULT_OUT = {"pybullet": ROOT / "bench" / "results" / "latest.json", "mujoco": ROOT / "bench" / "results" / "latest-mujoco.json",
+               "real": ROOT / "bench" / "results" / "latest-real.json"}
 # The engine's own call for one 4 ms tick, as the table names it.
 RAW_STEP_LABEL = {"pybullet": "raw stepSimulation, DIRECT", "mujoco": "raw mj_step x 2 (one 4 ms tick)"}
 FIRST_STATE_MARK = "bench: first joint_state"
@@ -469,7 +470,7 @@ def run_dataflow(run_dir: Path, duration_s: float, sim_env: dict, probe_env: dic
                 process.wait()
     if not tick_log.exists() or not probe_log.exists():
         raise RuntimeError(f"`dora run` stopped without the nodes' records (see {log_path})")
-    node_logs = sorted(run_dir.glob("out/*/log_simulation.jsonl"))
+    node_logs = sorted(run_dir.glob(f"out/*/log_{BODIES[body].node_id}.jsonl"))
     return {
         "started_ns": started_ns, "started_epoch_s": started_epoch_s, "ticks": tick_records(tick_log.read_bytes()),
         "probe": json.loads(probe_log.read_text()), "log": log_path.read_text(errors="replace"),
@@ -655,7 +656,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--duration", type=_positive_seconds, default=20.0,
                         help="seconds of the paced `dora run` measurement, after start-up (default 20)")
     parser.add_argument("--body", choices=list(BODIES), default="pybullet",
-                        help="which simulation node to measure: pybullet (the course's, default) or mujoco")
+                        help="which node to measure: pybullet (the course's, default), mujoco, or real (the real arm's "
+                        "driver, against so101 fake-arm's emulated bus)")
     parser.add_argument("--out", type=Path, default=None,
                         help="JSON file to write (default " + ", ".join(f"{path.relative_to(ROOT)} for {body}" for body, path in DEFAULT_OUT.items()) + ")")
     parser.add_argument("--quick", action="store_true",
@@ -680,9 +682,12 @@ def main(argv=None) -> int:
 
 def run(args: argparse.Namespace) -> int:
     """The benchmark for parsed options (`so101 bench` calls this)."""
+    from bench import real_bench
+
     if args.show is not None:
         try:
-            print(table(json.loads(args.show.read_text(encoding="utf-8"))))
+            shown = json.loads(args.show.read_text(encoding="utf-8"))
+            print(real_bench.table(shown) if shown.get("body") == "real" else table(shown))
         except OSError as error:
             print(f"so101 bench: cannot read {args.show}: {error.strerror or error}", file=sys.stderr)
             return 2
@@ -695,13 +700,16 @@ def run(args: argparse.Namespace) -> int:
     else:
         settings = dict(duration_s=args.duration, fast_s=5.0, fast_steps=[1, 10, 100], raw_steps=40000, node_ticks=10000, after_sleep_steps=1000)
     try:
-        result = run_benchmark(**settings, body=args.body)
+        if args.body == "real":
+            result = real_bench.run_real_benchmark(settings["duration_s"], exchanges=500 if args.quick else 3000)
+        else:
+            result = run_benchmark(**settings, body=args.body)
     except RuntimeError as error:
         print(f"so101 bench: {error}", file=sys.stderr)
         return 1
     result["settings"]["quick"] = args.quick
     print()
-    print(table(result))
+    print(real_bench.table(result) if args.body == "real" else table(result))
     out = args.out or DEFAULT_OUT[args.body]
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(result, indent=2) + "\n")

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from so101.bodies import BODIES, DEFAULT_BODY
+from so101.bodies import DEFAULT_BODY, SIMULATED_BODIES
 from so101.dataflow import TICK_PERIOD_S
 from so101.robot import ACTUATED_JOINTS, HOME_POSE_DEG
 from so101.servo import DEFAULT_NATURAL_FREQ_RAD_S, SERVO_TORQUE_LIMIT_NM
@@ -65,7 +65,7 @@ def _duration(text: str) -> float:
 
 def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
     parser.add_argument(
-        "--body", choices=list(BODIES), default=DEFAULT_BODY,
+        "--body", choices=SIMULATED_BODIES, default=DEFAULT_BODY,
         help="pybullet (default; --mode applies) or mujoco: the MJCF's servos, damping = joint damping in N·m·s/rad",
     )
     parser.add_argument("--joint", type=_joint, default=0, help="joint to step: 0-4 arm, 5 gripper (default 0, as in exercise 2)")

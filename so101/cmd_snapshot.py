@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from so101.bodies import BODIES, DEFAULT_BODY
+from so101.bodies import BODIES, DEFAULT_BODY, SIMULATED_BODIES
 from so101.dataflow import TICK_PERIOD_S
 from so101.robot import ACTUATED_JOINTS, HOME_POSE_DEG, NUM_ARM_JOINTS
 
@@ -35,7 +35,7 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
     from so101.camera import DEFAULT_CAMERA
 
     parser.add_argument(
-        "--body", choices=list(BODIES), default=DEFAULT_BODY,
+        "--body", choices=SIMULATED_BODIES, default=DEFAULT_BODY,
         help="which simulator drives the arm to the pose and draws it: pybullet (default, its CPU renderer) "
         "or mujoco (offscreen through EGL where there is no display)",
     )

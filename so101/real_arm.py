@@ -15,7 +15,6 @@ with one SYNC READ. The safety rules live here, so every user of the body has th
 
 from __future__ import annotations
 
-import os
 import statistics
 from array import array
 from dataclasses import dataclass
@@ -264,6 +263,3 @@ class SO101Real:
     def __exit__(self, *exc) -> None:
         self.close()
 
-
-def arm_from_environ(environ: Mapping[str, str] = os.environ, log: Callable[[str], None] = print) -> SO101Real:
-    return SO101Real.from_settings(ArmSettings.from_environ(environ), log)

@@ -50,17 +50,18 @@ def test_the_tests_the_readme_cites_exist():
 
 def test_every_so101_command_in_the_readme_exists():
     used = {name for code in code_spans() for name in re.findall(r"(?:^|\s)so101 ([a-z][a-z-]*)", code)}
-    assert {"assets", "inspect", "joints", "teleop", "plot-step", "snapshot", "bench"} <= used
+    assert {"assets", "inspect", "joints", "teleop", "plot-step", "snapshot", "bench", "fake-arm", "calibrate"} <= used
     assert used <= set(SUBCOMMANDS), used - set(SUBCOMMANDS)
 
 
-@pytest.mark.parametrize("body", ["pybullet", "mujoco"])
+@pytest.mark.parametrize("body", ["pybullet", "mujoco", "real"])
 def test_the_benchmark_tables_in_the_readme_are_the_latest_results(body):
     import json
 
-    from bench import run_bench
+    from bench import real_bench, run_bench
 
     latest = run_bench.DEFAULT_OUT[body]
     result = json.loads(latest.read_text())
-    shown = "\n".join(("    " + line).rstrip() for line in run_bench.table(result).splitlines())
+    table = real_bench.table if body == "real" else run_bench.table
+    shown = "\n".join(("    " + line).rstrip() for line in table(result).splitlines())
     assert shown in README, f"README's benchmark figures differ from {latest.name} (so101 bench --show prints them)"

@@ -13,15 +13,13 @@ import signal
 import time
 import uuid
 
-import pyarrow as pa
 import pytest
 
-from so101.calibration import MOTOR_IDS, load_calibration, save_calibration
+from so101.calibration import MOTOR_IDS, save_calibration
 from so101.fake_arm import FakeArm, calibrate_as_at_the_factory
-from so101.real_arm import ArmFailed, SO101Real
+from so101.real_arm import SO101Real
 from tests.dataflow_helpers import TICK, DoraRun, body_environment, run_simulation_node, write_test_dataflow
 
-TICK_S = 0.004  # the MockNode ticks' timer (tests/dataflow_helpers.py)
 
 
 def torque(arm: FakeArm) -> list[int]:

@@ -2,7 +2,7 @@
 
 Every $PROBE_PERIOD_S seconds (0 = never) it moves joint 0 or joint 4 (in turn) by
 ±$PROBE_STEP_DEG around 0, at a random phase of the 4 ms tick so the wait for the
-next tick is sampled fairly. It records when each joint_state arrived (time.monotonic_ns,
+next tick ($PROBE_PHASE_S long, default 4 ms) is sampled fairly. It records when each joint_state arrived (time.monotonic_ns,
 the clock `so101 bench` and the simulation node's tick log use) with the angles of
 joints 0 and 4, and writes everything to $PROBE_LOG (JSON) at STOP.
 With $PROBE_COUNT_ONLY=1 it only counts states and keeps the first and last arrival:
@@ -25,6 +25,7 @@ def main() -> None:
     period_ns = int(float(os.environ.get("PROBE_PERIOD_S", "0")) * 1e9)
     step_deg = float(os.environ.get("PROBE_STEP_DEG", "2"))
     count_only = os.environ.get("PROBE_COUNT_ONLY", "0") == "1"
+    phase_ns = int(float(os.environ.get("PROBE_PHASE_S", "0.004")) * 1e9)
     states = []  # [arrival ns, angle of joint 0, angle of joint 4]
     commands = []  # [send ns, joint, target deg]
     state_count, first_ns, last_ns = 0, None, None
@@ -59,7 +60,7 @@ def main() -> None:
             node.send_output("joint_cmd", pa.array([float(joint), target_deg], type=pa.float64()))
             commands.append([send_ns, joint, target_deg])
             sent += 1
-            next_send_ns = send_ns + period_ns + random.randrange(4_000_000)
+            next_send_ns = send_ns + period_ns + random.randrange(phase_ns)
     record = {"state_count": state_count, "first_state_ns": first_ns, "last_state_ns": last_ns,
               "states": states, "commands": commands, "probed_joints": list(PROBED_JOINTS)}
     with open(log_path + ".tmp", "w") as handle:
