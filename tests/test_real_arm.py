@@ -21,7 +21,6 @@ from so101.real_arm import SO101Real
 from tests.dataflow_helpers import TICK, DoraRun, body_environment, run_simulation_node, write_test_dataflow
 
 
-
 def torque(arm: FakeArm) -> list[int]:
     return [arm.read_register(servo_id, "Torque_Enable") for servo_id in MOTOR_IDS]
 
