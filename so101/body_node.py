@@ -34,7 +34,6 @@ from so101.bodies import BodyFailed
 from so101.dataflow import TICK_PERIOD_S, TickClock, timer_period_s
 from so101.joint_cmd import decode_joint_cmd
 from so101.robot import GRIPPER_COMMAND_INDEX, HOME_POSE_DEG, NUM_ARM_JOINTS
-from so101.viewer import WindowClosed
 
 IMAGE_SIZE = (320, 240)
 
@@ -52,8 +51,7 @@ TEXT = {
         "clamped": "{tag} 超出关节限位: {note}",
         "rejected": "{tag} 忽略无效 joint_cmd: {error}",
         "no_timer": "{tag} tick 不是 dora 定时器,物理步长取 {step_ms:g} ms",
-        "window_closed": "{tag} 仿真停止: {reason}",
-        "failed": "{tag} 停止: {reason}",
+        "stopping": "{tag} 停止: {reason}",
     },
     "en": {
         "loaded": "{tag} SO-101 loaded, {identity} ({mode} mode, step {step_ms:g} ms, {detail})",
@@ -62,8 +60,7 @@ TEXT = {
         "clamped": "{tag} beyond the joint limits: {note}",
         "rejected": "{tag} ignored invalid joint_cmd: {error}",
         "no_timer": "{tag} tick is not a dora timer; physics step set to {step_ms:g} ms",
-        "window_closed": "{tag} stopping: {reason}",
-        "failed": "{tag} stopping: {reason}",
+        "stopping": "{tag} stopping: {reason}",
     },
 }
 
@@ -214,13 +211,11 @@ def run_body_node(body, node, settings: NodeSettings, identity: str, detail: Map
                 break
     except KeyboardInterrupt:
         pass  # Ctrl-C on a node run by hand: stop like STOP
-    except WindowClosed as closed:
-        # As in the course, closing the window ends the simulation; exit code 1 makes dora
-        # stop the dataflow and say so, rather than leave a prompt driving nothing.
-        print(text["window_closed"].format(reason=closed), file=sys.stderr, flush=True)
-        return 1
-    except BodyFailed as failure:  # the real arm's bus, past its retries: exit 1 stops the dataflow
-        print(text["failed"].format(reason=failure), file=sys.stderr, flush=True)
+    except BodyFailed as failure:
+        # Closing the window ends the simulation, as in the course; the real arm's bus past its
+        # retries ends the driver. Exit code 1 makes dora stop the dataflow and say so, rather
+        # than leave a prompt driving nothing.
+        print(text["stopping"].format(reason=failure), file=sys.stderr, flush=True)
         return 1
     finally:
         body.close()

@@ -29,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from so101.bodies import BodyFailed
 from so101.robot import ACTUATED_JOINTS
 
 DEFAULT_FPS = 30.0
@@ -52,7 +53,7 @@ CAMERA = {"cameraDistance": 0.6, "cameraYaw": 45, "cameraPitch": -30, "cameraTar
 WINDOW_SHOWING = "window open: it shows the arm as the physics moves it"
 
 
-class WindowClosed(RuntimeError):
+class WindowClosed(BodyFailed):
     """The window's process ended: closed by the person, or it could not open."""
 
 
