@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import os
 import select
+import shutil
 import sys
 from pathlib import Path
 
@@ -27,7 +28,7 @@ from so101.calibration import (
     save_calibration,
 )
 from so101.feetech import BusError, FeetechBus
-from so101.sts3215 import MAX_STEP, MODEL_NUMBER, SIGN_BITS, encode_signed
+from so101.sts3215 import MAX_STEP, MODEL_NUMBER, SIGN_BITS, STEPS_PER_TURN, encode_signed
 
 FULL_TURN_JOINT = "wrist_roll"
 POLL_S = 0.01  # how often positions are read while the person moves the joints
@@ -107,13 +108,19 @@ def calibrate(bus: FeetechBus) -> dict[str, MotorCalibration] | None:
     low = bus.sync_read("Present_Position", MOTOR_IDS)
     high = dict(low)
 
+    shown = [""]
+
     def record() -> None:
         present = bus.sync_read("Present_Position", MOTOR_IDS)
         for servo_id, position in present.items():
             low[servo_id] = min(low[servo_id], position)
             high[servo_id] = max(high[servo_id], position)
-        if sys.stdout.isatty():
-            _say("\r" + "  ".join(f"{name} {low[i]}..{high[i]}" for name, i in ranged), end="")
+        # How far each joint has travelled, redrawn in place (one terminal row) when it grows.
+        line = " ".join(f"{name} {(high[i] - low[i]) * 360 / STEPS_PER_TURN:.0f}°" for name, i in ranged)
+        line = line[: shutil.get_terminal_size().columns - 1]
+        if sys.stdout.isatty() and line != shown[0]:
+            _say("\r\x1b[K" + line, end="")
+            shown[0] = line
 
     _say(f"Now move every joint except {FULL_TURN_JOINT} slowly to both ends of its travel, one at a time. "
          "Press Enter when done.")
