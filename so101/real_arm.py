@@ -65,11 +65,12 @@ class ArmSettings:
 
         port = environ.get("SO101_PORT", "").strip()
         if not port:
-            raise ValueError("SO101_PORT is empty: set it to the arm's serial port (/dev/ttyACM0, ...; "
-                             "`so101 fake-arm` prints an emulated one)")
+            raise ValueError("SO101_PORT is empty: set it (the dataflow's env:, or so101 teleop --port) to the arm's "
+                             "serial port (/dev/ttyACM0, ...; `so101 fake-arm` prints an emulated one)")
         calibration = environ.get("SO101_CALIBRATION", "").strip()
         if not calibration:
-            raise ValueError("SO101_CALIBRATION is empty: " + CALIBRATE_HINT.format(port=port))
+            raise ValueError("SO101_CALIBRATION is empty: set it (the dataflow's env:, or so101 teleop --calibration) "
+                             "to the arm's calibration file; " + CALIBRATE_HINT.format(port=port))
         torque = number_setting(environ, "SO101_TORQUE_LIMIT", "100", 1.0)
         if torque > 100:
             raise ValueError(f"SO101_TORQUE_LIMIT={torque:g} is above 100 (a percentage of the servo's maximum)")

@@ -42,8 +42,9 @@ def run_arm(monkeypatch, events, **env):
 
 
 @pytest.mark.parametrize("setting, message", [
-    ("SO101_CALIBRATION", "SO101_CALIBRATION is empty: make one with `so101 calibrate --port"),
-    ("SO101_PORT", "SO101_PORT is empty: set it to the arm's serial port"),
+    ("SO101_CALIBRATION", "SO101_CALIBRATION is empty: set it (the dataflow's env:, or so101 teleop --calibration) "
+                          "to the arm's calibration file; make one with `so101 calibrate --port"),
+    ("SO101_PORT", "SO101_PORT is empty: set it (the dataflow's env:, or so101 teleop --port) to the arm's serial port"),
 ])
 def test_without_a_port_or_a_calibration_the_node_refuses_in_one_line(monkeypatch, capsys, fake_arm, setting, message):
     code, node = run_arm(monkeypatch, [TICK], **{setting: ""})
