@@ -42,6 +42,7 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))  # run as a script: `nodes` and `so101` live at the top
 
+from so101.argtypes import number  # noqa: E402
 from so101.bodies import BODIES  # noqa: E402
 from so101.dataflow import TICK_PERIOD_S, dataflow_copy, write_dataflow  # noqa: E402
 from so101.display import DisplayError, display_available, virtual_display  # noqa: E402
@@ -666,14 +667,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="print the table of a saved result (e.g. bench/results/latest.json) and measure nothing")
 
 
-def _positive_seconds(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        value = float("nan")
-    if not 0 < value <= 3600:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number of seconds above 0 and at most 3600")
-    return value
+_positive_seconds = number(lambda value: 0 < value <= 3600, "a number of seconds above 0 and at most 3600")
 
 
 def main(argv=None) -> int:

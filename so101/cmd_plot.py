@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from so101 import argtypes
 from so101.bodies import DEFAULT_BODY, SIMULATED_BODIES
 from so101.dataflow import TICK_PERIOD_S
 from so101.robot import ACTUATED_JOINTS, HOME_POSE_DEG
@@ -43,24 +44,9 @@ def _joint(text: str) -> int:
     return int(text)
 
 
-def _non_negative(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        value = float("nan")
-    if not value >= 0:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a damping value: use numbers >= 0")
-    return value
-
-
-def _duration(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        value = float("nan")
-    if not 0 < value <= MAX_DURATION_S:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a duration: use seconds, more than 0 and at most {MAX_DURATION_S:g}")
-    return value
+_non_negative = argtypes.number(lambda value: value >= 0, "a damping value: use numbers >= 0")
+_duration = argtypes.number(lambda value: 0 < value <= MAX_DURATION_S,
+                            f"a duration: use seconds, more than 0 and at most {MAX_DURATION_S:g}")
 
 
 def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:

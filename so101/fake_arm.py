@@ -55,6 +55,7 @@ import tty
 from dataclasses import dataclass
 
 from so101 import sts3215
+from so101.argtypes import number
 from so101.robot import ACTUATED_JOINTS
 
 # -- the protocol ------------------------------------------------------------------------
@@ -880,24 +881,9 @@ def _servo_id(text: str) -> int:
     return int(text)
 
 
-def _seconds(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        value = float("nan")
-    if not 0 <= value < 1e6:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a time: use seconds, 0 or more")
-    return value
-
-
-def _speed(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        value = float("nan")
-    if not 0 < value <= 100_000:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a speed: use steps per second, more than 0 (the default is 3000)")
-    return value
+_seconds = number(lambda value: 0 <= value < 1e6, "a time: use seconds, 0 or more")
+_speed = number(lambda value: 0 < value <= 100_000,
+                 "a speed: use steps per second, more than 0 (the default is 3000)")
 
 
 def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
