@@ -40,8 +40,8 @@ if str(ROOT) not in sys.path:  # run as a script from anywhere: the so101 packag
     sys.path.insert(0, str(ROOT))
 
 from so101.commands import (  # noqa: E402
-    LANGUAGES, Batch, Empty, GoPose, Help, Home, ListJoints, ListPoses, ParseError, Quit, SavePose, SetJoint, ShowState,
-    Snapshot, format_angle, format_angles, help_lines, joint_lines, parse_command, texts,
+    LANGUAGES, Batch, Empty, GoPose, Help, Home, JogKeys, ListJoints, ListPoses, MoveTip, ParseError, Quit, SavePose,
+    SetJoint, ShowState, Snapshot, Where, format_angle, format_angles, help_lines, joint_lines, parse_command, texts,
 )
 from so101.poses import Pose, PoseStore  # noqa: E402
 from so101.robot import ACTUATED_JOINTS, NUM_ARM_JOINTS  # noqa: E402
@@ -55,6 +55,8 @@ DEFAULT_PROMPT_LOG = ROOT / "out" / "keyboard_control.log"
 # How long `save` waits for a first joint_state (a piped script may start before one arrives).
 FIRST_STATE_WAIT_S = 2.0
 EVENT_WAIT_S = 0.2
+# Jog mode looks for a key this often, and sends a waiting command once a newer joint_state came.
+JOG_POLL_S = 0.01
 
 TEXT = {
     "zh": {
@@ -92,7 +94,11 @@ class KeyboardControl:
         self._state_changed = threading.Condition()
         self.joint_state_deg: tuple[float, ...] | None = None
         self.gripper_deg: float | None = None
+        self.states_seen = 0  # joint_state messages so far: one per tick of the body
         self.stopped = False
+        self._kinematics = None
+        # Runs key jogging and returns its closing lines; set by the prompt when it has a terminal.
+        self.run_jog: Callable[[], list[str]] | None = None
 
     # -- events, from the pump thread ----------------------------------------------------
     def on_event(self, event: dict) -> None:
@@ -105,6 +111,7 @@ class KeyboardControl:
             with self._state_changed:
                 if event["id"] == "joint_state" and len(values) == NUM_ARM_JOINTS:
                     self.joint_state_deg = tuple(values)
+                    self.states_seen += 1
                     self._state_changed.notify_all()
                 elif event["id"] == "gripper_state" and len(values) == 1:
                     self.gripper_deg = values[0]
@@ -113,6 +120,26 @@ class KeyboardControl:
         with self._state_changed:
             self._state_changed.wait_for(lambda: self.joint_state_deg is not None or self.stopped, timeout_s)
             return self.joint_state_deg, self.gripper_deg
+
+    def latest_deg(self) -> tuple[float, ...] | None:
+        """The six angles of the latest state (the gripper as 0 until its first state), or None."""
+        with self._state_changed:
+            if self.joint_state_deg is None:
+                return None
+            return self.joint_state_deg + (self.gripper_deg or 0.0,)
+
+    def kinematics(self):
+        """so101.kinematics.Kinematics, made on first use (PyBullet stays out of the prompt's
+        start-up), or the exception that says why there is none."""
+        if self._kinematics is None:
+            from so101.assets import ModelFilesError
+            from so101.kinematics import Kinematics
+
+            try:
+                self._kinematics = Kinematics()
+            except ModelFilesError as error:
+                return error
+        return self._kinematics
 
     # -- commands, from the main thread --------------------------------------------------
     def handle_line(self, line: str, state_wait_s: float = FIRST_STATE_WAIT_S) -> tuple[list[str], bool]:
@@ -154,6 +181,12 @@ class KeyboardControl:
             return self._pose_lines(), False
         if isinstance(command, Snapshot):
             return [self._snapshot(command.path, state_wait_s)], False
+        if isinstance(command, MoveTip):
+            return [self._move_tip(command.target_mm, state_wait_s)], False
+        if isinstance(command, Where):
+            return [self._where(state_wait_s)], False
+        if isinstance(command, JogKeys):
+            return (self.run_jog() if self.run_jog else [text["jog_needs_terminal"]]), False
         raise AssertionError(f"unhandled command {command!r}")
 
     def _batch_line(self, angles_deg: Sequence[float]) -> str:
@@ -205,6 +238,33 @@ class KeyboardControl:
             return self.text["snapshot_failed"].format(error=lines[-1] if lines else f"exit code {result.returncode}")
         return self.text["snapshot"].format(path=path)
 
+    def _move_tip(self, target_mm: tuple[float, float, float], state_wait_s: float) -> str:
+        kinematics = self.kinematics()
+        if isinstance(kinematics, Exception):
+            return self.text["no_kinematics"].format(error=kinematics)
+        x, y, z = target_mm
+        if z < 0:  # the base stands on the floor (or the table) at z = 0; IK knows nothing of it
+            return self.text["below_floor"].format(x=x, y=y, z=z)
+        joints_deg, _ = self._wait_for_state(state_wait_s)
+        reach = kinematics.solve(target_mm, seed_deg=joints_deg)
+        if not reach.reachable:
+            nx, ny, nz = reach.tip_mm
+            return self.text["unreachable"].format(x=x, y=y, z=z, nx=nx, ny=ny, nz=nz, error=reach.error_mm)
+        if joints_deg is not None and not kinematics.path_clear(joints_deg, reach.joints_deg):
+            return self.text["through_floor"].format(x=x, y=y, z=z)
+        self.send_joint_cmd(list(reach.joints_deg))  # the five arm joints; the gripper stays
+        return self.text["sent_tip"].format(x=x, y=y, z=z, angles=format_angles(reach.joints_deg))
+
+    def _where(self, state_wait_s: float) -> str:
+        joints_deg, _ = self._wait_for_state(state_wait_s)
+        if joints_deg is None:
+            return self.text["no_state_where"]
+        kinematics = self.kinematics()
+        if isinstance(kinematics, Exception):
+            return self.text["no_kinematics"].format(error=kinematics)
+        x, y, z = kinematics.tip_mm(joints_deg)
+        return self.text["where"].format(x=x, y=y, z=z)
+
     def _pose_lines(self) -> list[str]:
         if not self.poses.names():
             return [self.text["no_poses"]]
@@ -217,6 +277,65 @@ class KeyboardControl:
                 lines.append(self.text["pose_line_gripper"].format(
                     name=name, angles=format_angles(pose.joints_deg), gripper=format_angle(pose.gripper_deg)))
         return lines
+
+
+def _columns(fd: int) -> int:
+    """The terminal's width (fd 1 is dora's log file here, so ask the keyboard's terminal)."""
+    try:
+        return os.get_terminal_size(fd).columns
+    except OSError:
+        return 80
+
+
+def run_jog(control: KeyboardControl, fd: int) -> list[str]:
+    """Key jogging at the terminal on `fd` (so101/jog.py says what each key does), until Esc or
+    q; returns the closing lines. At most one joint_cmd per joint_state received, so holding a
+    key never queues commands ahead of the arm. The terminal is restored however this ends."""
+    from so101.jog import TEXT as JOG_TEXT, Jog, press, status_line
+    from so101.terminal import single_keys
+
+    text = control.text
+    joints_deg, gripper_deg = control._wait_for_state(FIRST_STATE_WAIT_S)
+    if joints_deg is None:
+        return [text["jog_no_state"]]
+    jog_text = JOG_TEXT[control.lang]
+    for line in jog_text["map"]:
+        say(line)
+    jog = Jog(targets_deg=control.latest_deg())
+    kinematics = None  # made when Cartesian mode is first asked for: it loads PyBullet
+    waiting_deg, sent_at_state, shown = None, -1, ""
+    try:
+        with single_keys(fd) as keys:
+            while True:
+                key = keys.read(JOG_POLL_S)
+                if key is not None:
+                    if key == "tab" and kinematics is None:
+                        kinematics = control.kinematics()
+                    pressed = press(jog, key, control.latest_deg(), kinematics, control.lang)
+                    jog = pressed.jog
+                    if pressed.leave:
+                        break
+                    if pressed.show_map:
+                        sys.stdout.write("\r\x1b[K" + "\n".join(jog_text["map"]) + "\n")
+                        shown = ""
+                    if pressed.send_deg is not None:
+                        waiting_deg = pressed.send_deg
+                if waiting_deg is not None and control.states_seen != sent_at_state:
+                    control.send_joint_cmd(list(waiting_deg))
+                    waiting_deg, sent_at_state = None, control.states_seen
+                state_deg = control.latest_deg()
+                tip_mm = kinematics.tip_mm(state_deg[:NUM_ARM_JOINTS]) if jog.cartesian and state_deg else None
+                line = status_line(jog, state_deg, tip_mm, control.lang)[: _columns(fd) - 1]
+                if line != shown:
+                    sys.stdout.write("\r\x1b[K" + line)
+                    sys.stdout.flush()
+                    shown = line
+    except EOFError:  # the terminal went away
+        pass
+    finally:
+        sys.stdout.write("\n")
+        sys.stdout.flush()
+    return [text["jog_left"]]
 
 
 def joint_cmd_sender(node) -> Callable[[Sequence[float]], None]:
@@ -371,6 +490,8 @@ def _session(lang: str, poses_file: Path, history_file: Path) -> int:
             print(f"keyboard_control: {mismatch}", file=sys.stderr)
         return 1
     control.send_joint_cmd = joint_cmd_sender(node)
+    if interactive:
+        control.run_jog = lambda: run_jog(control, sys.stdin.fileno())
     pump = EventPump(node, control, on_stop=_interrupt_main_thread)
     pump.start()
     try:

@@ -22,6 +22,7 @@ SUBCOMMANDS = {
     "plot-step": ("so101.cmd_plot", "exercise 2: plot one joint's step response for a few damping values (PNG)"),
     "bench": ("so101.cmd_bench", "benchmark the simulation node's 4 ms real-time budget against raw PyBullet (JSON + table)"),
     "snapshot": ("so101.cmd_snapshot", "render the arm in a pose to a PNG, headless (no window needed)"),
+    "reach": ("so101.cmd_reach", "check IK and the simulated arm against Cartesian targets: tip errors in mm (table, JSON)"),
     "calibrate": ("so101.cmd_calibrate", "calibrate a real SO-101 follower arm into LeRobot's calibration format (JSON)"),
     "teleop": ("so101.teleop", "steps D + exercise 1: the dataflow and the keyboard prompt in one terminal"),
     "fake-arm": ("so101.fake_arm", "an emulated SO-101 servo bus on a pseudo-terminal, for trying the real-arm driver without hardware"),

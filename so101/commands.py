@@ -5,6 +5,10 @@ Commands (course step D and exercise 1, plus the gripper):
   batch a0 a1 a2 a3 a4 [g] all five arm joints at once, optionally the gripper as a sixth value
   grip ANGLE | open | close
   home | list | state | save NAME | go NAME | poses | snapshot [FILE] | help | quit | exit
+Beyond the course (its mini project 7, and Cartesian targets):
+  xyz X Y Z                the gripper tip to that point: millimetres, in the arm's base frame
+  where                    where the tip is now (forward kinematics of joint_state)
+  jog                      key jogging (so101/jog.py)
 
 Out-of-limit angles are refused, not clamped: at a keyboard a value beyond the
 URDF limits is far more likely a typo (900 for 90) than a wish for the limit.
@@ -83,6 +87,23 @@ class Snapshot:
 
 
 @dataclass(frozen=True)
+class MoveTip:
+    """`xyz X Y Z`: the gripper tip to a point in the base frame, millimetres."""
+
+    target_mm: tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class Where:
+    pass
+
+
+@dataclass(frozen=True)
+class JogKeys:
+    pass
+
+
+@dataclass(frozen=True)
 class Help:
     pass
 
@@ -103,7 +124,8 @@ class ParseError:
 
 
 Command = (
-    SetJoint | Batch | Home | ListJoints | ShowState | SavePose | GoPose | ListPoses | Snapshot | Help | Quit | Empty
+    SetJoint | Batch | Home | ListJoints | ShowState | SavePose | GoPose | ListPoses | Snapshot | MoveTip | Where | JogKeys
+    | Help | Quit | Empty
 )
 
 
@@ -129,7 +151,7 @@ TEXT = {
         "none": "无",
         "bye": "  再见",
         "unknown": "  无法识别 '{text}':可用 '关节号 角度'(如 '0 45')、batch、grip、open、close、home、list、"
-        "state、save、go、poses、snapshot、help、quit(输入 help 查看)",
+        "state、save、go、poses、snapshot、xyz、where、jog、help、quit(输入 help 查看)",
         "joint_form": "  格式错误:关节号 角度(如 '0 45'),关节号 0-5(5 = 夹爪)",
         "joint_range": "  关节号范围 0-5(0-4 手臂,5 夹爪),收到 '{text}';格式:关节号 角度(如 '0 45')",
         "bad_angle": "  '{text}' 不是角度:角度是十进制数字,单位度(如 45、-30.5)",
@@ -142,6 +164,18 @@ TEXT = {
         "snapshot": "  → 快照已写入 {path}",
         "snapshot_failed": "  快照失败: {error}",
         "no_state_snapshot": "  还没有收到 joint_state(仿真节点在运行吗?),无法拍快照",
+        "xyz_form": "  xyz 命令格式:xyz X Y Z(末端目标点,单位毫米,基座坐标系:x 向前,y 向左,z 向上;如 'xyz 200 0 150')",
+        "bad_mm": "  '{text}' 不是坐标:坐标是十进制数字,单位毫米(如 200、-35.5)",
+        "sent_tip": "  → 末端 → ({x:g}, {y:g}, {z:g}) mm:关节 {angles}°",
+        "unreachable": "  够不到 ({x:g}, {y:g}, {z:g}) mm:最近能到的点是 ({nx:.0f}, {ny:.0f}, {nz:.0f}) mm(差 {error:.0f} mm),未发送",
+        "below_floor": "  ({x:g}, {y:g}, {z:g}) mm 在地面以下(z < 0,基座底面是 z = 0),未发送",
+        "through_floor": "  到 ({x:g}, {y:g}, {z:g}) mm 的直接移动会碰到地面,未发送(分几步走,或先 home)",
+        "where": "  末端位置: ({x:.1f}, {y:.1f}, {z:.1f}) mm(基座坐标系)",
+        "no_state_where": "  还没有收到 joint_state(仿真节点在运行吗?),不知道末端在哪里",
+        "no_kinematics": "  无法计算运动学: {error}",
+        "jog_needs_terminal": "  jog 需要终端(键盘),标准输入不是终端",
+        "jog_no_state": "  还没有收到 joint_state(仿真节点在运行吗?),无法点动",
+        "jog_left": "  已退出点动模式",
         "help": [
             "  命令格式:",
             "    关节号 角度              如 '0 45'(关节号 0-4 手臂,5 夹爪)",
@@ -154,6 +188,9 @@ TEXT = {
             "    go 名字                 移动到已保存的姿态",
             "    poses                   显示已保存的姿态",
             "    snapshot [文件]          把当前姿态画成 PNG(无需窗口,默认 out/snapshot.png)",
+            "    xyz X Y Z               末端移到该点(毫米,基座坐标系:x 向前,y 向左,z 向上)",
+            "    where                   显示末端当前位置(毫米)",
+            "    jog                     键盘点动(W/S 抬起/放下,A/D 左/右转,Esc 返回)",
             "    help                    显示本帮助",
             "    quit / exit             退出(也可 Ctrl-D、Ctrl-C)",
             "  超出关节限位的角度不会发送(会提示范围)。",
@@ -180,7 +217,7 @@ TEXT = {
         "none": "none",
         "bye": "  bye",
         "unknown": "  cannot read '{text}': use 'JOINT ANGLE' (e.g. '0 45'), batch, grip, open, close, home, list, "
-        "state, save, go, poses, snapshot, help, quit (type help)",
+        "state, save, go, poses, snapshot, xyz, where, jog, help, quit (type help)",
         "joint_form": "  format: JOINT ANGLE (e.g. '0 45'), JOINT 0-5 (5 = gripper)",
         "joint_range": "  joints are 0-5 (0-4 arm, 5 gripper), got '{text}'; format: JOINT ANGLE (e.g. '0 45')",
         "bad_angle": "  '{text}' is not an angle: angles are decimal numbers in degrees (e.g. 45, -30.5)",
@@ -193,6 +230,20 @@ TEXT = {
         "snapshot": "  → snapshot written to {path}",
         "snapshot_failed": "  snapshot failed: {error}",
         "no_state_snapshot": "  no joint_state received yet (is the simulation running?): no snapshot",
+        "xyz_form": "  xyz format: xyz X Y Z (the tip's target in millimetres, base frame: x forward, y left, z up; "
+        "e.g. 'xyz 200 0 150')",
+        "bad_mm": "  '{text}' is not a coordinate: coordinates are decimal numbers in millimetres (e.g. 200, -35.5)",
+        "sent_tip": "  → tip → ({x:g}, {y:g}, {z:g}) mm: joints {angles}°",
+        "unreachable": "  ({x:g}, {y:g}, {z:g}) mm is out of reach: the nearest point reached is ({nx:.0f}, {ny:.0f}, {nz:.0f}) mm "
+        "({error:.0f} mm away); not sent",
+        "below_floor": "  ({x:g}, {y:g}, {z:g}) mm is below the floor (z < 0; the base stands at z = 0): not sent",
+        "through_floor": "  the straight move to ({x:g}, {y:g}, {z:g}) mm would hit the floor: not sent (go in steps, or home first)",
+        "where": "  tip at ({x:.1f}, {y:.1f}, {z:.1f}) mm (base frame)",
+        "no_state_where": "  no joint_state received yet (is the simulation running?): the tip's place is unknown",
+        "no_kinematics": "  cannot compute the kinematics: {error}",
+        "jog_needs_terminal": "  jog needs a terminal (a keyboard): stdin is not one",
+        "jog_no_state": "  no joint_state received yet (is the simulation running?): cannot jog",
+        "jog_left": "  left jog mode",
         "help": [
             "  commands:",
             "    JOINT ANGLE             e.g. '0 45' (JOINT 0-4 arm, 5 gripper)",
@@ -205,6 +256,9 @@ TEXT = {
             "    go NAME                 move to a saved pose",
             "    poses                   list the saved poses",
             "    snapshot [FILE]         draw the arm as it is now to a PNG (no window needed; default out/snapshot.png)",
+            "    xyz X Y Z               move the gripper tip there (millimetres, base frame: x forward, y left, z up)",
+            "    where                   where the gripper tip is now (millimetres)",
+            "    jog                     jog with keys (W/S raise/lower, A/D turn, Esc back)",
             "    help                    this help",
             "    quit / exit             quit (Ctrl-D and Ctrl-C quit too)",
             "  Angles beyond a joint's limits are not sent (the reply gives the range).",
@@ -268,7 +322,7 @@ def _pose_name(command: str, words: list[str], text: dict) -> str | ParseError:
 
 NO_ARGUMENT_COMMANDS = {
     "home": Home(), "list": ListJoints(), "state": ShowState(), "poses": ListPoses(), "help": Help(), "?": Help(),
-    "quit": Quit(), "exit": Quit(),
+    "quit": Quit(), "exit": Quit(), "where": Where(), "jog": JogKeys(),
     "open": SetJoint(GRIPPER_COMMAND_INDEX, GRIPPER_OPEN_DEG),
     "close": SetJoint(GRIPPER_COMMAND_INDEX, GRIPPER_CLOSED_DEG),
 }
@@ -311,6 +365,16 @@ def parse_command(line: str, lang: str = "zh") -> Command | ParseError:
         if isinstance(name, ParseError):
             return name
         return SavePose(name) if keyword == "save" else GoPose(name)
+
+    if keyword == "xyz":
+        if len(words) != 4:
+            return ParseError(text["xyz_form"])
+        coordinates = []
+        for word in words[1:]:
+            if not _NUMBER.match(word) or not math.isfinite(float(word)):
+                return ParseError(text["bad_mm"].format(text=word))
+            coordinates.append(float(word))
+        return MoveTip(tuple(coordinates))
 
     if keyword == "snapshot":
         if len(words) > 2:

@@ -87,3 +87,81 @@ def dora_logs_to(log_path: Path):
             libc.fclose(stream)  # closes terminal_fd with it
         else:
             os.close(terminal_fd)
+
+
+# Key jogging: single key presses, straight from the terminal (termios; works over SSH, in tmux
+# and headless, with no X11 keyboard hook).
+_NAMED_BYTES = {b" ": "space", b"\t": "tab", b"\r": "enter", b"\n": "enter", b"\x7f": "backspace"}
+_ARROWS = {b"A": "up", b"B": "down", b"C": "right", b"D": "left"}
+# An Esc alone, or the start of an arrow key's sequence: the rest of a sequence comes at once.
+_ESCAPE_WAIT_S = 0.05
+
+
+class KeyReader:
+    """Key presses from a terminal in cbreak mode (see `single_keys`): read(timeout) returns a
+    one-character string, a name (space, tab, enter, esc, up, ...), or None after the timeout."""
+
+    def __init__(self, fd: int):
+        self.fd = fd
+        self._pending = b""
+
+    def _ready(self, timeout_s: float) -> bool:
+        import select
+
+        return bool(self._pending) or bool(select.select([self.fd], [], [], timeout_s)[0])
+
+    def _take(self) -> bytes:
+        if not self._pending:
+            self._pending = os.read(self.fd, 64)
+            if not self._pending:
+                raise EOFError
+        byte, self._pending = self._pending[:1], self._pending[1:]
+        return byte
+
+    def read(self, timeout_s: float) -> str | None:
+        if not self._ready(timeout_s):
+            return None
+        byte = self._take()
+        if byte == b"\x1b":
+            if not self._ready(_ESCAPE_WAIT_S):
+                return "esc"
+            sequence = self._take()
+            if sequence not in (b"[", b"O"):
+                return "esc"  # Esc, then an ordinary key pressed right after it: that key is dropped
+            final = self._take() if self._ready(_ESCAPE_WAIT_S) else b""
+            while final and not final.isalpha() and final != b"~" and self._ready(_ESCAPE_WAIT_S):
+                final = self._take()  # the parameters of a longer sequence (Home, F5, ...)
+            return _ARROWS.get(final, "unknown")
+        if byte in _NAMED_BYTES:
+            return _NAMED_BYTES[byte]
+        # A multi-byte UTF-8 character (say, from an input method) comes in one read.
+        while byte[0] >= 0x80 and len(byte) < 4 and self._pending:
+            try:
+                return byte.decode("utf-8")
+            except UnicodeDecodeError:
+                byte += self._take()
+        return byte.decode("utf-8", errors="replace")
+
+
+@contextlib.contextmanager
+def single_keys(fd: int):
+    """The terminal on `fd` in cbreak mode (each key at once, no echo; Ctrl-C still interrupts)
+    for the block, then exactly as it was, however the block ends: normally, Ctrl-C, an
+    exception, SIGTERM or SIGHUP (both raised as KeyboardInterrupt inside the block)."""
+    import signal
+    import termios
+    import tty
+
+    saved = termios.tcgetattr(fd)
+
+    def interrupt(signum, frame):
+        raise KeyboardInterrupt
+
+    previous = {signum: signal.signal(signum, interrupt) for signum in (signal.SIGTERM, signal.SIGHUP)}
+    try:
+        tty.setcbreak(fd, termios.TCSANOW)
+        yield KeyReader(fd)
+    finally:
+        termios.tcsetattr(fd, termios.TCSADRAIN, saved)
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)

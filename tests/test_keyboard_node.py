@@ -157,7 +157,7 @@ def test_a_piped_script_runs_in_order_echoes_and_stops_at_quit(tmp_path, monkeyp
         "  → joint 0 (shoulder_pan) → 90°",
         "> bogus",
         "  cannot read 'bogus': use 'JOINT ANGLE' (e.g. '0 45'), batch, grip, open, close, home, list, state, save, "
-        "go, poses, snapshot, help, quit (type help)",
+        "go, poses, snapshot, xyz, where, jog, help, quit (type help)",
         "> save a",
         "  → pose 'a' saved: [-30.0, 44.98, -59.69, 30.0, 0.0]°, gripper 12.35°",
         "> quit",
@@ -284,3 +284,66 @@ def test_main_says_so_in_one_line_when_the_log_file_cannot_be_written(tmp_path, 
     out = capsys.readouterr().out
     assert f"  (dora's log lines are dropped: cannot write {tmp_path / 'a-file' / 'prompt.log'}: File exists)" in out
     assert "> quit" in out
+
+
+# -- Cartesian targets: xyz and where ----------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def kinematics():
+    from so101.kinematics import Kinematics
+
+    with Kinematics() as model:
+        yield model
+
+
+def test_xyz_sends_the_five_joints_that_put_the_tip_there(tmp_path, kinematics):
+    node, control = make_control(tmp_path, "en", events=state_events())
+    lines, _ = control.handle_line("xyz 200 0 150")
+    assert lines[0].startswith("  → tip → (200, 0, 150) mm: joints [")
+    (joints_deg,) = sent(node)
+    assert len(joints_deg) == 5  # the arm only: the gripper stays as it is
+    assert kinematics.tip_mm(joints_deg) == pytest.approx((200, 0, 150), abs=1.0)
+
+
+def test_where_is_forward_kinematics_of_the_latest_state(tmp_path, kinematics):
+    _, control = make_control(tmp_path, "en", events=state_events())
+    x, y, z = kinematics.tip_mm(STATE_DEG)
+    assert control.handle_line("where") == ([f"  tip at ({x:.1f}, {y:.1f}, {z:.1f}) mm (base frame)"], False)
+    _, no_state = make_control(tmp_path, "en")
+    assert no_state.handle_line("where", state_wait_s=0.01)[0] == [
+        "  no joint_state received yet (is the simulation running?): the tip's place is unknown"]
+
+
+@pytest.mark.parametrize("line, reply", [
+    ("xyz 1000 0 0", r"  \(1000, 0, 0\) mm is out of reach: the nearest point reached is \(\d+, -?\d+, -?\d+\) mm "
+                     r"\(\d+ mm away\); not sent"),
+    ("xyz 200 0 -5", r"  \(200, 0, -5\) mm is below the floor \(z < 0; the base stands at z = 0\): not sent"),
+    ("xyz 200 0", r"  xyz format: xyz X Y Z \(the tip's target in millimetres, base frame: x forward, y left, z up; "
+                  r"e\.g\. 'xyz 200 0 150'\)"),
+    ("xyz 200 zero 150", r"  'zero' is not a coordinate: coordinates are decimal numbers in millimetres \(e\.g\. 200, -35\.5\)"),
+    ("xyz inf 0 0", r"  'inf' is not a coordinate: .*"),
+])
+def test_xyz_that_cannot_be_done_sends_nothing_and_says_why_in_one_line(tmp_path, kinematics, line, reply):
+    import re
+
+    node, control = make_control(tmp_path, "en", events=state_events())
+    lines, quit_now = control.handle_line(line)
+    assert len(lines) == 1 and re.fullmatch(reply, lines[0]), lines
+    assert not quit_now and sent(node) == []
+
+
+def test_jog_without_a_terminal_says_so(tmp_path):
+    node, control = make_control(tmp_path, "en", events=state_events())
+    assert control.handle_line("jog") == (["  jog needs a terminal (a keyboard): stdin is not one"], False)
+    assert sent(node) == []
+
+
+def test_the_prompt_does_not_load_pybullet_until_asked():
+    import subprocess
+    import sys
+
+    probe = ("import sys, nodes.keyboard_control; "
+             "print(sorted(m for m in ('pybullet', 'numpy', 'so101.kinematics', 'so101.jog') if m in sys.modules))")
+    result = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, cwd=keyboard_control.ROOT)
+    assert result.stdout.strip() == "[]", result.stderr

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import os
 import re
 import shutil
@@ -285,3 +286,85 @@ def test_a_person_without_an_arm_calibrates_the_emulated_one_and_drives_it(tmp_p
     assert list(json.loads(poses_file.read_text())) == ["a"]
     spawned = [int(pid) for pid in re.findall(r"spawned node with pid (\d+)", log_file.read_text())]
     assert spawned and [pid for pid in spawned if _alive(pid)] == []
+
+
+def _pane_stty(terminal: Terminal) -> str:
+    tty = subprocess.run(["tmux", "display", "-p", "-t", terminal.name, "#{pane_tty}"], capture_output=True,
+                         text=True, check=True).stdout.strip()
+    return subprocess.run(["stty", "-a", "-F", tty], capture_output=True, text=True, check=True).stdout
+
+
+def _keys(terminal: Terminal, *keys: str) -> None:
+    subprocess.run(["tmux", "send-keys", "-t", terminal.name, *keys], check=True)
+
+
+def test_jog_moves_the_arm_by_keys_and_xyz_reaches_a_point(tmp_path):
+    """Mini project 7 and Cartesian targets, as a person does it: `jog`, W held, the limit, Tab
+    and a sideways step, Esc; then `xyz 200 0 150` and `where`. The terminal is as it was."""
+    terminal, _, _ = start_teleop(tmp_path, "en")
+    try:
+        end = terminal.wait_for(r"^=+\n>$", timeout_s=120).start()
+        at_prompt = _pane_stty(terminal)
+        terminal.type_line("jog")
+        end = terminal.wait_for(r"^  jog mode \(a press moves, holding repeats\):$", timeout_s=20, after=end).end()
+        terminal.wait_for(r"^\[joint\] step 2°  pan 0\.0 lift 0\.0", timeout_s=20, after=end)
+        assert "icanon" in at_prompt or "-icanon" in at_prompt
+        during = _pane_stty(terminal)
+        assert " -icanon" in during and " -echo " in during  # raw keys while jogging
+        _keys(terminal, *["w"] * 5)  # five presses of 2°: shoulder_lift -10° raises the arm
+        terminal.wait_for(r"^\[joint\] step 2°  pan 0\.0 lift -10\.0 ", timeout_s=20, after=end)
+        _keys(terminal, *["w"] * 80)  # held down: the terminal repeats the key
+        terminal.wait_for(r"lift -100\.0 .*\| shoulder_lift at its limit -100\.0°$", timeout_s=30, after=end)
+        _keys(terminal, "-l", "+")
+        _keys(terminal, "a", "a")  # 5° a press: A turns the arm left, a negative shoulder_pan
+        terminal.wait_for(r"^\[joint\] step 5°  pan -10\.0 ", timeout_s=20, after=end)
+        _keys(terminal, "Tab")
+        first = terminal.wait_for(r"^\[cartesian\] step 10 mm .* tip \((-?\d+), (-?\d+), (-?\d+)\) mm", timeout_s=30, after=end)
+        _keys(terminal, "d", "d")  # two steps of 10 mm to the right: y falls by 20 mm
+        y_before = int(first.group(2))
+        deadline = time.monotonic() + 20
+        while True:
+            now = terminal.wait_for(r"^\[cartesian\] .* tip \((-?\d+), (-?\d+), (-?\d+)\) mm", after=end)
+            if int(now.group(2)) <= y_before - 19 or time.monotonic() > deadline:
+                break
+            time.sleep(0.3)
+        assert int(now.group(2)) == pytest.approx(y_before - 20, abs=1), terminal.screen()
+        assert [int(now.group(i)) for i in (1, 3)] == pytest.approx([int(first.group(i)) for i in (1, 3)], abs=1)
+        _keys(terminal, "Escape")
+        end = terminal.wait_for(r"^  left jog mode\n>$", timeout_s=20, after=end).start()
+        assert _pane_stty(terminal) == at_prompt
+
+        terminal.type_line("xyz 200 0 150")
+        end = terminal.wait_for(r"^  → tip → \(200, 0, 150\) mm: joints \[.*\]°$", timeout_s=30, after=end).end()
+        for _ in range(20):
+            time.sleep(0.5)
+            terminal.type_line("where")
+            where = terminal.wait_for(r"^  tip at \((\S+), (\S+), (\S+)\) mm \(base frame\)$", timeout_s=20, after=end)
+            end = where.end()
+            reached = [float(where.group(i)) for i in (1, 2, 3)]
+            if math.dist(reached, (200, 0, 150)) <= 5:
+                break
+        assert math.dist(reached, (200, 0, 150)) <= 5, reached
+        terminal.type_line("xyz 1000 0 0")
+        end = terminal.wait_for(r"^  \(1000, 0, 0\) mm is out of reach: the nearest point reached is .* not sent$",
+                                timeout_s=30, after=end).end()
+        for bad, reply in (("xyz 1 2", "  xyz format: xyz X Y Z"), ("xyz a 0 0", "  'a' is not a coordinate"),
+                           ("xyz nan 0 0", "  'nan' is not a coordinate")):
+            terminal.type_line(bad)
+            end = terminal.wait_for(rf"^> {re.escape(bad)}\n{re.escape(reply)}.*$", timeout_s=20, after=end).end()
+        terminal.type_line("jog")
+        end = terminal.wait_for(r"^\[joint\] step 2°", timeout_s=20, after=end).end()
+        _keys(terminal, "C-c")  # Ctrl-C while jogging quits, as at the prompt
+        terminal.wait_for(r"^TELEOP_EXIT=0$", timeout_s=60, after=end)
+        screen = terminal.screen()
+        after_exit = _pane_stty(terminal)
+    finally:
+        terminal.close()
+    fresh = Terminal("sleep 30", {})
+    try:
+        time.sleep(0.5)
+        untouched = _pane_stty(fresh)
+    finally:
+        fresh.close()
+    assert after_exit == untouched  # the shell gets its terminal back as tmux made it
+    assert "Traceback" not in screen, screen
