@@ -134,9 +134,11 @@ class KeyboardControl:
         if self._kinematics is None:
             from so101.assets import ModelFilesError
             from so101.kinematics import Kinematics
+            from so101.terminal import stderr_to_log
 
             try:
-                self._kinematics = Kinematics()
+                with stderr_to_log():
+                    self._kinematics = Kinematics()
             except ModelFilesError as error:
                 return error
         return self._kinematics
@@ -248,7 +250,7 @@ class KeyboardControl:
         joints_deg, _ = self._wait_for_state(state_wait_s)
         reach = kinematics.solve(target_mm, seed_deg=joints_deg)
         if not reach.reachable:
-            nx, ny, nz = reach.tip_mm
+            nx, ny, nz = (round(value) + 0.0 for value in reach.tip_mm)
             return self.text["unreachable"].format(x=x, y=y, z=z, nx=nx, ny=ny, nz=nz, error=reach.error_mm)
         if joints_deg is not None and not kinematics.path_clear(joints_deg, reach.joints_deg):
             return self.text["through_floor"].format(x=x, y=y, z=z)
@@ -262,7 +264,7 @@ class KeyboardControl:
         kinematics = self.kinematics()
         if isinstance(kinematics, Exception):
             return self.text["no_kinematics"].format(error=kinematics)
-        x, y, z = kinematics.tip_mm(joints_deg)
+        x, y, z = (round(value, 1) + 0.0 for value in kinematics.tip_mm(joints_deg))  # + 0.0: no "-0.0"
         return self.text["where"].format(x=x, y=y, z=z)
 
     def _pose_lines(self) -> list[str]:

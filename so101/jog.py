@@ -175,7 +175,8 @@ def status_line(jog: Jog, state_deg: Sequence[float] | None, tip_mm, lang: str =
     step = f"{jog.step_mm:g} mm" if jog.cartesian else f"{jog.step_deg:g}°"
     line = text["status"].format(mode=text["cartesian_mode" if jog.cartesian else "joint_mode"], step=step, angles=angles)
     if jog.cartesian and tip_mm is not None:
-        line += text["tip"].format(x=tip_mm[0], y=tip_mm[1], z=tip_mm[2])
+        x, y, z = (round(value) + 0.0 for value in tip_mm)
+        line += text["tip"].format(x=x, y=y, z=z)
     if jog.note:
         line += "  | " + jog.note
     return line

@@ -89,6 +89,21 @@ def dora_logs_to(log_path: Path):
             os.close(terminal_fd)
 
 
+@contextlib.contextmanager
+def stderr_to_log():
+    """Inside `dora_logs_to`, descriptor 2 goes to the log file too, for the block: PyBullet
+    writes its build-time banner there when first imported, not between the prompt's lines."""
+    sys.stderr.flush()
+    saved = os.dup(2)
+    os.dup2(1, 2)
+    try:
+        yield
+    finally:
+        sys.stderr.flush()
+        os.dup2(saved, 2)
+        os.close(saved)
+
+
 # Key jogging: single key presses, straight from the terminal (termios; works over SSH, in tmux
 # and headless, with no X11 keyboard hook).
 _NAMED_BYTES = {b" ": "space", b"\t": "tab", b"\r": "enter", b"\n": "enter", b"\x7f": "backspace"}

@@ -368,3 +368,4 @@ def test_jog_moves_the_arm_by_keys_and_xyz_reaches_a_point(tmp_path):
         fresh.close()
     assert after_exit == untouched  # the shell gets its terminal back as tmux made it
     assert "Traceback" not in screen, screen
+    assert "pybullet build time" not in screen  # loading the kinematics writes its banner to the log
