@@ -369,3 +369,31 @@ def test_jog_moves_the_arm_by_keys_and_xyz_reaches_a_point(tmp_path):
     assert after_exit == untouched  # the shell gets its terminal back as tmux made it
     assert "Traceback" not in screen, screen
     assert "pybullet build time" not in screen  # loading the kinematics writes its banner to the log
+
+
+def test_the_dataflow_stopping_while_jogging_gives_the_terminal_back(tmp_path):
+    from tests.dataflow_helpers import PROMPT_COMMAND, DoraRun, prompt_env, write_test_dataflow
+
+    dora = DoraRun(write_test_dataflow(tmp_path, {"SO101_LANG": "en"}), tmp_path / "dora.log")
+    terminal = None
+    try:
+        dora.wait_for("SO-101 loaded", timeout_s=60)
+        terminal = Terminal(" ".join(PROMPT_COMMAND), prompt_env(tmp_path))
+        end = terminal.wait_for(r"^=+\n>$", timeout_s=60).start()
+        terminal.type_line("jog")
+        end = terminal.wait_for(r"^\[joint\] step 2°", timeout_s=20, after=end).end()
+        _keys(terminal, "s", "s")
+        terminal.wait_for(r"^\[joint\] step 2°  pan 0\.0 lift 4\.0 ", timeout_s=20)
+        dora.stop()  # Ctrl-C to `dora run`: STOP reaches the prompt in the middle of jogging
+        terminal.wait_for(r"^  the dataflow stopped: quitting\nTELEOP_EXIT=0$", timeout_s=30, after=end)
+        after_exit = _pane_stty(terminal)
+    finally:
+        dora.stop()
+        if terminal is not None:
+            terminal.close()
+    fresh = Terminal("sleep 30", {})
+    try:
+        time.sleep(0.5)
+        assert after_exit == _pane_stty(fresh)
+    finally:
+        fresh.close()
