@@ -21,6 +21,8 @@ Environment:
   SO101_POSES_FILE    where saved poses are kept (default: saved_poses.json beside dataflow.yml)
   SO101_HISTORY_FILE  the prompt's line history (default: ~/.so101_history)
   SO101_PROMPT_LOG    where dora's log lines go (default: out/keyboard_control.log beside dataflow.yml)
+  SO101_DAEMON_PORT   the local listen port of the dora daemon to join through (default: dora's own,
+                      53291); on a cluster, that of this machine's daemon (`dora daemon --local-listen-port`)
 """
 
 from __future__ import annotations
@@ -450,7 +452,8 @@ def _arguments(argv: list[str] | None) -> None:
         "Type `help` at the prompt for the commands. A pipe or a file on stdin runs its lines in order and exits.",
         epilog="environment: SO101_LANG=zh|en (default zh); SO101_POSES_FILE (default "
         f"{DEFAULT_POSES_FILE}); SO101_HISTORY_FILE (default {DEFAULT_HISTORY_FILE}); SO101_PROMPT_LOG, where "
-        f"dora's own log lines go (default {DEFAULT_PROMPT_LOG})",
+        f"dora's own log lines go (default {DEFAULT_PROMPT_LOG}); SO101_DAEMON_PORT, the daemon to join through "
+        "(its --local-listen-port; default dora's)",
     )
     parser.parse_args(argv)
 
@@ -461,6 +464,10 @@ def main(argv: list[str] | None = None) -> int:
     if lang not in LANGUAGES:
         print(f"keyboard_control: SO101_LANG={lang!r} is not one of: {', '.join(LANGUAGES)}", file=sys.stderr)
         return 2
+    daemon_port = os.environ.get("SO101_DAEMON_PORT", "").strip()
+    if daemon_port and not (daemon_port.isdigit() and 0 < int(daemon_port) < 65536):
+        print(f"keyboard_control: SO101_DAEMON_PORT={daemon_port!r} is not a port number (1-65535)", file=sys.stderr)
+        return 2
     poses_file = Path(os.environ.get("SO101_POSES_FILE") or DEFAULT_POSES_FILE).expanduser()
     history_file = Path(os.environ.get("SO101_HISTORY_FILE") or DEFAULT_HISTORY_FILE).expanduser()
     log_file = Path(os.environ.get("SO101_PROMPT_LOG") or DEFAULT_PROMPT_LOG).expanduser()
@@ -470,10 +477,10 @@ def main(argv: list[str] | None = None) -> int:
         except OSError as error:
             say(f"  (dora's log lines are dropped: cannot write {log_file}: {error.strerror or error})")
             logs_aside.enter_context(dora_logs_to(Path(os.devnull)))
-        return _session(lang, poses_file, history_file)
+        return _session(lang, poses_file, history_file, int(daemon_port) if daemon_port else None)
 
 
-def _session(lang: str, poses_file: Path, history_file: Path) -> int:
+def _session(lang: str, poses_file: Path, history_file: Path, daemon_port: int | None = None) -> int:
     """Join the dataflow, then run the prompt until quit, end of input or STOP."""
     from dora import Node
 
@@ -483,7 +490,7 @@ def _session(lang: str, poses_file: Path, history_file: Path) -> int:
     # Ctrl-C must raise KeyboardInterrupt even when started with SIGINT ignored: STOP relies on it too.
     signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
-        node = Node(NODE_ID)
+        node = Node(NODE_ID, daemon_port=daemon_port) if daemon_port else Node(NODE_ID)
     except Exception as error:  # noqa: BLE001 - dora raises a bare RuntimeError with a multi-line chain
         reason = " ".join(str(error).split("Location:")[0].split())  # drop the Rust backtrace
         print(TEXT[lang]["join_failed"].format(node_id=NODE_ID, error=reason), file=sys.stderr)

@@ -347,3 +347,10 @@ def test_the_prompt_does_not_load_pybullet_until_asked():
              "print(sorted(m for m in ('pybullet', 'numpy', 'so101.kinematics', 'so101.jog') if m in sys.modules))")
     result = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, cwd=keyboard_control.ROOT)
     assert result.stdout.strip() == "[]", result.stderr
+
+
+@pytest.mark.parametrize("port", ["0", "70000", "abc", "-5"])
+def test_a_bad_daemon_port_is_one_line_and_exit_2(monkeypatch, capsys, port):
+    monkeypatch.setenv("SO101_DAEMON_PORT", port)
+    assert keyboard_control.main([]) == 2
+    assert capsys.readouterr().err == f"keyboard_control: SO101_DAEMON_PORT={port!r} is not a port number (1-65535)\n"

@@ -1,0 +1,122 @@
+"""The dataflow on a dora cluster: a coordinator with token authentication and two daemons on
+127.0.0.1 under different machine ids (so101/cluster.py, as `so101 cluster-demo` runs it)."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import time
+
+import pytest
+
+from so101.cluster import BODY_MACHINE, CLUSTER_DATAFLOW, PROMPT_MACHINE, Cluster, ClusterError
+from so101.dataflow import LOADED_MARKS, dataflow_copy, write_dataflow
+from tests.dataflow_helpers import PROMPT_COMMAND, RECORDER, prompt_env
+from tests.test_dataflow import SCRIPT, SETTLE_S, check_the_record
+
+pytestmark = pytest.mark.dataflow
+
+
+def cluster_processes(cluster: Cluster) -> list[int]:
+    """The processes still alive in the sessions the cluster started (its daemons' nodes included)."""
+    sessions = {process.pid for process in cluster.processes.values()}
+    alive = []
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                fields = open(f"/proc/{entry}/stat").read().rsplit(")", 1)[1].split()
+            except OSError:
+                continue
+            if int(fields[3]) in sessions and fields[0] != "Z":
+                alive.append(int(entry))
+    return alive
+
+
+def test_the_course_commands_cross_daemons_and_reach_their_targets(tmp_path):
+    record_file = tmp_path / "joint_state.json"
+    cluster = Cluster(tmp_path / "cluster")
+    try:
+        cluster.start_coordinator()
+        cluster.start_daemon(BODY_MACHINE)
+        cluster.start_daemon(PROMPT_MACHINE)
+        descriptor = dataflow_copy({"SO101_MODE": "direct", "SO101_LANG": "en"}, CLUSTER_DATAFLOW)
+        descriptor["nodes"].append({
+            "id": "recorder", "path": str(RECORDER), "deploy": {"machine": PROMPT_MACHINE},
+            "inputs": {"joint_state": "simulation/joint_state"}, "env": {"RECORD_FILE": str(record_file)},
+        })
+        cluster.start_dataflow(write_dataflow(descriptor, tmp_path / "dataflow_cluster.yml"))
+        cluster.wait_for_node_log(BODY_MACHINE, "simulation", LOADED_MARKS)
+        prompt = subprocess.Popen(
+            PROMPT_COMMAND, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+            env=prompt_env(tmp_path, SO101_DAEMON_PORT=str(cluster.daemon_ports[PROMPT_MACHINE])), cwd=tmp_path,
+        )
+        sent_at = []
+        for command in SCRIPT:
+            time.sleep(SETTLE_S if sent_at else 1.0)
+            sent_at.append(time.monotonic())
+            prompt.stdin.write(command + "\n")
+            prompt.stdin.flush()
+        time.sleep(SETTLE_S)
+        end = time.monotonic()
+        prompt.stdin.close()
+        prompt_output = prompt.stdout.read()
+        assert prompt.wait(20) == 0, prompt_output
+        # Which daemon ran which node: each daemon keeps its nodes' logs in its own folder.
+        ran = {machine: {node for node in ("simulation", "recorder") if cluster.node_log(machine, node)}
+               for machine in (BODY_MACHINE, PROMPT_MACHINE)}
+    finally:
+        cluster.stop()
+    assert ran == {BODY_MACHINE: {"simulation"}, PROMPT_MACHINE: {"recorder"}}
+    assert "Traceback" not in prompt_output, prompt_output
+    # The states the recorder took on daemon `desk` crossed from daemon `arm`; the commands the other way.
+    check_the_record(record_file, tmp_path / "poses.json", "pybullet", sent_at, end)
+    assert json.loads(record_file.read_text())["samples"]
+    assert cluster_processes(cluster) == []
+
+
+def test_without_the_token_the_cli_and_a_daemon_are_refused(tmp_path):
+    with Cluster(tmp_path / "cluster") as cluster:
+        cluster.start_coordinator()
+        assert cluster.token
+        env = cluster.env()
+        env.pop("DORA_AUTH_TOKEN")
+        env["HOME"] = str(tmp_path)  # not the cluster's, so no token file either
+        refused = subprocess.run(["dora", "list"], capture_output=True, text=True, env=env, timeout=30, cwd=tmp_path)
+        cluster.token, token = None, cluster.token  # the daemon is started without it
+        daemon = cluster.start_daemon("intruder", wait=False)
+        time.sleep(3)
+        cluster.token = token
+        joined = cluster.connected_daemons()
+        daemon_log = cluster.log("daemon-intruder")
+        assert daemon.poll() is None  # it keeps trying, and is kept out
+    assert refused.returncode != 0
+    assert (f"authentication failed connecting to coordinator at 127.0.0.1:{cluster.coordinator_port}: "
+            "HTTP error: 401 Unauthorized") in refused.stderr
+    assert "The coordinator was started with --auth and requires a valid token." in refused.stderr
+    assert "intruder" not in joined
+    assert "401 Unauthorized" in daemon_log
+
+
+def test_a_node_placed_on_a_machine_no_daemon_has_is_one_clear_line(tmp_path):
+    with Cluster(tmp_path / "cluster") as cluster:
+        cluster.start_coordinator()
+        cluster.start_daemon("arm2")  # a typo in the machine id
+        cluster.start_daemon(PROMPT_MACHINE)
+        with pytest.raises(ClusterError) as failed:
+            cluster.start_dataflow(write_dataflow(dataflow_copy({"SO101_MODE": "direct"}, CLUSTER_DATAFLOW),
+                                                  tmp_path / "dataflow_cluster.yml"))
+    message = str(failed.value)
+    assert "\n" not in message and message.startswith("dora start failed: ")
+    assert message == "dora start failed: no matching daemon for machine id `arm`"
+
+
+def test_the_cluster_dataflow_is_the_courses_dataflow_with_placements():
+    import yaml
+
+    from tests.dataflow_helpers import ROOT
+
+    cluster_nodes = yaml.safe_load(CLUSTER_DATAFLOW.read_text())["nodes"]
+    placements = {node["id"]: node.pop("deploy") for node in cluster_nodes}
+    assert placements == {"keyboard_control": {"machine": PROMPT_MACHINE}, "simulation": {"machine": BODY_MACHINE}}
+    assert cluster_nodes == yaml.safe_load((ROOT / "dataflow.yml").read_text())["nodes"]
