@@ -34,6 +34,7 @@ import signal
 import subprocess
 import sys
 import threading
+import time
 from pathlib import Path
 from typing import Callable, Sequence
 
@@ -57,6 +58,9 @@ DEFAULT_PROMPT_LOG = ROOT / "out" / "keyboard_control.log"
 # How long `save` waits for a first joint_state (a piped script may start before one arrives).
 FIRST_STATE_WAIT_S = 2.0
 EVENT_WAIT_S = 0.2
+# A body publishes joint_state every tick (4 or 20 ms): none for this long means it, its machine
+# or the network between is gone (on a cluster nothing else tells the prompt).
+STALE_STATE_S = 2.0
 # Jog mode looks for a key this often, and sends a waiting command once a newer joint_state came.
 JOG_POLL_S = 0.01
 
@@ -97,6 +101,7 @@ class KeyboardControl:
         self.joint_state_deg: tuple[float, ...] | None = None
         self.gripper_deg: float | None = None
         self.states_seen = 0  # joint_state messages so far: one per tick of the body
+        self._last_state_at: float | None = None  # time.monotonic() of the latest joint_state
         self.stopped = False
         self._kinematics = None
         # Runs key jogging and returns its closing lines; set by the prompt when it has a terminal.
@@ -114,6 +119,7 @@ class KeyboardControl:
                 if event["id"] == "joint_state" and len(values) == NUM_ARM_JOINTS:
                     self.joint_state_deg = tuple(values)
                     self.states_seen += 1
+                    self._last_state_at = time.monotonic()
                     self._state_changed.notify_all()
                 elif event["id"] == "gripper_state" and len(values) == 1:
                     self.gripper_deg = values[0]
@@ -122,6 +128,14 @@ class KeyboardControl:
         with self._state_changed:
             self._state_changed.wait_for(lambda: self.joint_state_deg is not None or self.stopped, timeout_s)
             return self.joint_state_deg, self.gripper_deg
+
+    def silent_for_s(self) -> float | None:
+        """How long no joint_state has come, once they had been coming and stopped; else None."""
+        with self._state_changed:
+            if self._last_state_at is None or self.stopped:
+                return None
+            silent_s = time.monotonic() - self._last_state_at
+        return silent_s if silent_s > STALE_STATE_S else None
 
     def latest_deg(self) -> tuple[float, ...] | None:
         """The six angles of the latest state (the gripper as 0 until its first state), or None."""
@@ -160,6 +174,9 @@ class KeyboardControl:
             return help_lines(self.lang), False
         if isinstance(command, ListJoints):
             return joint_lines(self.lang), False
+        silent_s = self.silent_for_s()
+        if silent_s is not None:  # every other command moves the arm or reads its state: neither works now
+            return [text["body_silent"].format(seconds=silent_s)], False
         if isinstance(command, Home):
             self.send_joint_cmd([0.0] * NUM_ARM_JOINTS)
             return [text["sent_home"]], False

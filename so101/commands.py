@@ -176,6 +176,7 @@ TEXT = {
         "jog_needs_terminal": "  jog 需要终端(键盘),标准输入不是终端",
         "jog_no_state": "  还没有收到 joint_state(仿真节点在运行吗?),无法点动",
         "jog_left": "  已退出点动模式",
+        "body_silent": "  {seconds:.0f} 秒没有收到 joint_state:仿真(或机械臂驱动)、它所在的机器或网络已断开,命令未发送",
         "help": [
             "  命令格式:",
             "    关节号 角度              如 '0 45'(关节号 0-4 手臂,5 夹爪)",
@@ -244,6 +245,8 @@ TEXT = {
         "jog_needs_terminal": "  jog needs a terminal (a keyboard): stdin is not one",
         "jog_no_state": "  no joint_state received yet (is the simulation running?): cannot jog",
         "jog_left": "  left jog mode",
+        "body_silent": "  no joint_state for {seconds:.0f} s: the simulation (or the arm's driver), its machine or the network "
+        "is gone; not sent",
         "help": [
             "  commands:",
             "    JOINT ANGLE             e.g. '0 45' (JOINT 0-4 arm, 5 gripper)",

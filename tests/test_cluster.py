@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import json
+import re
 import os
 import subprocess
 import time
@@ -120,3 +121,40 @@ def test_the_cluster_dataflow_is_the_courses_dataflow_with_placements():
     placements = {node["id"]: node.pop("deploy") for node in cluster_nodes}
     assert placements == {"keyboard_control": {"machine": PROMPT_MACHINE}, "simulation": {"machine": BODY_MACHINE}}
     assert cluster_nodes == yaml.safe_load((ROOT / "dataflow.yml").read_text())["nodes"]
+
+
+def test_when_the_simulations_daemon_dies_the_prompt_says_so_in_one_line(tmp_path):
+    import signal
+
+    cluster = Cluster(tmp_path / "cluster")
+    try:
+        cluster.start_coordinator()
+        cluster.start_daemon(BODY_MACHINE)
+        cluster.start_daemon(PROMPT_MACHINE)
+        cluster.start_dataflow(write_dataflow(dataflow_copy({"SO101_MODE": "direct", "SO101_LANG": "en"}, CLUSTER_DATAFLOW),
+                                              tmp_path / "dataflow_cluster.yml"))
+        prompt = subprocess.Popen(
+            PROMPT_COMMAND, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+            env=prompt_env(tmp_path, SO101_DAEMON_PORT=str(cluster.daemon_ports[PROMPT_MACHINE])),
+        )
+        cluster.wait_for_node_log(BODY_MACHINE, "simulation", LOADED_MARKS)
+        prompt.stdin.write("0 45\n")
+        prompt.stdin.flush()
+        time.sleep(2)
+        os.killpg(cluster.processes[f"daemon-{BODY_MACHINE}"].pid, signal.SIGKILL)  # the arm's machine goes away
+        time.sleep(3)
+        started = time.monotonic()
+        prompt.stdin.write("0 -45\nstate\nquit\n")
+        prompt.stdin.close()
+        output = prompt.stdout.read()
+        assert prompt.wait(20) == 0
+        took_s = time.monotonic() - started
+        coordinator_log = cluster.log("coordinator")
+    finally:
+        cluster.stop()
+    replies = output.split("> 0 -45\n", 1)[1].splitlines()
+    silent = r"  no joint_state for \d+ s: the simulation \(or the arm's driver\), its machine or the network is gone; not sent"
+    assert re.fullmatch(silent, replies[0]) and re.fullmatch(silent, replies[2]), output  # `0 -45`, then `state`
+    assert replies[3:] == ["> quit", "  bye"]
+    assert took_s < 10  # no hang
+    assert re.search(rf"Daemon `{BODY_MACHINE}-[0-9a-f-]+` exited", re.sub(r"\x1b\[[0-9;]*m", "", coordinator_log))

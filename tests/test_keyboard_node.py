@@ -354,3 +354,18 @@ def test_a_bad_daemon_port_is_one_line_and_exit_2(monkeypatch, capsys, port):
     monkeypatch.setenv("SO101_DAEMON_PORT", port)
     assert keyboard_control.main([]) == 2
     assert capsys.readouterr().err == f"keyboard_control: SO101_DAEMON_PORT={port!r} is not a port number (1-65535)\n"
+
+
+def test_when_joint_state_stops_coming_commands_are_not_sent_and_one_line_says_why(tmp_path):
+    import time
+
+    node, control = make_control(tmp_path, "en", events=state_events())
+    control.stopped = False  # the MockNode's STOP ended the pump; the dataflow "runs" on, silently
+    assert control.handle_line("0 10")[0] == ["  → joint 0 (shoulder_pan) → 10°"]  # states just came
+    control._last_state_at = time.monotonic() - 7.2
+    for line in ("0 20", "state", "xyz 200 0 150", "save b"):
+        assert control.handle_line(line) == ([
+            "  no joint_state for 7 s: the simulation (or the arm's driver), its machine or the network is gone; not sent"],
+            False)
+    assert control.handle_line("help")[0][0] == "  commands:"  # what needs no arm still works
+    assert sent(node) == [[0.0, 10.0]]
