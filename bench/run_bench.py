@@ -51,7 +51,8 @@ from so101.venv import env_with_bin_first, executable  # noqa: E402
 
 PROBER = ROOT / "bench" / "nodes" / "prober.py"
 DEFAULT_OUT = {"pybullet": ROOT / "bench" / "results" / "latest.json", "mujoco": ROOT / "bench" / "results" / "latest-mujoco.json",
-               "real": ROOT / "bench" / "results" / "latest-real.json"}
+               "real": ROOT / "bench" / "results" / "latest-real.json",
+               "cluster": ROOT / "bench" / "results" / "latest-cluster.json"}
 # The engine's own call for one 4 ms tick, as the table names it.
 RAW_STEP_LABEL = {"pybullet": "raw stepSimulation, DIRECT", "mujoco": "raw mj_step x 2 (one 4 ms tick)"}
 FIRST_STATE_MARK = "bench: first joint_state"
@@ -659,6 +660,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--body", choices=list(BODIES), default="pybullet",
                         help="which node to measure: pybullet (the course's, default), mujoco, or real (the real arm's "
                         "driver, against so101 fake-arm's emulated bus)")
+    parser.add_argument("--cluster", action="store_true",
+                        help="measure the simulation across two dora daemons on 127.0.0.1 (dataflow_cluster.yml), next "
+                        "to one daemon: joint_state rate and command latency")
     parser.add_argument("--out", type=Path, default=None,
                         help="JSON file to write (default " + ", ".join(f"{path.relative_to(ROOT)} for {body}" for body, path in DEFAULT_OUT.items()) + ")")
     parser.add_argument("--quick", action="store_true",
@@ -676,12 +680,13 @@ def main(argv=None) -> int:
 
 def run(args: argparse.Namespace) -> int:
     """The benchmark for parsed options (`so101 bench` calls this)."""
-    from bench import real_bench
+    from bench import cluster_bench, real_bench
 
+    tables = {"real": real_bench.table, "cluster": cluster_bench.table}
     if args.show is not None:
         try:
             shown = json.loads(args.show.read_text(encoding="utf-8"))
-            print(real_bench.table(shown) if shown.get("body") == "real" else table(shown))
+            print(tables.get(shown.get("body"), table)(shown))
         except OSError as error:
             print(f"so101 bench: cannot read {args.show}: {error.strerror or error}", file=sys.stderr)
             return 2
@@ -693,8 +698,11 @@ def run(args: argparse.Namespace) -> int:
         settings = dict(duration_s=3.0, fast_s=2.0, fast_steps=[1, 100], raw_steps=5000, node_ticks=1500, after_sleep_steps=100)
     else:
         settings = dict(duration_s=args.duration, fast_s=5.0, fast_steps=[1, 10, 100], raw_steps=40000, node_ticks=10000, after_sleep_steps=1000)
+    kind = "cluster" if args.cluster else args.body
     try:
-        if args.body == "real":
+        if args.cluster:
+            result = cluster_bench.run_cluster_benchmark(settings["duration_s"])
+        elif args.body == "real":
             result = real_bench.run_real_benchmark(settings["duration_s"], exchanges=500 if args.quick else 3000)
         else:
             result = run_benchmark(**settings, body=args.body)
@@ -703,8 +711,8 @@ def run(args: argparse.Namespace) -> int:
         return 1
     result["settings"]["quick"] = args.quick
     print()
-    print(real_bench.table(result) if args.body == "real" else table(result))
-    out = args.out or DEFAULT_OUT[args.body]
+    print(tables.get(kind, table)(result))
+    out = args.out or DEFAULT_OUT[kind]
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(result, indent=2) + "\n")
     print(f"\nwrote {out}")
