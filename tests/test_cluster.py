@@ -158,3 +158,46 @@ def test_when_the_simulations_daemon_dies_the_prompt_says_so_in_one_line(tmp_pat
     assert replies[3:] == ["> quit", "  bye"]
     assert took_s < 10  # no hang
     assert re.search(rf"Daemon `{BODY_MACHINE}-[0-9a-f-]+` exited", re.sub(r"\x1b\[[0-9;]*m", "", coordinator_log))
+
+
+def test_when_the_prompts_daemon_dies_the_simulation_goes_on(tmp_path):
+    """What the README says of the prompt's machine dropping out, in dora 1.1: the simulation keeps
+    publishing; a daemon started again rejoins the coordinator, but not the running dataflow."""
+    import signal
+
+    record_file = tmp_path / "joint_state.json"
+    cluster = Cluster(tmp_path / "cluster")
+    try:
+        cluster.start_coordinator()
+        cluster.start_daemon(BODY_MACHINE)
+        cluster.start_daemon(PROMPT_MACHINE)
+        descriptor = dataflow_copy({"SO101_MODE": "direct", "SO101_LANG": "en"}, CLUSTER_DATAFLOW)
+        descriptor["nodes"].append({
+            "id": "recorder", "path": str(RECORDER), "deploy": {"machine": BODY_MACHINE},
+            "inputs": {"joint_state": "simulation/joint_state"}, "env": {"RECORD_FILE": str(record_file)},
+        })
+        cluster.start_dataflow(write_dataflow(descriptor, tmp_path / "dataflow_cluster.yml"))
+        env = prompt_env(tmp_path, SO101_DAEMON_PORT=str(cluster.daemon_ports[PROMPT_MACHINE]))
+        first = subprocess.Popen(PROMPT_COMMAND, stdin=subprocess.PIPE, stdout=subprocess.DEVNULL,
+                                 stderr=subprocess.DEVNULL, text=True, env=env)
+        cluster.wait_for_node_log(BODY_MACHINE, "simulation", LOADED_MARKS)
+        first.stdin.write("0 45\n")
+        first.stdin.flush()
+        time.sleep(2)
+        os.killpg(cluster.processes[f"daemon-{PROMPT_MACHINE}"].pid, signal.SIGKILL)
+        killed_at = time.monotonic()
+        first.kill()
+        first.wait()
+        time.sleep(2)
+        cluster.start_daemon(PROMPT_MACHINE)  # the laptop comes back: its daemon rejoins the coordinator
+        time.sleep(3)
+        second = subprocess.run(PROMPT_COMMAND, input="0 -45\n", capture_output=True, text=True, env=env, timeout=60)
+        cluster.cli("stop", "--name", "so101", timeout_s=30)
+    finally:
+        cluster.stop()
+    samples = json.loads(record_file.read_text())["samples"]
+    alone = [state for t, state in samples if killed_at < t < killed_at + 2.0]
+    assert len(alone) >= 0.8 * 2.0 * 250  # the simulation went on at its 250 Hz on its own daemon
+    assert all(abs(state[0] - 45.0) <= 1.0 for state in alone)  # holding the first prompt's target
+    assert second.returncode == 1
+    assert "no node with ID `keyboard_control`" in second.stderr  # dora 1.1 does not hand the dataflow back

@@ -2,9 +2,9 @@
 
 Every $PROBE_PERIOD_S seconds (0 = never) it moves joint 0 or joint 4 (in turn) by
 ±$PROBE_STEP_DEG around 0, at a random phase of the tick ($PROBE_PHASE_S, default 4 ms)
-so the wait for the next tick is sampled fairly. It records when each joint_state arrived (time.monotonic_ns,
-the clock `so101 bench` and the simulation node's tick log use) with the angles of
-joints 0 and 4, and writes everything to $PROBE_LOG (JSON) at STOP.
+so the wait for the next tick is sampled fairly. It records when each joint_state arrived
+(time.monotonic_ns, the clock `so101 bench` and the simulation node's tick log use) with the
+angles of joints 0 and 4, and writes everything to $PROBE_LOG (JSON) at STOP.
 With $PROBE_COUNT_ONLY=1 it only counts states and keeps the first and last arrival:
 the fast mode publishes far too many to keep.
 """
