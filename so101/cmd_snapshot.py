@@ -157,7 +157,7 @@ def mujoco_projector(sim, width: int, height: int) -> Projector:
     (the average of the two stereo cameras; the frustum's width from the picture's aspect)."""
     import mujoco
 
-    scene = sim._renderer.scene  # the scene render_rgb just drew
+    scene = sim.drawn_scene()
     camera = mujoco.mjv_averageCamera(scene.camera[0], scene.camera[1])
     forward, up, position = (np.asarray(vector, dtype=float) for vector in (camera.forward, camera.up, camera.pos))
     right = np.cross(forward, up)

@@ -149,6 +149,12 @@ class SO101MuJoCo:
         return self._renderer.render().copy()
 
     # -- life cycle ------------------------------------------------------------------
+    def drawn_scene(self):
+        """The scene of the picture render_rgb drew last (its camera), to project points onto it."""
+        if self._renderer is None:
+            raise RuntimeError("no picture drawn yet: call render_rgb first")
+        return self._renderer.scene
+
     def _close_renderer(self) -> None:
         if self._renderer is not None:
             self._renderer.close()
