@@ -14,7 +14,7 @@ import pytest
 from so101.cluster import BODY_MACHINE, CLUSTER_DATAFLOW, PROMPT_MACHINE, Cluster, ClusterError
 from so101.dataflow import LOADED_MARKS, dataflow_copy, write_dataflow
 from tests.dataflow_helpers import PROMPT_COMMAND, RECORDER, prompt_env
-from tests.test_dataflow import SCRIPT, SETTLE_S, check_the_record
+from tests.test_dataflow import check_the_record, type_the_script
 
 pytestmark = pytest.mark.dataflow
 
@@ -34,42 +34,34 @@ def cluster_processes(cluster: Cluster) -> list[int]:
     return alive
 
 
+def start_with_recorder(cluster: Cluster, tmp_path, record_file, recorder_machine: str) -> None:
+    """The coordinator, daemons `arm` and `desk`, and dataflow_cluster.yml with a joint_state
+    recorder on `recorder_machine`."""
+    cluster.start_coordinator()
+    cluster.start_daemon(BODY_MACHINE)
+    cluster.start_daemon(PROMPT_MACHINE)
+    descriptor = dataflow_copy({"SO101_MODE": "direct", "SO101_LANG": "en"}, CLUSTER_DATAFLOW)
+    descriptor["nodes"].append({
+        "id": "recorder", "path": str(RECORDER), "deploy": {"machine": recorder_machine},
+        "inputs": {"joint_state": "simulation/joint_state"}, "env": {"RECORD_FILE": str(record_file)},
+    })
+    cluster.start_dataflow(write_dataflow(descriptor, tmp_path / "dataflow_cluster.yml"))
+
+
 def test_the_course_commands_cross_daemons_and_reach_their_targets(tmp_path):
     record_file = tmp_path / "joint_state.json"
     cluster = Cluster(tmp_path / "cluster")
     try:
-        cluster.start_coordinator()
-        cluster.start_daemon(BODY_MACHINE)
-        cluster.start_daemon(PROMPT_MACHINE)
-        descriptor = dataflow_copy({"SO101_MODE": "direct", "SO101_LANG": "en"}, CLUSTER_DATAFLOW)
-        descriptor["nodes"].append({
-            "id": "recorder", "path": str(RECORDER), "deploy": {"machine": PROMPT_MACHINE},
-            "inputs": {"joint_state": "simulation/joint_state"}, "env": {"RECORD_FILE": str(record_file)},
-        })
-        cluster.start_dataflow(write_dataflow(descriptor, tmp_path / "dataflow_cluster.yml"))
+        start_with_recorder(cluster, tmp_path, record_file, PROMPT_MACHINE)
         cluster.wait_for_node_log(BODY_MACHINE, "simulation", LOADED_MARKS)
-        prompt = subprocess.Popen(
-            PROMPT_COMMAND, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-            env=prompt_env(tmp_path, SO101_DAEMON_PORT=str(cluster.daemon_ports[PROMPT_MACHINE])), cwd=tmp_path,
-        )
-        sent_at = []
-        for command in SCRIPT:
-            time.sleep(SETTLE_S if sent_at else 1.0)
-            sent_at.append(time.monotonic())
-            prompt.stdin.write(command + "\n")
-            prompt.stdin.flush()
-        time.sleep(SETTLE_S)
-        end = time.monotonic()
-        prompt.stdin.close()
-        prompt_output = prompt.stdout.read()
-        assert prompt.wait(20) == 0, prompt_output
+        sent_at, end = type_the_script(
+            tmp_path, prompt_env(tmp_path, SO101_DAEMON_PORT=str(cluster.daemon_ports[PROMPT_MACHINE])))
         # Which daemon ran which node: each daemon keeps its nodes' logs in its own folder.
         ran = {machine: {node for node in ("simulation", "recorder") if cluster.node_log(machine, node)}
                for machine in (BODY_MACHINE, PROMPT_MACHINE)}
     finally:
         cluster.stop()
     assert ran == {BODY_MACHINE: {"simulation"}, PROMPT_MACHINE: {"recorder"}}
-    assert "Traceback" not in prompt_output, prompt_output
     # The states the recorder took on daemon `desk` crossed from daemon `arm`; the commands the other way.
     check_the_record(record_file, tmp_path / "poses.json", "pybullet", sent_at, end)
     assert json.loads(record_file.read_text())["samples"]
@@ -168,15 +160,7 @@ def test_when_the_prompts_daemon_dies_the_simulation_goes_on(tmp_path):
     record_file = tmp_path / "joint_state.json"
     cluster = Cluster(tmp_path / "cluster")
     try:
-        cluster.start_coordinator()
-        cluster.start_daemon(BODY_MACHINE)
-        cluster.start_daemon(PROMPT_MACHINE)
-        descriptor = dataflow_copy({"SO101_MODE": "direct", "SO101_LANG": "en"}, CLUSTER_DATAFLOW)
-        descriptor["nodes"].append({
-            "id": "recorder", "path": str(RECORDER), "deploy": {"machine": BODY_MACHINE},
-            "inputs": {"joint_state": "simulation/joint_state"}, "env": {"RECORD_FILE": str(record_file)},
-        })
-        cluster.start_dataflow(write_dataflow(descriptor, tmp_path / "dataflow_cluster.yml"))
+        start_with_recorder(cluster, tmp_path, record_file, BODY_MACHINE)
         env = prompt_env(tmp_path, SO101_DAEMON_PORT=str(cluster.daemon_ports[PROMPT_MACHINE]))
         first = subprocess.Popen(PROMPT_COMMAND, stdin=subprocess.PIPE, stdout=subprocess.DEVNULL,
                                  stderr=subprocess.DEVNULL, text=True, env=env)

@@ -39,32 +39,33 @@ def test_typed_commands_reach_their_targets(tmp_path, body):
     poses_file = tmp_path / "poses.json"
     with body_environment(body, tmp_path) as (body_env, _):
         dora = DoraRun(write_test_dataflow(tmp_path, body_env, record_file=record_file, body=body), tmp_path / "dora.log")
-        sent_at, end = type_the_script(dora, tmp_path)
+        try:
+            dora.wait_for("SO-101", timeout_s=60)
+            sent_at, end = type_the_script(tmp_path, prompt_env(tmp_path))
+        finally:
+            dora.stop()
     assert "Traceback" not in dora.log(), dora.log()[-3000:]
     check_the_record(record_file, poses_file, body, sent_at, end)
 
 
-def type_the_script(dora: DoraRun, tmp_path) -> tuple[list[float], float]:
-    """SCRIPT typed into the prompt, SETTLE_S apart; returns when each line was sent, and the end."""
-    try:
-        dora.wait_for("SO-101", timeout_s=60)
-        prompt = subprocess.Popen(
-            PROMPT_COMMAND, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-            env=prompt_env(tmp_path), cwd=tmp_path,
-        )
-        sent_at = []
-        for command in SCRIPT:
-            time.sleep(SETTLE_S if sent_at else 1.0)
-            sent_at.append(time.monotonic())
-            prompt.stdin.write(command + "\n")
-            prompt.stdin.flush()
-        time.sleep(SETTLE_S)
-        end = time.monotonic()
-        prompt.stdin.close()
-        prompt_output = prompt.stdout.read()
-        assert prompt.wait(20) == 0, prompt_output
-    finally:
-        dora.stop()
+def type_the_script(tmp_path, env: dict[str, str]) -> tuple[list[float], float]:
+    """SCRIPT typed into a prompt started with `env`, SETTLE_S apart; returns when each line was
+    sent, and the end."""
+    prompt = subprocess.Popen(
+        PROMPT_COMMAND, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+        env=env, cwd=tmp_path,
+    )
+    sent_at = []
+    for command in SCRIPT:
+        time.sleep(SETTLE_S if sent_at else 1.0)
+        sent_at.append(time.monotonic())
+        prompt.stdin.write(command + "\n")
+        prompt.stdin.flush()
+    time.sleep(SETTLE_S)
+    end = time.monotonic()
+    prompt.stdin.close()
+    prompt_output = prompt.stdout.read()
+    assert prompt.wait(20) == 0, prompt_output
     assert "Traceback" not in prompt_output, prompt_output
     return sent_at, end
 
