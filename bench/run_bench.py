@@ -44,6 +44,7 @@ if str(ROOT) not in sys.path:
 
 from so101.argtypes import number  # noqa: E402
 from so101.bodies import BODIES  # noqa: E402
+from so101.processes import processes_with_env  # noqa: E402
 from so101.dataflow import TICK_PERIOD_S, dataflow_copy, write_dataflow  # noqa: E402
 from so101.display import DisplayError, display_available, virtual_display  # noqa: E402
 from so101.viewer import WINDOW_SHOWING  # noqa: E402
@@ -396,19 +397,6 @@ def bench_dataflow(path: Path, sim_env: dict, probe_env: dict, body: str = "pybu
             # The prompt keeps only the latest state; the prober counts every one.
             node["inputs"] = {name: {**spec, "queue_size": 1000} for name, spec in node["inputs"].items()}
     write_dataflow(descriptor, path)
-
-
-def processes_with_env(name: str, value: str) -> list[int]:
-    """The pids of our processes whose environment holds name=value (a node runs under dora's daemon,
-    not under us: its environment is how to find it)."""
-    wanted = f"{name}={value}".encode()
-    found = []
-    for entry in Path("/proc").iterdir():
-        if entry.name.isdigit():
-            with contextlib.suppress(OSError):  # gone meanwhile, or not ours
-                if wanted in (entry / "environ").read_bytes().split(b"\0"):
-                    found.append(int(entry.name))
-    return found
 
 
 def peak_rss_mb(pid: int | None) -> float | None:

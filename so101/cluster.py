@@ -25,6 +25,7 @@ from pathlib import Path
 
 from so101.dataflow import dataflow_copy, write_dataflow
 from so101.display import MODES, resolve_mode
+from so101.processes import processes_with_env
 from so101.steps import _language
 from so101.venv import env_with_bin_first, executable
 from so101.versions import dora_version_problem
@@ -65,6 +66,9 @@ class Cluster:
 
     def __init__(self, work_dir: Path, auth: bool = True):
         self.work_dir = work_dir
+        # In the environment of every process the cluster starts, and so of every node its daemons
+        # start: a node whose daemon was killed outlives it, and is found by this.
+        self.marker = f"{work_dir.resolve()}:{os.getpid()}:{time.monotonic_ns()}"
         self.coordinator_port = free_port()
         self.zenoh_port = free_port()
         self.auth = auth
@@ -91,7 +95,8 @@ class Cluster:
 
     def env(self, **extra: str) -> dict[str, str]:
         """The environment of a dora CLI or daemon of this cluster: its coordinator's port and token."""
-        env = env_with_bin_first(dict(os.environ, DORA_COORDINATOR_PORT=str(self.coordinator_port), **extra))
+        env = env_with_bin_first(dict(os.environ, DORA_COORDINATOR_PORT=str(self.coordinator_port),
+                                      SO101_CLUSTER_RUN=self.marker, **extra))
         env.pop("DORA_AUTH_TOKEN", None)
         if self.token:
             env["DORA_AUTH_TOKEN"] = self.token
@@ -167,15 +172,31 @@ class Cluster:
                 pass
         for name in sorted(self.processes, key=lambda name: name == "coordinator"):
             stop_session(self.processes[name])
+        for pid in self.leftover_processes():
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
         for log in self._logs:
             log.close()
         self._logs.clear()
+
+    def leftover_processes(self) -> list[int]:
+        """The processes this cluster started that still run (its daemons' nodes included)."""
+        return [pid for pid in processes_with_env("SO101_CLUSTER_RUN", self.marker) if _running(pid)]
 
     def __enter__(self) -> "Cluster":
         return self
 
     def __exit__(self, *exc) -> None:
         self.stop()
+
+
+def _running(pid: int) -> bool:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except (OSError, IndexError):
+        return False
 
 
 def stop_session(process: subprocess.Popen) -> None:

@@ -19,21 +19,6 @@ from tests.test_dataflow import check_the_record, type_the_script
 pytestmark = pytest.mark.dataflow
 
 
-def cluster_processes(cluster: Cluster) -> list[int]:
-    """The processes still alive in the sessions the cluster started (its daemons' nodes included)."""
-    sessions = {process.pid for process in cluster.processes.values()}
-    alive = []
-    for entry in os.listdir("/proc"):
-        if entry.isdigit():
-            try:
-                fields = open(f"/proc/{entry}/stat").read().rsplit(")", 1)[1].split()
-            except OSError:
-                continue
-            if int(fields[3]) in sessions and fields[0] != "Z":
-                alive.append(int(entry))
-    return alive
-
-
 def start_with_recorder(cluster: Cluster, tmp_path, record_file, recorder_machine: str) -> None:
     """The coordinator, daemons `arm` and `desk`, and dataflow_cluster.yml with a joint_state
     recorder on `recorder_machine`."""
@@ -65,7 +50,7 @@ def test_the_course_commands_cross_daemons_and_reach_their_targets(tmp_path):
     # The states the recorder took on daemon `desk` crossed from daemon `arm`; the commands the other way.
     check_the_record(record_file, tmp_path / "poses.json", "pybullet", sent_at, end)
     assert json.loads(record_file.read_text())["samples"]
-    assert cluster_processes(cluster) == []
+    assert cluster.leftover_processes() == []
 
 
 def test_without_the_token_the_cli_and_a_daemon_are_refused(tmp_path):
@@ -149,6 +134,7 @@ def test_when_the_simulations_daemon_dies_the_prompt_says_so_in_one_line(tmp_pat
     assert re.fullmatch(silent, replies[0]) and re.fullmatch(silent, replies[2]), output  # `0 -45`, then `state`
     assert replies[3:] == ["> quit", "  bye"]
     assert took_s < 10  # no hang
+    assert cluster.leftover_processes() == []  # the simulation its daemon left behind was stopped too
     assert re.search(rf"Daemon `{BODY_MACHINE}-[0-9a-f-]+` exited", re.sub(r"\x1b\[[0-9;]*m", "", coordinator_log))
 
 
@@ -184,4 +170,5 @@ def test_when_the_prompts_daemon_dies_the_simulation_goes_on(tmp_path):
     assert len(alone) >= 0.8 * 2.0 * 250  # the simulation went on at its 250 Hz on its own daemon
     assert all(abs(state[0] - 45.0) <= 1.0 for state in alone)  # holding the first prompt's target
     assert second.returncode == 1
-    assert "no node with ID `keyboard_control`" in second.stderr  # dora 1.1 does not hand the dataflow back
+    assert "no node with ID `keyboard_control`" in second.stderr
+    assert cluster.leftover_processes() == []  # dora 1.1 does not hand the dataflow back

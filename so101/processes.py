@@ -1,0 +1,19 @@
+"""Finding the processes a run started, by a marker in their environment: dora's daemons start
+the nodes, so a node is not our child, but it inherits the environment it was given."""
+
+from __future__ import annotations
+
+import contextlib
+from pathlib import Path
+
+
+def processes_with_env(name: str, value: str) -> list[int]:
+    """The pids of our processes whose environment holds name=value."""
+    wanted = f"{name}={value}".encode()
+    found = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            with contextlib.suppress(OSError):  # gone meanwhile, or not ours
+                if wanted in (entry / "environ").read_bytes().split(b"\0"):
+                    found.append(int(entry.name))
+    return found
