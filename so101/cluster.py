@@ -172,11 +172,14 @@ class Cluster:
                 pass
         for name in sorted(self.processes, key=lambda name: name == "coordinator"):
             stop_session(self.processes[name])
-        for pid in self.leftover_processes():
-            try:
-                os.kill(pid, signal.SIGKILL)
-            except ProcessLookupError:
-                pass
+        deadline = time.monotonic() + STOP_TIMEOUT_S
+        while self.leftover_processes() and time.monotonic() < deadline:
+            for pid in self.leftover_processes():
+                try:
+                    os.kill(pid, signal.SIGKILL)
+                except ProcessLookupError:
+                    pass
+            time.sleep(0.05)  # a killed process takes a moment to go
         for log in self._logs:
             log.close()
         self._logs.clear()
