@@ -84,7 +84,7 @@ class Cluster:
         folder.mkdir(parents=True, exist_ok=True)
         log = (self.work_dir / f"{name}.log").open("wb")
         self._logs.append(log)
-        # A session of its own: stopping it stops the nodes it spawned too.
+        # A session of its own, stopped as a whole; nodes that left it are found by the marker.
         process = subprocess.Popen([_dora(), *args], cwd=folder, stdin=subprocess.DEVNULL, stdout=log,
                                    stderr=subprocess.STDOUT, env=env, start_new_session=True)
         self.processes[name] = process
