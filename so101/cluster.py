@@ -25,7 +25,7 @@ from pathlib import Path
 
 from so101.dataflow import dataflow_copy, write_dataflow
 from so101.display import MODES, resolve_mode
-from so101.processes import processes_with_env
+from so101.processes import alive, processes_with_env
 from so101.steps import _language
 from so101.venv import env_with_bin_first, executable
 from so101.versions import dora_version_problem
@@ -186,20 +186,13 @@ class Cluster:
 
     def leftover_processes(self) -> list[int]:
         """The processes this cluster started that still run (its daemons' nodes included)."""
-        return [pid for pid in processes_with_env("SO101_CLUSTER_RUN", self.marker) if _running(pid)]
+        return [pid for pid in processes_with_env("SO101_CLUSTER_RUN", self.marker) if alive(pid)]
 
     def __enter__(self) -> "Cluster":
         return self
 
     def __exit__(self, *exc) -> None:
         self.stop()
-
-
-def _running(pid: int) -> bool:
-    try:
-        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
-    except (OSError, IndexError):
-        return False
 
 
 def stop_session(process: subprocess.Popen) -> None:

@@ -28,7 +28,8 @@ from so101.calibration import (
     save_calibration,
 )
 from so101.feetech import BusError, FeetechBus
-from so101.sts3215 import MAX_STEP, MODEL_NUMBER, SIGN_BITS, STEPS_PER_TURN, encode_signed
+from so101.real_arm import check_servos_answer
+from so101.sts3215 import MAX_STEP, SIGN_BITS, STEPS_PER_TURN, encode_signed
 
 FULL_TURN_JOINT = "wrist_roll"
 POLL_S = 0.01  # how often positions are read while the person moves the joints
@@ -69,16 +70,6 @@ class _Lines:
         return True
 
 
-def _check_servos(bus: FeetechBus) -> None:
-    for name, servo_id in zip(MOTOR_NAMES, MOTOR_IDS):
-        model = bus.ping(servo_id)
-        if model is None:
-            raise BusError(f"servo {servo_id} ({name}) does not answer on {bus.port_name}: "
-                           f"check its power and cable, and that it has ID {servo_id}")
-        if model != MODEL_NUMBER:
-            raise BusError(f"servo {servo_id} ({name}) is model {model}, not an STS3215 ({MODEL_NUMBER})")
-
-
 def _write_eeprom(bus: FeetechBus, name: str, values: dict[int, int]) -> None:
     for servo_id, value in values.items():
         bus.write(servo_id, name, value)
@@ -86,7 +77,7 @@ def _write_eeprom(bus: FeetechBus, name: str, values: dict[int, int]) -> None:
 
 def calibrate(bus: FeetechBus) -> dict[str, MotorCalibration] | None:
     """The interactive steps on an open bus; the calibration, or None if the input ended first."""
-    _check_servos(bus)
+    check_servos_answer(bus)
     lines = _Lines()
     everyone = dict.fromkeys(MOTOR_IDS, 0)
     bus.sync_write("Torque_Enable", everyone)

@@ -4,6 +4,7 @@ the nodes, so a node is not our child, but it inherits the environment it was gi
 from __future__ import annotations
 
 import contextlib
+import os
 from pathlib import Path
 
 
@@ -17,3 +18,15 @@ def processes_with_env(name: str, value: str) -> list[int]:
                 if wanted in (entry / "environ").read_bytes().split(b"\0"):
                     found.append(int(entry.name))
     return found
+
+
+def alive(pid: int) -> bool:
+    """Whether `pid` still runs; a zombie (exited, not yet reaped by its dead parent) counts as gone."""
+    try:
+        os.kill(pid, 0)
+    except OSError:
+        return False
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except (OSError, IndexError):
+        return True

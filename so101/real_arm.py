@@ -47,6 +47,17 @@ class ArmFailed(BodyFailed):
     """The arm cannot start or go on; the message is one line for the user."""
 
 
+def check_servos_answer(bus: FeetechBus) -> None:
+    """Every servo of an SO-101 follower answers at its ID and is an STS3215; BusError names the first that is not."""
+    for name, servo_id in zip(MOTOR_NAMES, MOTOR_IDS):
+        model = bus.ping(servo_id)
+        if model is None:
+            raise BusError(f"servo {servo_id} ({name}) does not answer on {bus.port_name}: "
+                           f"check its power and cable, and that it has ID {servo_id}")
+        if model != MODEL_NUMBER:
+            raise BusError(f"servo {servo_id} ({name}) is model {model}, not an STS3215 ({MODEL_NUMBER})")
+
+
 @dataclass(frozen=True)
 class ArmSettings:
     """The arm node's own settings, from its environment (dataflow_real.yml's `env:`)."""
@@ -143,13 +154,8 @@ class SO101Real:
     # -- start-up checks ------------------------------------------------------------------
 
     def _check_servos(self, calibration_name: str) -> None:
+        check_servos_answer(self.bus)
         for name, servo_id, motor in zip(MOTOR_NAMES, MOTOR_IDS, self._motors):
-            model = self.bus.ping(servo_id)
-            if model is None:
-                raise ArmFailed(f"servo {servo_id} ({name}) does not answer on {self.port}: "
-                                f"check its power and cable, and that it has ID {servo_id}")
-            if model != MODEL_NUMBER:
-                raise ArmFailed(f"servo {servo_id} ({name}) is model {model}, not an STS3215 ({MODEL_NUMBER})")
             on_servo = {
                 "homing_offset": decode_signed(self.bus.read(servo_id, "Homing_Offset"), SIGN_BITS["Homing_Offset"]),
                 "range_min": self.bus.read(servo_id, "Min_Position_Limit"),

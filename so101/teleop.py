@@ -25,6 +25,7 @@ from pathlib import Path
 from so101.bodies import BODIES, DEFAULT_BODY
 from so101.dataflow import LOADED_MARKS, dataflow_copy, write_dataflow
 from so101.display import MODES, resolve_mode
+from so101.processes import alive
 from so101.steps import _language
 from so101.venv import env_with_bin_first, executable
 from so101.versions import dora_version_problem
@@ -158,26 +159,14 @@ class Dataflow:
                 self.process.wait()
         deadline = time.monotonic() + 5
         for pid in nodes:
-            while _alive(pid) and time.monotonic() < deadline:
+            while alive(pid) and time.monotonic() < deadline:
                 time.sleep(0.1)
-            if _alive(pid):
+            if alive(pid):
                 try:
                     os.kill(pid, signal.SIGKILL)
                 except OSError:
                     pass
         self._log_stream.close()
-
-
-def _alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except OSError:
-        return False
-    # A zombie (exited, not yet reaped by its dead parent) counts as gone.
-    try:
-        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
-    except (OSError, IndexError):
-        return True
 
 
 def run(args: argparse.Namespace) -> int:
