@@ -44,3 +44,17 @@ BODIES = {
 }
 SIMULATED_BODIES = [name for name, body in BODIES.items() if body.simulated]
 DEFAULT_BODY = "pybullet"
+
+
+def body_node_env(body: Body, port: str | None, calibration: str | None) -> dict[str, str]:
+    """The body node's settings that come from the command line: the real arm's serial port and
+    calibration file (SO101_PORT, SO101_CALIBRATION). ValueError, in one line, when the real arm
+    lacks them or a simulated body is given them."""
+    if body.simulated:
+        if port or calibration:
+            raise ValueError(f"--port and --calibration are for --body real, not {body.name}")
+        return {}
+    if not port or not calibration:
+        raise ValueError("--body real needs --port PORT and --calibration FILE "
+                         "(no arm? `so101 fake-arm` emulates one; `so101 calibrate` makes the file)")
+    return {"SO101_PORT": port, "SO101_CALIBRATION": calibration}

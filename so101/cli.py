@@ -25,6 +25,7 @@ SUBCOMMANDS = {
     "reach": ("so101.cmd_reach", "check IK and the simulated arm against Cartesian targets: tip errors in mm (table, JSON)"),
     "calibrate": ("so101.cmd_calibrate", "calibrate a real SO-101 follower arm into LeRobot's calibration format (JSON)"),
     "cluster-demo": ("so101.cluster", "the dataflow on a dora cluster: two daemons on this machine, the prompt on the second"),
+    "cluster-dataflow": ("so101.cluster", "write the dataflow for a dora cluster of two machines: the body on `arm`, the prompt on `desk`"),
     "teleop": ("so101.teleop", "steps D + exercise 1: the dataflow and the keyboard prompt in one terminal"),
     "fake-arm": ("so101.fake_arm", "an emulated SO-101 servo bus on a pseudo-terminal, for trying the real-arm driver without hardware"),
 }

@@ -8,6 +8,10 @@ its own, so each node's log shows which daemon ran it), starts the dataflow with
 and runs the prompt in this terminal, joined through the `desk` daemon. Quitting the prompt
 stops the dataflow, the daemons and the coordinator; nothing is left running.
 
+`so101 cluster-dataflow` writes the file `dora start` needs on two real machines: a body's
+dataflow placed the same way, with node paths made absolute under the project's folder on the
+arm's machine (dora 1.1 does not find a placed node by a relative path).
+
 `Cluster` is the same set-up as a class, for the tests.
 """
 
@@ -21,9 +25,10 @@ import subprocess
 import sys
 import tempfile
 import time
-from pathlib import Path
+from pathlib import Path, PurePath, PurePosixPath
 
-from so101.dataflow import dataflow_copy, write_dataflow
+from so101.bodies import BODIES, DEFAULT_BODY, Body, body_node_env
+from so101.dataflow import dataflow_copy, dataflow_text, write_dataflow
 from so101.display import MODES, resolve_mode
 from so101.processes import alive, processes_with_env
 from so101.steps import _language
@@ -210,14 +215,44 @@ def stop_session(process: subprocess.Popen) -> None:
     process.wait()
 
 
+def placed_dataflow(body: Body, node_env: dict[str, str], root: PurePath = ROOT) -> dict:
+    """The body's dataflow (dataflow.yml for PyBullet) placed as dataflow_cluster.yml places it:
+    the body's node on machine `arm`, the prompt on `desk`, with `node_env` over the body
+    node's env. Node paths are made absolute under `root`, the project's folder on the arm's
+    machine: once a node is placed, dora 1.1's `dora start` sends no working folder, and a
+    daemon looks for a relative path in an empty folder of its own, where it is not found."""
+    descriptor = dataflow_copy(node_env, body.dataflow_file, root)
+    descriptor["nodes"] = [
+        {"id": node["id"], "deploy": {"machine": BODY_MACHINE if node["id"] == body.node_id else PROMPT_MACHINE},
+         **node}
+        for node in descriptor["nodes"]
+    ]
+    return descriptor
+
+
 def cluster_dataflow(work_dir: Path, node_env: dict[str, str]) -> Path:
-    """dataflow_cluster.yml with absolute node paths and `node_env` over each node's own."""
-    return write_dataflow(dataflow_copy(node_env, CLUSTER_DATAFLOW), work_dir / "dataflow_cluster.yml")
+    """The PyBullet dataflow placed on daemons `arm` and `desk` of this machine, written under `work_dir`."""
+    return write_dataflow(placed_dataflow(BODIES[DEFAULT_BODY], node_env), work_dir / "dataflow_cluster.yml")
 
 
-# -- so101 cluster-demo ------------------------------------------------------------------------
+# -- so101 cluster-demo, so101 cluster-dataflow ---------------------------------------------------
 
 def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
+    if name == "cluster-dataflow":
+        parser.add_argument(
+            "--body", choices=list(BODIES), default=DEFAULT_BODY,
+            help="what the arm's machine drives: pybullet (default), mujoco, or real (with --port and --calibration)",
+        )
+        parser.add_argument("--port", metavar="PORT", default=None,
+                            help="--body real: the arm's serial port on the arm's machine (SO101_PORT)")
+        parser.add_argument("--calibration", metavar="FILE", default=None,
+                            help="--body real: the calibration JSON's absolute path on the arm's machine "
+                            "(SO101_CALIBRATION)")
+        parser.add_argument("--root", default=str(ROOT), metavar="FOLDER",
+                            help=f"the project's folder on the arm's machine, an absolute path (default: this "
+                            f"checkout's, {ROOT})")
+        parser.add_argument("--output", "-o", type=Path, metavar="FILE", default=None,
+                            help="write the dataflow to FILE (default: print it)")
     parser.add_argument(
         "--mode", choices=MODES, default=os.environ.get("SO101_MODE", "auto"),
         help="the simulation's window: gui, direct (headless) or auto (default $SO101_MODE, else auto)",
@@ -226,12 +261,15 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
         "--lang", type=_language, metavar="{zh,en}", default=os.environ.get("SO101_LANG", "zh"),
         help="language of the prompt and the logs (default: $SO101_LANG, else zh)",
     )
-    parser.add_argument("--keep", type=Path, metavar="FOLDER", default=None,
-                        help="keep the coordinator's and daemons' logs and working folders in FOLDER (default: a "
-                        "temporary folder, removed at exit)")
+    if name == "cluster-demo":
+        parser.add_argument("--keep", type=Path, metavar="FOLDER", default=None,
+                            help="keep the coordinator's and daemons' logs and working folders in FOLDER (default: "
+                            "a temporary folder, removed at exit)")
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.command == "cluster-dataflow":
+        return _write_placed_dataflow(args)
     try:
         mode, notice = resolve_mode(args.mode)
     except ValueError as error:
@@ -280,3 +318,27 @@ def _demo(work_dir: Path, mode: str, lang: str) -> int:
         cluster.stop()
         signal.signal(signal.SIGINT, previous)
         say("cluster stopped")
+
+
+def _write_placed_dataflow(args: argparse.Namespace) -> int:
+    body = BODIES[args.body]
+    # Paths on the arm's machine: taken as written, never resolved against this one's folders.
+    for option, path in (("--root", args.root), ("--calibration", args.calibration)):
+        if path is not None and not PurePosixPath(path).is_absolute():
+            print(f"so101 cluster-dataflow: {option} must be an absolute path on the arm's machine, not {path!r}",
+                  file=sys.stderr)
+            return 2
+    try:
+        node_env = {"SO101_LANG": args.lang, **body_node_env(body, args.port, args.calibration)}
+    except ValueError as error:
+        print(f"so101 cluster-dataflow: {error}", file=sys.stderr)
+        return 2
+    if body.simulated:
+        node_env["SO101_MODE"] = args.mode  # `auto` is settled by the node, on the arm's machine
+    text = dataflow_text(placed_dataflow(body, node_env, PurePosixPath(args.root)), body.dataflow_file.name)
+    if args.output is None:
+        sys.stdout.write(text)
+    else:
+        args.output.write_text(text, encoding="utf-8")
+        print(f"wrote {args.output}: start it with `dora start {args.output} --name {DATAFLOW_NAME} --detach`")
+    return 0

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import re
-from pathlib import Path
+from pathlib import Path, PurePath
 
 ROOT = Path(__file__).resolve().parents[1]
 DATAFLOW_FILE = ROOT / "dataflow.yml"
@@ -68,26 +68,28 @@ class TickClock:
         return steps
 
 
-def dataflow_copy(node_env: dict[str, str], dataflow_file: Path = DATAFLOW_FILE) -> dict:
+def dataflow_copy(node_env: dict[str, str], dataflow_file: Path = DATAFLOW_FILE, root: PurePath = ROOT) -> dict:
     """A dataflow file (dataflow.yml by default) as a dict to run from elsewhere: every node
-    that runs a file gets its path made absolute and `node_env` over its own `env:` (which
+    that runs a file gets its path made absolute (under `root`, the project's folder on the
+    machine that runs it: this checkout by default) and `node_env` over its own `env:` (which
     dora ranks above the shell's)."""
     import yaml
 
     descriptor = yaml.safe_load(dataflow_file.read_text(encoding="utf-8"))
     for node in descriptor["nodes"]:
         if node.get("path", "dynamic") != "dynamic":
-            node["path"] = str((ROOT / node["path"]).resolve())
+            node["path"] = str(root / node["path"])
             node["env"] = {**(node.get("env") or {}), **node_env}
     return descriptor
 
 
-def write_dataflow(descriptor: dict, path: Path) -> Path:
+def dataflow_text(descriptor: dict, source: str = DATAFLOW_FILE.name) -> str:
     import yaml
 
-    path.write_text(
-        "# Written from dataflow.yml; edit that file, not this one.\n"
-        + yaml.safe_dump(descriptor, sort_keys=False, allow_unicode=True),
-        encoding="utf-8",
-    )
+    return (f"# Written from {source}; edit that file, not this one.\n"
+            + yaml.safe_dump(descriptor, sort_keys=False, allow_unicode=True))
+
+
+def write_dataflow(descriptor: dict, path: Path) -> Path:
+    path.write_text(dataflow_text(descriptor), encoding="utf-8")
     return path

@@ -22,7 +22,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from so101.bodies import BODIES, DEFAULT_BODY
+from so101.bodies import BODIES, DEFAULT_BODY, body_node_env
 from so101.dataflow import LOADED_MARKS, dataflow_copy, write_dataflow
 from so101.display import MODES, resolve_mode
 from so101.processes import alive
@@ -189,17 +189,13 @@ def run(args: argparse.Namespace) -> int:
     if version_problem:
         print(f"so101 teleop: {version_problem}", file=sys.stderr)
         return 2
-    node_env = {"SO101_MODE": resolved_mode, "SO101_LANG": args.lang}
-    if body.simulated:
-        if args.port or args.calibration:
-            print(f"so101 teleop: --port and --calibration are for --body real, not {body.name}", file=sys.stderr)
-            return 2
-    else:
-        if not args.port or not args.calibration:
-            print("so101 teleop: --body real needs --port PORT and --calibration FILE "
-                  "(no arm? `so101 fake-arm` emulates one; `so101 calibrate` makes the file)", file=sys.stderr)
-            return 2
-        node_env.update(SO101_PORT=args.port, SO101_CALIBRATION=str(args.calibration.expanduser().resolve()))
+    try:
+        calibration = args.calibration and str(args.calibration.expanduser().resolve())
+        node_env = {"SO101_MODE": resolved_mode, "SO101_LANG": args.lang,
+                    **body_node_env(body, args.port, calibration)}
+    except ValueError as error:
+        print(f"so101 teleop: {error}", file=sys.stderr)
+        return 2
     log = args.log.expanduser().resolve()
     env = env_with_bin_first(dict(os.environ, SO101_MODE=resolved_mode, SO101_LANG=args.lang))
 

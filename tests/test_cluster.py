@@ -11,9 +11,10 @@ import time
 
 import pytest
 
-from so101.cluster import BODY_MACHINE, CLUSTER_DATAFLOW, PROMPT_MACHINE, Cluster, ClusterError
+from so101.bodies import BODIES
+from so101.cluster import BODY_MACHINE, CLUSTER_DATAFLOW, PROMPT_MACHINE, Cluster, ClusterError, placed_dataflow
 from so101.dataflow import LOADED_MARKS, dataflow_copy, write_dataflow
-from tests.dataflow_helpers import PROMPT_COMMAND, RECORDER, prompt_env
+from tests.dataflow_helpers import PROMPT_COMMAND, RECORDER, ROOT, error_lines, prompt_env, run_so101
 from tests.test_dataflow import check_the_record, type_the_script
 
 pytestmark = pytest.mark.dataflow
@@ -92,12 +93,59 @@ def test_a_node_placed_on_a_machine_no_daemon_has_is_one_clear_line(tmp_path):
 def test_the_cluster_dataflow_is_the_courses_dataflow_with_placements():
     import yaml
 
-    from tests.dataflow_helpers import ROOT
-
     cluster_nodes = yaml.safe_load(CLUSTER_DATAFLOW.read_text())["nodes"]
     placements = {node["id"]: node.pop("deploy") for node in cluster_nodes}
     assert placements == {"keyboard_control": {"machine": PROMPT_MACHINE}, "simulation": {"machine": BODY_MACHINE}}
     assert cluster_nodes == yaml.safe_load((ROOT / "dataflow.yml").read_text())["nodes"]
+    # What `so101 cluster-dataflow` writes (and cluster-demo starts) is this file with absolute paths.
+    assert placed_dataflow(BODIES["pybullet"], {}) == dataflow_copy({}, CLUSTER_DATAFLOW)
+
+
+def test_cluster_dataflow_writes_the_real_arm_placed_with_paths_on_the_arms_machine(tmp_path):
+    import yaml
+
+    written = tmp_path / "cluster.yml"
+    result = run_so101("cluster-dataflow", "--body", "real", "--port", "/dev/ttyUSB0", "--calibration",
+                       "/home/pi/arm.json", "--root", "/home/pi/so101", "--lang", "en", "--output", str(written))
+    assert result.returncode == 0, result.stderr
+    assert result.stdout == f"wrote {written}: start it with `dora start {written} --name so101 --detach`\n"
+    nodes = {node["id"]: node for node in yaml.safe_load(written.read_text())["nodes"]}
+    assert nodes["arm"]["deploy"] == {"machine": BODY_MACHINE}
+    assert nodes["arm"]["path"] == "/home/pi/so101/nodes/arm_node.py"
+    assert (nodes["arm"]["env"]["SO101_PORT"], nodes["arm"]["env"]["SO101_CALIBRATION"],
+            nodes["arm"]["env"]["SO101_LANG"]) == ("/dev/ttyUSB0", "/home/pi/arm.json", "en")
+    assert nodes["keyboard_control"]["deploy"] == {"machine": PROMPT_MACHINE}
+    assert nodes["keyboard_control"]["path"] == "dynamic"
+    assert written.read_text().startswith("# Written from dataflow_real.yml;")
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--body", "real", "--port", "/dev/ttyACM0", "--calibration", "arm.json"],
+     "--calibration must be an absolute path on the arm's machine, not 'arm.json'"),
+    (["--root", "so101"], "--root must be an absolute path on the arm's machine, not 'so101'"),
+    (["--body", "real"], "--body real needs --port PORT and --calibration FILE (no arm? `so101 fake-arm` emulates "
+                         "one; `so101 calibrate` makes the file)"),
+    (["--port", "/dev/ttyACM0"], "--port and --calibration are for --body real, not pybullet"),
+])
+def test_cluster_dataflow_refuses_bad_settings_in_one_line(tmp_path, args, message):
+    result = run_so101("cluster-dataflow", "--output", str(tmp_path / "cluster.yml"), *args)
+    assert result.returncode == 2
+    assert error_lines(result.stderr) == [f"so101 cluster-dataflow: {message}"]
+    assert not (tmp_path / "cluster.yml").exists()
+
+
+def test_dora_does_not_find_a_placed_node_by_a_relative_path(tmp_path):
+    """Why `so101 cluster-dataflow` makes node paths absolute: dataflow_cluster.yml as it is (paths
+    relative to the project) fails in dora 1.1, even started from the project's folder."""
+    with Cluster(tmp_path / "cluster") as cluster:
+        cluster.start_coordinator()
+        cluster.start_daemon(BODY_MACHINE)
+        cluster.start_daemon(PROMPT_MACHINE)
+        result = subprocess.run(["dora", "start", "dataflow_cluster.yml", "--name", "so101", "--detach"],
+                                capture_output=True, text=True, env=cluster.env(),
+                                cwd=ROOT, timeout=60)
+    assert result.returncode != 0
+    assert "failed to prepare node simulation" in result.stderr
 
 
 def test_when_the_simulations_daemon_dies_the_prompt_says_so_in_one_line(tmp_path):
@@ -138,9 +186,11 @@ def test_when_the_simulations_daemon_dies_the_prompt_says_so_in_one_line(tmp_pat
     assert re.search(rf"Daemon `{BODY_MACHINE}-[0-9a-f-]+` exited", re.sub(r"\x1b\[[0-9;]*m", "", coordinator_log))
 
 
-def test_when_the_prompts_daemon_dies_the_simulation_goes_on(tmp_path):
+def test_when_the_prompts_daemon_dies_the_simulation_goes_on_and_a_restart_lets_a_new_prompt_drive(tmp_path):
     """What the README says of the prompt's machine dropping out, in dora 1.1: the simulation keeps
-    publishing; a daemon started again rejoins the coordinator, but not the running dataflow."""
+    publishing; a daemon started again rejoins the coordinator, but not the running dataflow, so a
+    new prompt is refused, in one line that says what to do; after `dora restart so101` a new
+    prompt drives the arm again."""
     import signal
 
     record_file = tmp_path / "joint_state.json"
@@ -161,14 +211,35 @@ def test_when_the_prompts_daemon_dies_the_simulation_goes_on(tmp_path):
         time.sleep(2)
         cluster.start_daemon(PROMPT_MACHINE)  # the laptop comes back: its daemon rejoins the coordinator
         time.sleep(3)
-        second = subprocess.run(PROMPT_COMMAND, input="0 -45\n", capture_output=True, text=True, env=env, timeout=60)
+        refused = subprocess.run(PROMPT_COMMAND, input="0 -45\n", capture_output=True, text=True, env=env, timeout=60)
+        restart = cluster.cli("restart", "so101", timeout_s=60)
+        # The first dataflow's recorder wrote its record on the way out; the new one writes at the end.
+        deadline = time.monotonic() + 20
+        while not record_file.exists() and time.monotonic() < deadline:
+            time.sleep(0.2)
+        before_restart = json.loads(record_file.read_text())["samples"]
+        record_file.unlink()
+        again = subprocess.Popen(PROMPT_COMMAND, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                 stderr=subprocess.STDOUT, text=True, env=env)
+        cluster.wait_for_node_log(BODY_MACHINE, "simulation", LOADED_MARKS)
+        sent_at = time.monotonic()
+        output, _ = again.communicate("0 -45\n", timeout=60)
+        time.sleep(3)
         cluster.cli("stop", "--name", "so101", timeout_s=30)
     finally:
         cluster.stop()
-    samples = json.loads(record_file.read_text())["samples"]
-    alone = [state for t, state in samples if killed_at < t < killed_at + 2.0]
+    alone = [state for t, state in before_restart if killed_at < t < killed_at + 2.0]
     assert len(alone) >= 0.8 * 2.0 * 250  # the simulation went on at its 250 Hz on its own daemon
     assert all(abs(state[0] - 45.0) <= 1.0 for state in alone)  # holding the first prompt's target
-    assert second.returncode == 1
-    assert "no node with ID `keyboard_control`" in second.stderr
-    assert cluster.leftover_processes() == []  # dora 1.1 does not hand the dataflow back
+    assert refused.returncode == 1
+    refusal = refused.stderr.strip()
+    assert "\n" not in refusal and refusal.endswith("no node with ID `keyboard_control`")
+    assert refusal.startswith(
+        "cannot join the dataflow as keyboard_control (the running dataflow has no keyboard_control on this daemon: "
+        "the wrong dataflow, or this machine's daemon was started again after it dropped out, and dora 1.1 does not "
+        "hand a running dataflow back to it; `dora restart so101` starts the dataflow anew): ")
+    assert restart.returncode == 0 and "dataflow restarted" in restart.stdout, restart.stderr
+    assert "> 0 -45" in output and again.returncode == 0, output
+    after = [state for t, state in json.loads(record_file.read_text())["samples"] if t > sent_at + 2.0]
+    assert after and all(abs(state[0] - (-45.0)) <= 1.0 for state in after)  # the new prompt drove it
+    assert cluster.leftover_processes() == []
