@@ -49,7 +49,7 @@ from so101.commands import (  # noqa: E402
 from so101.poses import Pose, PoseStore  # noqa: E402
 from so101.robot import ACTUATED_JOINTS, NUM_ARM_JOINTS  # noqa: E402
 from so101.terminal import dora_logs_to  # noqa: E402
-from so101.versions import dora_version_mismatch  # noqa: E402
+from so101.versions import dora_version_mismatch, joined_daemon_version_problem  # noqa: E402
 
 NODE_ID = "keyboard_control"
 DEFAULT_POSES_FILE = ROOT / "saved_poses.json"
@@ -511,6 +511,10 @@ def _session(lang: str, poses_file: Path, history_file: Path, daemon_port: int |
     control = KeyboardControl(lambda angles_deg: None, poses, lang)
     # Ctrl-C must raise KeyboardInterrupt even when started with SIGINT ignored: STOP relies on it too.
     signal.signal(signal.SIGINT, signal.default_int_handler)
+    daemon_problem = joined_daemon_version_problem(daemon_port)
+    if daemon_problem:
+        print(f"keyboard_control: {daemon_problem}", file=sys.stderr)
+        return 1
     try:
         node = Node(NODE_ID, daemon_port=daemon_port) if daemon_port else Node(NODE_ID)
     except Exception as error:  # noqa: BLE001 - dora raises a bare RuntimeError with a multi-line chain

@@ -34,6 +34,7 @@ from so101.bodies import BodyFailed
 from so101.dataflow import TICK_PERIOD_S, TickClock, timer_period_s
 from so101.joint_cmd import decode_joint_cmd
 from so101.robot import GRIPPER_COMMAND_INDEX, HOME_POSE_DEG, NUM_ARM_JOINTS
+from so101.versions import spawning_daemon_version_problem
 
 IMAGE_SIZE = (320, 240)
 
@@ -105,7 +106,11 @@ class NodeSettings:
 
     @classmethod
     def from_environ(cls, environ: Mapping[str, str]) -> "NodeSettings":
-        """Raises ValueError naming a bad value and what is accepted."""
+        """Raises ValueError naming a bad value and what is accepted, or the dora daemon that
+        started the node when it runs another dora version than the node's library."""
+        problem = spawning_daemon_version_problem()
+        if problem:
+            raise ValueError(problem)
         return cls(
             mode=environ.get("SO101_MODE", "auto"),
             image_hz=number_setting(environ, "SO101_IMAGE_HZ", "0", 0.0),

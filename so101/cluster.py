@@ -84,13 +84,13 @@ class Cluster:
 
     # -- processes -----------------------------------------------------------------------
 
-    def _spawn(self, name: str, args: list[str], env: dict[str, str]) -> subprocess.Popen:
+    def _spawn(self, name: str, args: list[str], env: dict[str, str], dora: str | None = None) -> subprocess.Popen:
         folder = self.work_dir / name
         folder.mkdir(parents=True, exist_ok=True)
         log = (self.work_dir / f"{name}.log").open("wb")
         self._logs.append(log)
         # A session of its own, stopped as a whole; nodes that left it are found by the marker.
-        process = subprocess.Popen([_dora(), *args], cwd=folder, stdin=subprocess.DEVNULL, stdout=log,
+        process = subprocess.Popen([dora or _dora(), *args], cwd=folder, stdin=subprocess.DEVNULL, stdout=log,
                                    stderr=subprocess.STDOUT, env=env, start_new_session=True)
         self.processes[name] = process
         return process
@@ -121,13 +121,14 @@ class Cluster:
         if self.auth:
             self.token = token_file.read_text().strip()
 
-    def start_daemon(self, machine_id: str, wait: bool = True) -> subprocess.Popen:
+    def start_daemon(self, machine_id: str, wait: bool = True, dora: str | None = None) -> subprocess.Popen:
+        """A daemon under `machine_id`, run by this project's dora or another `dora` program."""
         port = self.daemon_ports.setdefault(machine_id, free_port())
         args = ["daemon", "--machine-id", machine_id, "--coordinator-addr", "127.0.0.1",
                 "--coordinator-port", str(self.coordinator_port), "--local-listen-port", str(port),
                 # No multicast here (containers, CI): the daemons meet at one Zenoh endpoint.
                 "--zenoh-peer", f"tcp/127.0.0.1:{self.zenoh_port}"]
-        process = self._spawn(f"daemon-{machine_id}", args, self.env())
+        process = self._spawn(f"daemon-{machine_id}", args, self.env(), dora)
         if wait:
             deadline = time.monotonic() + START_TIMEOUT_S
             while machine_id not in self.connected_daemons():

@@ -7,6 +7,7 @@ the daemon with errors that do not name the cause; this says it in one line.
 from __future__ import annotations
 
 import importlib.metadata
+import os
 import re
 import shutil
 import subprocess
@@ -78,3 +79,70 @@ def dora_version_mismatch(dora_executable: str | None = None) -> str | None:
     if library is None or cli is None:
         return None
     return version_mismatch(cli, library, dora_executable)
+
+
+# -- the daemon a node runs under (Linux: read from /proc) -----------------------------------------
+# dora 1.1 accepts any 1.x daemon next to any other, and a node of one 1.x version under a daemon
+# of another, without a word (a 1.0.0 daemon joined a 1.1.0 coordinator and ran this project's
+# 1.1.0 nodes). This project pins one version; a node checks the daemon it runs under.
+
+DAEMON_DEFAULT_LOCAL_PORT = 53291  # dora's default `--local-listen-port`, which a dynamic node joins through
+
+
+def _dora_of_process(pid: int) -> str | None:
+    """The `dora` program a process runs (`dora daemon ...`, `dora run ...`), or None if it runs
+    none or cannot be read. A pip-installed `dora` is a Python script: it is in the arguments."""
+    proc = f"/proc/{pid}"
+    try:
+        args = [arg.decode(errors="replace") for arg in open(f"{proc}/cmdline", "rb").read().split(b"\0")[:2]]
+        for arg in args:
+            if os.path.basename(arg) == "dora":
+                return os.path.join(os.readlink(f"{proc}/cwd"), arg) if "/" in arg else os.readlink(f"{proc}/exe")
+    except OSError:
+        pass
+    return None
+
+
+def _listening_process(port: int) -> int | None:
+    """The process that listens on TCP `port` of this machine, or None."""
+    sockets = set()
+    for table in ("/proc/net/tcp", "/proc/net/tcp6"):
+        try:
+            rows = open(table).read().splitlines()[1:]
+        except OSError:
+            continue
+        for row in rows:
+            fields = row.split()
+            if fields[3] == "0A" and int(fields[1].rsplit(":", 1)[1], 16) == port:  # 0A: LISTEN
+                sockets.add(f"socket:[{fields[9]}]")
+    if not sockets:
+        return None
+    for pid in filter(str.isdigit, os.listdir("/proc")):
+        try:
+            if any(os.readlink(f"/proc/{pid}/fd/{fd}") in sockets for fd in os.listdir(f"/proc/{pid}/fd")):
+                return int(pid)
+        except OSError:
+            continue
+    return None
+
+
+def daemon_version_problem(daemon_pid: int | None) -> str | None:
+    """One line when the dora daemon with this pid runs another dora version than this node's
+    dora-rs library; None when they match, or when it cannot be told (no daemon, not Linux)."""
+    dora = _dora_of_process(daemon_pid) if daemon_pid else None
+    daemon, library = (cli_version(dora) if dora else None), library_version()
+    if daemon is None or library is None or daemon == library:
+        return None
+    return (f"the dora daemon this node runs under ({dora}) is version {daemon}, this node's dora-rs is {library}: "
+            f"use one dora version on every machine (this project pins {library}: start the daemon with this "
+            f"project's .venv/bin/dora, or pip install '{CLI_DISTRIBUTION}=={library}' where it runs)")
+
+
+def spawning_daemon_version_problem() -> str | None:
+    """For a node the daemon started: that daemon is its parent process."""
+    return daemon_version_problem(os.getppid())
+
+
+def joined_daemon_version_problem(daemon_port: int | None) -> str | None:
+    """For a dynamic node: the daemon is the process listening on the local port it joins through."""
+    return daemon_version_problem(_listening_process(daemon_port or DAEMON_DEFAULT_LOCAL_PORT))

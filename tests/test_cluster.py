@@ -7,12 +7,14 @@ import json
 import re
 import os
 import subprocess
+import sys
 import time
 
 import pytest
 
 from so101.bodies import BODIES
-from so101.cluster import BODY_MACHINE, CLUSTER_DATAFLOW, PROMPT_MACHINE, Cluster, ClusterError, placed_dataflow
+from so101.cluster import (BODY_MACHINE, CLUSTER_DATAFLOW, PROMPT_MACHINE, Cluster, ClusterError, cluster_dataflow,
+                          placed_dataflow)
 from so101.dataflow import LOADED_MARKS, dataflow_copy, write_dataflow
 from tests.dataflow_helpers import PROMPT_COMMAND, RECORDER, ROOT, error_lines, prompt_env, run_so101
 from tests.test_dataflow import check_the_record, type_the_script
@@ -242,4 +244,49 @@ def test_when_the_prompts_daemon_dies_the_simulation_goes_on_and_a_restart_lets_
     assert "> 0 -45" in output and again.returncode == 0, output
     after = [state for t, state in json.loads(record_file.read_text())["samples"] if t > sent_at + 2.0]
     assert after and all(abs(state[0] - (-45.0)) <= 1.0 for state in after)  # the new prompt drove it
+    assert cluster.leftover_processes() == []
+
+
+OTHER_DORA_VERSION = "1.0.0"
+
+
+@pytest.fixture(scope="module")
+def other_dora(tmp_path_factory):
+    """dora-rs-cli 1.0.0, in an environment of its own: a dora that dora 1.1 accepts next to itself."""
+    venv = tmp_path_factory.mktemp("other-dora") / "venv"
+    subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True, timeout=120)
+    subprocess.run([str(venv / "bin" / "pip"), "install", "-q", f"dora-rs-cli=={OTHER_DORA_VERSION}"],
+                   check=True, capture_output=True, timeout=600)
+    return venv / "bin" / "dora"
+
+
+@pytest.mark.parametrize("machine", [BODY_MACHINE, PROMPT_MACHINE])
+def test_a_daemon_of_another_dora_version_is_named_in_one_line(tmp_path, other_dora, machine):
+    """dora 1.1 lets a 1.0.0 daemon join and run this project's nodes; the node it would run says why not."""
+    cluster = Cluster(tmp_path / "cluster")
+    try:
+        cluster.start_coordinator()
+        for machine_id in (BODY_MACHINE, PROMPT_MACHINE):
+            cluster.start_daemon(machine_id, dora=str(other_dora) if machine_id == machine else None)
+        cluster.start_dataflow(cluster_dataflow(tmp_path, {"SO101_MODE": "direct", "SO101_LANG": "en"}))
+        prompt = subprocess.Popen(
+            PROMPT_COMMAND, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+            env=prompt_env(tmp_path, SO101_DAEMON_PORT=str(cluster.daemon_ports[PROMPT_MACHINE])),
+        )
+        if machine == BODY_MACHINE:
+            cluster.wait_for_node_log(BODY_MACHINE, "simulation", ["cannot start"])
+        _, prompt_errors = prompt.communicate("quit\n", timeout=60)
+        simulation_log = cluster.node_log(BODY_MACHINE, "simulation")
+    finally:
+        cluster.stop()
+    problem = (f"the dora daemon this node runs under ({other_dora}) is version {OTHER_DORA_VERSION}, this node's "
+               "dora-rs is 1.1.0: use one dora version on every machine (this project pins 1.1.0: start the daemon "
+               "with this project's .venv/bin/dora, or pip install 'dora-rs-cli==1.1.0' where it runs)")
+    if machine == BODY_MACHINE:
+        messages = [json.loads(line)["msg"] for line in simulation_log.splitlines() if line.startswith("{")]
+        assert f"[simulation] cannot start: {problem}" in messages
+    else:
+        assert prompt.returncode == 1
+        assert prompt_errors.strip() == f"keyboard_control: {problem}"
+        assert "cannot start" not in simulation_log
     assert cluster.leftover_processes() == []
