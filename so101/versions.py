@@ -11,6 +11,7 @@ import os
 import re
 import shutil
 import subprocess
+from pathlib import Path
 
 LIBRARY_DISTRIBUTION = "dora-rs"
 CLI_DISTRIBUTION = "dora-rs-cli"
@@ -92,12 +93,14 @@ DAEMON_DEFAULT_LOCAL_PORT = 53291  # dora's default `--local-listen-port`, which
 def _dora_of_process(pid: int) -> str | None:
     """The `dora` program a process runs (`dora daemon ...`, `dora run ...`), or None if it runs
     none or cannot be read. A pip-installed `dora` is a Python script: it is in the arguments."""
-    proc = f"/proc/{pid}"
+    proc = Path(f"/proc/{pid}")
     try:
-        args = [arg.decode(errors="replace") for arg in open(f"{proc}/cmdline", "rb").read().split(b"\0")[:2]]
+        args = [arg.decode(errors="replace") for arg in (proc / "cmdline").read_bytes().split(b"\0")[:2]]
         for arg in args:
             if os.path.basename(arg) == "dora":
-                return os.path.join(os.readlink(f"{proc}/cwd"), arg) if "/" in arg else os.readlink(f"{proc}/exe")
+                program = os.path.join(os.readlink(proc / "cwd"), arg)  # an absolute `arg` stays as it is
+                # A bare `dora` found on PATH is the executable itself.
+                return program if os.path.exists(program) else os.readlink(proc / "exe")
     except OSError:
         pass
     return None
@@ -108,7 +111,7 @@ def _listening_process(port: int) -> int | None:
     sockets = set()
     for table in ("/proc/net/tcp", "/proc/net/tcp6"):
         try:
-            rows = open(table).read().splitlines()[1:]
+            rows = Path(table).read_text().splitlines()[1:]
         except OSError:
             continue
         for row in rows:

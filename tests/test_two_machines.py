@@ -193,6 +193,7 @@ def test_the_readme_steps_across_two_firewalled_machines_and_a_dropped_network(t
         type_line("quit", 2)
         assert prompt.wait(30) == 0
         arm_firewall = machines.iptables("arm", "-L", "INPUT", "-n", "-v", "-x")
+        coordinator_log = (tmp_path / "coordinator.log").read_text(errors="replace")
     finally:
         machines.tear_down()
 
@@ -205,6 +206,8 @@ def test_the_readme_steps_across_two_firewalled_machines_and_a_dropped_network(t
     assert abs(first_angle(first[1][1][0]) - 45) <= 1.0
     stale = r"  no joint_state for \d+ s: the simulation \(or the arm's driver\), its machine or the network is gone; not sent"
     assert first[2][0] == "0 -45" and re.fullmatch(stale, first[2][1][0])  # the cable out: said, not sent
+    watchdog = "Disconnecting daemons that failed watchdog" in coordinator_log
+    assert watchdog == (drop_s > 30)
     if drop_s > 30:
         assert re.fullmatch(stale, first[3][1][0])  # the laptop's daemon was dropped: no state came back
         last = replies((tmp_path / "prompt-again.log").read_text())
