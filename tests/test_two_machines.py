@@ -100,11 +100,12 @@ class TwoMachines:
             except subprocess.TimeoutExpired:
                 pass
         deadline = time.monotonic() + 15
-        while (left := [pid for pid in processes_with_env("SO101_TWO_MACHINES", self.marker) if alive(pid)]):
-            for pid in left:
-                os.kill(pid, signal.SIGKILL)
-            if time.monotonic() > deadline:
-                break
+        while self.left_running() and time.monotonic() < deadline:  # nodes outlive a daemon killed hard
+            for pid in self.left_running():
+                try:
+                    os.kill(pid, signal.SIGKILL)
+                except ProcessLookupError:
+                    pass
             time.sleep(0.1)
         for ns in self.ns.values():
             subprocess.run(["ip", "netns", "del", ns], capture_output=True)
