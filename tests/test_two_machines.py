@@ -172,7 +172,7 @@ def test_the_readme_steps_across_two_firewalled_machines_and_a_dropped_network(t
                       for machine in ("arm", "desk")):
             assert time.monotonic() < deadline, "the daemons did not both join"
             time.sleep(0.5)
-        dataflow = tmp_path / "cluster.yml"
+        dataflow = tmp_path / "placed_dataflow.yml"
         subprocess.run([str(SO101), "cluster-dataflow", "--mode", "direct", "--lang", "en", "-o", str(dataflow)],
                        check=True, capture_output=True, timeout=60)
         started = machines.dora("start", str(dataflow), "--name", "so101", "--detach", token=token)
