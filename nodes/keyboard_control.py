@@ -69,8 +69,9 @@ TEXT = {
         "title": "  SO-101 键盘控制",
         "stopped": "  数据流已停止,退出",
         "join_failed": "无法作为 {node_id} 加入数据流(先在另一个终端运行 `dora run dataflow.yml`): {error}",
-        "join_no_place": "无法作为 {node_id} 加入数据流(正在运行的数据流在此守护进程上没有 {node_id}:数据流不对,"
-        "或此机器的守护进程掉线后重启过,dora 1.1 不会把运行中的数据流交还给它;`dora restart so101` 重新启动数据流): {error}",
+        "join_no_place": "无法作为 {node_id} 加入数据流(此守护进程上没有含 {node_id} 的数据流:请先启动一个(`dora run "
+        "dataflow.yml`,集群上用 `dora start`);若数据流已在运行,说明此机器的守护进程掉线后重启过,dora 1.1 不会把运行中的"
+        "数据流交还给它:`dora restart so101` 重新启动数据流): {error}",
         "poses_file": "  姿态文件: {path}(已保存 {count} 个)",
     },
     "en": {
@@ -78,9 +79,10 @@ TEXT = {
         "stopped": "  the dataflow stopped: quitting",
         "join_failed": "cannot join the dataflow as {node_id} (start it first in another terminal: "
         "`dora run dataflow.yml`): {error}",
-        "join_no_place": "cannot join the dataflow as {node_id} (the running dataflow has no {node_id} on this daemon: "
-        "the wrong dataflow, or this machine's daemon was started again after it dropped out, and dora 1.1 does not "
-        "hand a running dataflow back to it; `dora restart so101` starts the dataflow anew): {error}",
+        "join_no_place": "cannot join the dataflow as {node_id} (this daemon has no dataflow with a {node_id} in it: "
+        "start one (`dora run dataflow.yml`, or `dora start` on a cluster); if one runs, this machine's daemon was "
+        "started again after it dropped out, and dora 1.1 does not hand a running dataflow back: `dora restart so101` "
+        "starts it anew): {error}",
         "poses_file": "  poses file: {path} ({count} saved)",
     },
 }
@@ -519,7 +521,7 @@ def _session(lang: str, poses_file: Path, history_file: Path, daemon_port: int |
         node = Node(NODE_ID, daemon_port=daemon_port) if daemon_port else Node(NODE_ID)
     except Exception as error:  # noqa: BLE001 - dora raises a bare RuntimeError with a multi-line chain
         reason = " ".join(str(error).split("Location:")[0].split())  # drop the Rust backtrace
-        # dora's answer when a dataflow runs but has no such node on this daemon
+        # dora's answer when no dataflow of this daemon has this node
         text = TEXT[lang]["join_no_place" if "no node with ID" in reason else "join_failed"]
         print(text.format(node_id=NODE_ID, error=reason), file=sys.stderr)
         mismatch = dora_version_mismatch()  # the likeliest cause when the dataflow does run

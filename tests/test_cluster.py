@@ -150,6 +150,18 @@ def test_dora_does_not_find_a_placed_node_by_a_relative_path(tmp_path):
     assert "failed to prepare node simulation" in result.stderr
 
 
+def test_a_prompt_whose_daemon_runs_no_dataflow_is_told_to_start_one(tmp_path):
+    with Cluster(tmp_path / "cluster") as cluster:
+        cluster.start_coordinator()
+        cluster.start_daemon(PROMPT_MACHINE)
+        prompt = subprocess.run(PROMPT_COMMAND, input="quit\n", capture_output=True, text=True, timeout=60,
+                                env=prompt_env(tmp_path, SO101_DAEMON_PORT=str(cluster.daemon_ports[PROMPT_MACHINE])))
+    assert prompt.returncode == 1
+    assert prompt.stderr.count("\n") == 1 and prompt.stderr.startswith(
+        "cannot join the dataflow as keyboard_control (this daemon has no dataflow with a keyboard_control in it: "
+        "start one (`dora run dataflow.yml`, or `dora start` on a cluster);")
+
+
 def test_when_the_simulations_daemon_dies_the_prompt_says_so_in_one_line(tmp_path):
     import signal
 
@@ -237,9 +249,10 @@ def test_when_the_prompts_daemon_dies_the_simulation_goes_on_and_a_restart_lets_
     refusal = refused.stderr.strip()
     assert "\n" not in refusal and refusal.endswith("no node with ID `keyboard_control`")
     assert refusal.startswith(
-        "cannot join the dataflow as keyboard_control (the running dataflow has no keyboard_control on this daemon: "
-        "the wrong dataflow, or this machine's daemon was started again after it dropped out, and dora 1.1 does not "
-        "hand a running dataflow back to it; `dora restart so101` starts the dataflow anew): ")
+        "cannot join the dataflow as keyboard_control (this daemon has no dataflow with a keyboard_control in it: "
+        "start one (`dora run dataflow.yml`, or `dora start` on a cluster); if one runs, this machine's daemon was "
+        "started again after it dropped out, and dora 1.1 does not hand a running dataflow back: `dora restart so101` "
+        "starts it anew): ")
     assert restart.returncode == 0 and "dataflow restarted" in restart.stdout, restart.stderr
     assert "> 0 -45" in output and again.returncode == 0, output
     after = [state for t, state in json.loads(record_file.read_text())["samples"] if t > sent_at + 2.0]
