@@ -68,7 +68,8 @@ TEXT = {
     "zh": {
         "title": "  SO-101 键盘控制",
         "stopped": "  数据流已停止,退出",
-        "join_failed": "无法作为 {node_id} 加入数据流(先在另一个终端运行 `dora run dataflow.yml`): {error}",
+        "join_failed": "无法作为 {node_id} 加入数据流(先在另一个终端运行 `dora run dataflow.yml`;集群上,本机的 "
+        "`dora daemon` 须在运行): {error}",
         "join_no_place": "无法作为 {node_id} 加入数据流(此守护进程上没有含 {node_id} 的数据流:请先启动一个(`dora run "
         "dataflow.yml`,集群上用 `dora start`);若数据流已在运行,说明此机器的守护进程掉线后重启过,dora 1.1 不会把运行中的"
         "数据流交还给它:`dora restart so101` 重新启动数据流): {error}",
@@ -78,7 +79,7 @@ TEXT = {
         "title": "  SO-101 keyboard control",
         "stopped": "  the dataflow stopped: quitting",
         "join_failed": "cannot join the dataflow as {node_id} (start it first in another terminal: "
-        "`dora run dataflow.yml`): {error}",
+        "`dora run dataflow.yml`; on a cluster, this machine's `dora daemon` must be running): {error}",
         "join_no_place": "cannot join the dataflow as {node_id} (this daemon has no dataflow with a {node_id} in it: "
         "start one (`dora run dataflow.yml`, or `dora start` on a cluster); if one runs, this machine's daemon was "
         "started again after it dropped out, and dora 1.1 does not hand a running dataflow back: `dora restart so101` "

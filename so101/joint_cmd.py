@@ -20,7 +20,7 @@ from so101.robot import ACTUATED_JOINTS, NUM_ARM_JOINTS
 
 ACCEPTED_FORMS = (
     "accepted: a numeric array in degrees, [joint_idx, angle] with joint_idx 0-5 "
-    f"(5 = gripper), [a0..a4] or [a0..a4, gripper]"
+    "(5 = gripper), [a0..a4] or [a0..a4, gripper]"
 )
 
 

@@ -11,7 +11,7 @@ import pytest
 
 from so101.versions import cli_version_from_output, dora_version_problem, version_mismatch
 from tests.dataflow_helpers import (
-    BROKEN_MESH, PROMPT_COMMAND, VENV_BIN, DoraRun, corrupt, dora_env, error_lines, run_so101,
+    BROKEN_MESH, PROMPT_COMMAND, VENV_BIN, DoraRun, corrupt, error_lines, run_so101,
     unused_display, write_test_dataflow,
 )
 

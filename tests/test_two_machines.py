@@ -21,7 +21,7 @@ import pytest
 
 from so101.processes import alive, processes_with_env
 from so101.venv import env_with_bin_first
-from tests.dataflow_helpers import PROMPT_COMMAND, ROOT, SO101
+from tests.dataflow_helpers import PROMPT_COMMAND, SO101
 
 ARM_IP, DESK_IP = "10.231.0.1", "10.231.0.2"
 COORDINATOR_PORT, ZENOH_PORT = 6013, 7447  # dora's default, and the README's rendezvous
