@@ -30,7 +30,7 @@ from pathlib import Path, PurePath, PurePosixPath
 from so101.bodies import BODIES, DEFAULT_BODY, Body, body_node_env
 from so101.dataflow import dataflow_copy, dataflow_text, write_dataflow
 from so101.display import MODES, resolve_mode
-from so101.processes import alive, processes_with_env
+from so101.processes import kill_with_env, running_with_env
 from so101.steps import _language
 from so101.venv import env_with_bin_first, executable
 from so101.versions import dora_version_problem
@@ -178,21 +178,14 @@ class Cluster:
                 pass
         for name in sorted(self.processes, key=lambda name: name == "coordinator"):
             stop_session(self.processes[name])
-        deadline = time.monotonic() + STOP_TIMEOUT_S
-        while self.leftover_processes() and time.monotonic() < deadline:
-            for pid in self.leftover_processes():
-                try:
-                    os.kill(pid, signal.SIGKILL)
-                except ProcessLookupError:
-                    pass
-            time.sleep(0.05)  # a killed process takes a moment to go
+        kill_with_env("SO101_CLUSTER_RUN", self.marker, STOP_TIMEOUT_S)
         for log in self._logs:
             log.close()
         self._logs.clear()
 
     def leftover_processes(self) -> list[int]:
         """The processes this cluster started that still run (its daemons' nodes included)."""
-        return [pid for pid in processes_with_env("SO101_CLUSTER_RUN", self.marker) if alive(pid)]
+        return running_with_env("SO101_CLUSTER_RUN", self.marker)
 
     def __enter__(self) -> "Cluster":
         return self

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import contextlib
 import os
+import signal
+import time
 from pathlib import Path
 
 
@@ -30,3 +32,19 @@ def alive(pid: int) -> bool:
         return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
     except (OSError, IndexError):
         return True
+
+
+def running_with_env(name: str, value: str) -> list[int]:
+    """Those of `processes_with_env` that still run."""
+    return [pid for pid in processes_with_env(name, value) if alive(pid)]
+
+
+def kill_with_env(name: str, value: str, timeout_s: float) -> None:
+    """SIGKILL every process holding name=value (nodes outlive a daemon killed hard), until none
+    runs or `timeout_s` is up: a killed process takes a moment to go."""
+    deadline = time.monotonic() + timeout_s
+    while (pids := running_with_env(name, value)) and time.monotonic() < deadline:
+        for pid in pids:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+        time.sleep(0.05)

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import pytest
 
-from so101.processes import alive, processes_with_env
+from so101.processes import kill_with_env, running_with_env
 from so101.venv import env_with_bin_first
 from tests.dataflow_helpers import PROMPT_COMMAND, SO101
 
@@ -117,19 +117,12 @@ class TwoMachines:
                 process.wait(15)
             except subprocess.TimeoutExpired:
                 pass
-        deadline = time.monotonic() + 15
-        while self.left_running() and time.monotonic() < deadline:  # nodes outlive a daemon killed hard
-            for pid in self.left_running():
-                try:
-                    os.kill(pid, signal.SIGKILL)
-                except ProcessLookupError:
-                    pass
-            time.sleep(0.1)
+        kill_with_env("SO101_TWO_MACHINES", self.marker, 15)
         for ns in self.ns.values():
             subprocess.run(["ip", "netns", "del", ns], capture_output=True)
 
     def left_running(self) -> list[int]:
-        return [pid for pid in processes_with_env("SO101_TWO_MACHINES", self.marker) if alive(pid)]
+        return running_with_env("SO101_TWO_MACHINES", self.marker)
 
 
 def replies(output: str) -> list[tuple[str, list[str]]]:
