@@ -1,7 +1,7 @@
 """`so101 bench --cluster`: the simulation across two dora daemons on 127.0.0.1, next to one.
 
 The same measurement twice, back to back: dataflow.yml under `dora run` (one daemon), then
-dataflow_cluster.yml on a coordinator and two daemons (so101/cluster.py), the simulation on
+dataflow_cluster.yml on a coordinator and two daemons (so101/runtime/cluster.py), the simulation on
 daemon `arm` and bench/nodes/prober.py, in the prompt's place, on daemon `desk`, so every
 joint_cmd and joint_state crosses between the daemons over Zenoh. Figures: joint_state per
 second at the prober against the tick's 250, and the joint_cmd -> joint_state latency (the
@@ -19,7 +19,7 @@ from pathlib import Path
 
 import yaml
 
-from so101.cluster import BODY_MACHINE, PROMPT_MACHINE, Cluster, cluster_dataflow
+from so101.runtime.cluster import BODY_MACHINE, PROMPT_MACHINE, Cluster, cluster_dataflow
 
 PROBE_ENV = {"PROBE_PERIOD_S": "0.075", "PROBE_STEP_DEG": "4"}
 

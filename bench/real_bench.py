@@ -19,9 +19,9 @@ import tempfile
 import time
 from pathlib import Path
 
-from so101.calibration import save_calibration
-from so101.fake_arm import FakeArm, calibrate_as_at_the_factory
-from so101.real_arm import SO101Real
+from so101.feetech.calibration import save_calibration
+from so101.feetech.fake_arm import FakeArm, calibrate_as_at_the_factory
+from so101.bodies.real_arm import SO101Real
 
 TICK_S = 0.02  # dataflow_real.yml's timer
 TARGETS = {

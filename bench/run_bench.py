@@ -42,13 +42,13 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))  # run as a script: `nodes` and `so101` live at the top
 
-from so101.argtypes import number  # noqa: E402
-from so101.bodies import BODIES  # noqa: E402
-from so101.processes import processes_with_env  # noqa: E402
-from so101.dataflow import TICK_PERIOD_S, dataflow_copy, write_dataflow  # noqa: E402
-from so101.display import DisplayError, display_available, virtual_display  # noqa: E402
-from so101.viewer import WINDOW_SHOWING  # noqa: E402
-from so101.venv import env_with_bin_first, executable  # noqa: E402
+from so101.cli.argtypes import number  # noqa: E402
+from so101.bodies.registry import BODIES  # noqa: E402
+from so101.runtime.processes import processes_with_env  # noqa: E402
+from so101.runtime.dataflow import TICK_PERIOD_S, dataflow_copy, write_dataflow  # noqa: E402
+from so101.gui.display import DisplayError, display_available, virtual_display  # noqa: E402
+from so101.gui.viewer import WINDOW_SHOWING  # noqa: E402
+from so101.runtime.venv import env_with_bin_first, executable  # noqa: E402
 
 PROBER = ROOT / "bench" / "nodes" / "prober.py"
 DEFAULT_OUT = {"pybullet": ROOT / "bench" / "results" / "latest.json", "mujoco": ROOT / "bench" / "results" / "latest-mujoco.json",
@@ -350,7 +350,8 @@ def mb():  # VmHWM, not ru_maxrss: the latter keeps the forking parent's peak ac
 way = sys.argv[1]
 stages = {"python": mb()}
 import pyarrow, dora, pybullet as p, pybullet_data
-from so101 import assets, simulator
+from so101 import assets
+from so101.bodies import pybullet_sim as simulator
 stages["imports (numpy, pyarrow, dora, pybullet)"] = mb()
 if way == "node":
     simulator.release_freed_memory()

@@ -9,7 +9,7 @@ assets/SO101 (verified first, so a missing file gives a clear message, not
 "Cannot load URDF file"), and a machine without a display runs DIRECT and stops
 after a bounded number of steps instead of dying on "cannot connect to X server".
 Those two checks, and the course's connect/gravity/ground calls, are in
-open_course_world (so101/steps.py), shared with step B.
+open_course_world (so101/cli/course_steps.py), shared with step B.
 """
 
 import argparse
@@ -17,7 +17,7 @@ import sys
 
 import pybullet as p
 
-from so101.steps import open_course_world, step_course_world
+from so101.cli.course_steps import open_course_world, step_course_world
 
 JOINT_TYPE_LABELS = {
     p.JOINT_REVOLUTE: "旋转关节 (Revolute)",

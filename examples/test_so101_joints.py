@@ -9,7 +9,7 @@ them anyway: a POSITION_CONTROL target holds until replaced). Differences from
 the course's script: the model comes from this repo's assets/SO101, a headless
 machine runs DIRECT and stops, and radians become degrees with math.degrees
 rather than 180 / 3.14159. The set-up (model and display checks, connect,
-gravity, ground) is open_course_world in so101/steps.py, as in step A.
+gravity, ground) is open_course_world in so101/cli/course_steps.py, as in step A.
 """
 
 import argparse
@@ -19,7 +19,7 @@ import time
 
 import pybullet as p
 
-from so101.steps import open_course_world, step_course_world
+from so101.cli.course_steps import open_course_world, step_course_world
 
 ARM_JOINT_INDICES = [0, 1, 2, 3, 4]  # index 5 is the fixed gripper_frame_joint, 6 the gripper
 TARGETS_RAD = [0.5, -0.5, 0.5, -0.5, 0.5]  # PyBullet works in radians: 0.5 rad = 28.6°

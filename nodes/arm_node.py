@@ -2,13 +2,13 @@
 
 "Swap one driver node": the same `joint_cmd` input and `joint_state`/`gripper_state`
 outputs, in the URDF's degrees, from the same event loop as the simulations
-(so101/body_node.py); the body is six Feetech STS3215 servos on a serial bus
-(so101/real_arm.py, which holds the safety rules). Each `tick` sends the ramped goals
+(so101/bodies/node_loop.py); the body is six Feetech STS3215 servos on a serial bus
+(so101/bodies/real_arm.py, which holds the safety rules). Each `tick` sends the ramped goals
 with one SYNC WRITE and reads the angles with one SYNC READ. On STOP, Ctrl-C, SIGTERM,
 an error or a lost bus, torque goes off.
 
 Environment (declared in dataflow_real.yml): SO101_LANG and SO101_TICK_LOG (see
-so101/body_node.py), and the arm's own:
+so101/bodies/node_loop.py), and the arm's own:
   SO101_PORT             the serial port (/dev/ttyACM0, ...; `so101 fake-arm` prints an emulated one)
   SO101_CALIBRATION      LeRobot's so101_follower calibration JSON, or one from `so101 calibrate`
   SO101_MAX_SPEED_DEG_S  how fast a goal may move, °/s (each tick moves it by this x the tick period)
@@ -26,9 +26,9 @@ import sys
 
 from dora import Node
 
-from so101.body_node import NodeSettings, cannot_start, log, run_body_node
-from so101.calibration import CalibrationError
-from so101.real_arm import ArmFailed, ArmSettings, SO101Real
+from so101.bodies.node_loop import NodeSettings, cannot_start, log, run_body_node
+from so101.feetech.calibration import CalibrationError
+from so101.bodies.real_arm import ArmFailed, ArmSettings, SO101Real
 
 
 def _interrupt(signum, frame):

@@ -42,14 +42,14 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:  # run as a script from anywhere: the so101 package sits beside nodes/
     sys.path.insert(0, str(ROOT))
 
-from so101.commands import (  # noqa: E402
+from so101.prompt.commands import (  # noqa: E402
     LANGUAGES, Batch, Empty, GoPose, Help, Home, JogKeys, ListJoints, ListPoses, MoveTip, ParseError, Quit, SavePose,
     SetJoint, ShowState, Snapshot, Where, format_angle, format_angles, help_lines, joint_lines, parse_command, texts,
 )
-from so101.poses import Pose, PoseStore  # noqa: E402
+from so101.prompt.poses import Pose, PoseStore  # noqa: E402
 from so101.robot import ACTUATED_JOINTS, NUM_ARM_JOINTS  # noqa: E402
-from so101.terminal import dora_logs_to  # noqa: E402
-from so101.versions import dora_version_mismatch, joined_daemon_version_problem  # noqa: E402
+from so101.prompt.terminal import dora_logs_to  # noqa: E402
+from so101.runtime.versions import dora_version_mismatch, joined_daemon_version_problem  # noqa: E402
 
 NODE_ID = "keyboard_control"
 DEFAULT_POSES_FILE = ROOT / "saved_poses.json"
@@ -158,7 +158,7 @@ class KeyboardControl:
         if self._kinematics is None:
             from so101.assets import ModelFilesError
             from so101.kinematics import Kinematics
-            from so101.terminal import stderr_to_log
+            from so101.prompt.terminal import stderr_to_log
 
             try:
                 with stderr_to_log():
@@ -317,11 +317,11 @@ def _columns(fd: int) -> int:
 
 
 def run_jog(control: KeyboardControl, fd: int) -> list[str]:
-    """Key jogging at the terminal on `fd` (so101/jog.py says what each key does), until Esc or
+    """Key jogging at the terminal on `fd` (so101/prompt/jog.py says what each key does), until Esc or
     q; returns the closing lines. At most one joint_cmd per joint_state received, so holding a
     key never queues commands ahead of the arm. The terminal is restored however this ends."""
-    from so101.jog import TEXT as JOG_TEXT, Jog, press, status_line
-    from so101.terminal import single_keys
+    from so101.prompt.jog import TEXT as JOG_TEXT, Jog, press, status_line
+    from so101.prompt.terminal import single_keys
 
     text = control.text
     joints_deg, gripper_deg = control._wait_for_state(FIRST_STATE_WAIT_S)

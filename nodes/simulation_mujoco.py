@@ -2,11 +2,11 @@
 
 The same contract as nodes/simulation_node.py (the node id, inputs, outputs, units,
 clamping, replies to bad commands, STOP and Ctrl-C) from the same event loop
-(so101/body_node.py), with MuJoCo and TheRobotStudio's MJCF as the body: position
+(so101/bodies/node_loop.py), with MuJoCo and TheRobotStudio's MJCF as the body: position
 actuators like the STS3215 servos, and joint damping, so exercise 2 means what it says.
 
 Environment (declared in dataflow_mujoco.yml): SO101_MODE, SO101_IMAGE_HZ,
-SO101_FAST_STEPS, SO101_TICK_LOG, SO101_LANG (see so101/body_node.py), and MuJoCo's own:
+SO101_FAST_STEPS, SO101_TICK_LOG, SO101_LANG (see so101/bodies/node_loop.py), and MuJoCo's own:
   SO101_MUJOCO_DAMPING  every joint's damping in N·m·s/rad; empty = the MJCF's (0.60)
 """
 
@@ -18,10 +18,10 @@ import sys
 from dora import Node
 
 from so101.assets import ModelFilesError
-from so101.body_node import NodeSettings, cannot_start, check_pictures, log, number_setting, run_body_node
-from so101.dataflow import TICK_PERIOD_S
-from so101.display import DisplayError
-from so101.mujoco_sim import SO101MuJoCo
+from so101.bodies.node_loop import NodeSettings, cannot_start, check_pictures, log, number_setting, run_body_node
+from so101.runtime.dataflow import TICK_PERIOD_S
+from so101.gui.display import DisplayError
+from so101.bodies.mujoco_sim import SO101MuJoCo
 
 
 def main() -> int:

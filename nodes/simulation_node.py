@@ -5,10 +5,10 @@ course's motor calls for a new goal first) and publishes `joint_state`. A `joint
 updates the targets; the next tick applies them. When dora had to drop ticks
 because the node was late (a busy machine), the next tick takes the steps of the
 dropped ones too, so simulated time keeps pace with the wall clock. The event loop is
-shared with the MuJoCo body (so101/body_node.py); this file sets up PyBullet.
+shared with the MuJoCo body (so101/bodies/node_loop.py); this file sets up PyBullet.
 
 Environment (declared in dataflow.yml): SO101_MODE, SO101_IMAGE_HZ, SO101_FAST_STEPS,
-SO101_TICK_LOG, SO101_LANG (see so101/body_node.py), and PyBullet's own:
+SO101_TICK_LOG, SO101_LANG (see so101/bodies/node_loop.py), and PyBullet's own:
   SO101_CONTROL     position | servo      (position is the course's POSITION_CONTROL)
   SO101_SERVO_ZETA  damping ratio of the servo model (servo mode only)
 """
@@ -21,10 +21,10 @@ import sys
 from dora import Node
 
 from so101.assets import ModelFilesError
-from so101.body_node import NodeSettings, cannot_start, check_pictures, log, number_setting, run_body_node
-from so101.dataflow import TICK_PERIOD_S
-from so101.display import DisplayError
-from so101.simulator import SO101Sim, release_freed_memory
+from so101.bodies.node_loop import NodeSettings, cannot_start, check_pictures, log, number_setting, run_body_node
+from so101.runtime.dataflow import TICK_PERIOD_S
+from so101.gui.display import DisplayError
+from so101.bodies.pybullet_sim import SO101Sim, release_freed_memory
 
 
 def main() -> int:

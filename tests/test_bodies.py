@@ -1,6 +1,6 @@
 """Every body speaks the same contract: registered once, the same graph, the same facts.
 
-A body node added under nodes/ without an entry in so101.bodies would escape the
+A body node added under nodes/ without an entry in so101.bodies.registry would escape the
 contract suite (the `body` fixture of tests/test_simulation_node.py runs over that table):
 the first test fails then.
 """
@@ -14,7 +14,7 @@ import pytest
 import yaml
 
 from so101 import assets
-from so101.bodies import BODIES, DEFAULT_BODY
+from so101.bodies.registry import BODIES, DEFAULT_BODY
 from so101.robot import ACTUATED_JOINTS
 from tests.dataflow_helpers import ROOT
 
@@ -52,7 +52,7 @@ def test_each_body_has_the_courses_graph(name):
 
 
 def test_the_joint_facts_equal_the_mjcf():
-    from so101.mujoco_sim import SO101MuJoCo
+    from so101.bodies.mujoco_sim import SO101MuJoCo
 
     with SO101MuJoCo(mode="direct", renders=False, log=lambda message: None) as sim:
         model = sim.model
@@ -72,7 +72,7 @@ def test_the_joint_facts_equal_the_mjcf():
 
 
 def test_without_damping_the_mujoco_arm_overshoots_more():
-    from so101.mujoco_sim import SO101MuJoCo
+    from so101.bodies.mujoco_sim import SO101MuJoCo
 
     def peak_deg(damping):
         with SO101MuJoCo(mode="direct", renders=False, joint_damping_n_m_s=damping, log=lambda message: None) as sim:
@@ -91,9 +91,9 @@ def test_without_damping_the_mujoco_arm_overshoots_more():
 
 
 def test_so101_teleop_knows_every_loaded_line():
-    # teleop waits for this line (so101.dataflow.LOADED_MARKS) without importing the loop's module.
-    from so101.body_node import TAGS, TEXT
-    from so101.dataflow import LOADED_MARKS
+    # teleop waits for this line (so101.runtime.dataflow.LOADED_MARKS) without importing the loop's module.
+    from so101.bodies.node_loop import TAGS, TEXT
+    from so101.runtime.dataflow import LOADED_MARKS
 
     for lang, text in TEXT.items():
         for tags in TAGS.values():

@@ -9,9 +9,9 @@ import time
 
 import pytest
 
-from so101.calibration import MOTOR_IDS, MOTOR_NAMES, load_calibration
-from so101.fake_arm import FakeArm
-from so101.real_arm import SO101Real
+from so101.feetech.calibration import MOTOR_IDS, MOTOR_NAMES, load_calibration
+from so101.feetech.fake_arm import FakeArm
+from so101.bodies.real_arm import SO101Real
 from tests.dataflow_helpers import SO101, dora_env
 
 
@@ -69,7 +69,7 @@ def test_a_scripted_calibration_finds_the_emulated_arms_offsets_and_ranges(tmp_p
 
     written = json.loads(out.read_text())
     assert list(written) == list(MOTOR_NAMES)
-    # Worked out from the emulator's assembly (so101/fake_arm.py MECHANICAL_TABLE): the middle
+    # Worked out from the emulator's assembly (so101/feetech/fake_arm.py MECHANICAL_TABLE): the middle
     # pose reads 2047 after homing, so homing_offset = centre - 2047, and the range is the hard
     # stops in that frame; wrist_roll turns fully (0..4095), as LeRobot records it.
     centres = {1: 2048 + 310, 2: 2048 - 420, 3: 2048 + 190, 4: 2048 - 275, 5: 2048 + 530, 6: 2048 - 360}

@@ -8,7 +8,7 @@ import math
 import pytest
 from hypothesis import given, strategies as st
 
-from so101.calibration import (
+from so101.feetech.calibration import (
     CalibrationError,
     MotorCalibration,
     deg_to_steps,

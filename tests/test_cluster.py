@@ -1,5 +1,5 @@
 """The dataflow on a dora cluster: a coordinator with token authentication and two daemons on
-127.0.0.1 under different machine ids (so101/cluster.py, as `so101 cluster-demo` runs it)."""
+127.0.0.1 under different machine ids (so101/runtime/cluster.py, as `so101 cluster-demo` runs it)."""
 
 from __future__ import annotations
 
@@ -12,10 +12,10 @@ import time
 
 import pytest
 
-from so101.bodies import BODIES
-from so101.cluster import (BODY_MACHINE, CLUSTER_DATAFLOW, PROMPT_MACHINE, Cluster, ClusterError, cluster_dataflow,
+from so101.bodies.registry import BODIES
+from so101.runtime.cluster import (BODY_MACHINE, CLUSTER_DATAFLOW, PROMPT_MACHINE, Cluster, ClusterError, cluster_dataflow,
                           placed_dataflow)
-from so101.dataflow import LOADED_MARKS, dataflow_copy, write_dataflow
+from so101.runtime.dataflow import LOADED_MARKS, dataflow_copy, write_dataflow
 from tests.dataflow_helpers import PROMPT_COMMAND, RECORDER, ROOT, error_lines, prompt_env, run_so101
 from tests.test_dataflow import check_the_record, type_the_script
 

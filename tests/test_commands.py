@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from so101.commands import (
+from so101.prompt.commands import (
     GRIPPER_CLOSED_DEG, GRIPPER_OPEN_DEG, Batch, Empty, GoPose, Help, Home, ListJoints, ListPoses, ParseError,
     Quit, SavePose, SetJoint, ShowState, Snapshot, format_angle, format_angles, help_lines, joint_lines, parse_command,
 )

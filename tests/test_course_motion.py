@@ -16,8 +16,8 @@ import pybullet_data
 import pytest
 
 from so101 import assets
-from so101.dataflow import TICK_PERIOD_S
-from so101.simulator import SO101Sim
+from so101.runtime.dataflow import TICK_PERIOD_S
+from so101.bodies.pybullet_sim import SO101Sim
 
 TOLERANCE_DEG = 0.01
 STEPS_PER_COMMAND = 250  # 1 s: every move below ends and settles well within it

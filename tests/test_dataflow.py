@@ -8,7 +8,7 @@ import time
 
 import pytest
 
-from so101.bodies import BODIES
+from so101.bodies.registry import BODIES
 from tests.dataflow_helpers import PROMPT_COMMAND, DoraRun, body_environment, prompt_env, write_test_dataflow
 
 pytestmark = pytest.mark.dataflow

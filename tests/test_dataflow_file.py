@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import yaml
 
-from so101.dataflow import TICK_PERIOD_S, timer_period_s
+from so101.runtime.dataflow import TICK_PERIOD_S, timer_period_s
 from tests.dataflow_helpers import ROOT
 
 DATAFLOW = yaml.safe_load((ROOT / "dataflow.yml").read_text(encoding="utf-8"))

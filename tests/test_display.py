@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from so101.display import DisplayError, display_available, resolve_mode
+from so101.gui.display import DisplayError, display_available, resolve_mode
 from tests.dataflow_helpers import unused_display
 
 

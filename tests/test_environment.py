@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from so101.versions import cli_version_from_output, dora_version_problem, version_mismatch
+from so101.runtime.versions import cli_version_from_output, dora_version_problem, version_mismatch
 from tests.dataflow_helpers import (
     BROKEN_MESH, PROMPT_COMMAND, VENV_BIN, DoraRun, corrupt, error_lines, run_so101,
     unused_display, write_test_dataflow,
@@ -147,7 +147,8 @@ def test_no_dora_on_path_is_reported(tmp_path, monkeypatch):
 
 
 def test_teleop_with_mismatched_dora_stops_before_starting_anything(tmp_path, monkeypatch, capsys):
-    from so101 import cli, teleop
+    from so101.cli import main as cli
+    from so101.cli import teleop
 
     bin_dir = fake_dora(tmp_path, 'echo "dora-cli 1.0.4"')
     monkeypatch.setattr(teleop, "_dora_executable", lambda: str(bin_dir / "dora"))

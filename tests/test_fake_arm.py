@@ -1,4 +1,4 @@
-"""The emulated SO-101 bus (so101/fake_arm.py), driven through Feetech's own SDK as a driver would.
+"""The emulated SO-101 bus (so101/feetech/fake_arm.py), driven through Feetech's own SDK as a driver would.
 
 Every test talks to the emulator over its pseudo-terminal with scservo_sdk (PortHandler,
 PacketHandler(0), GroupSyncRead/GroupSyncWrite) and checks values: the numbers a real
@@ -21,7 +21,7 @@ import pytest
 import serial
 import scservo_sdk as scs
 
-from so101.fake_arm import MECHANICAL_TABLE, MECHANICS, FakeArm
+from so101.feetech.fake_arm import MECHANICAL_TABLE, MECHANICS, FakeArm
 from so101.robot import ACTUATED_JOINTS
 
 SO101 = Path(sys.executable).parent / "so101"
@@ -29,7 +29,7 @@ IDS = (1, 2, 3, 4, 5, 6)
 JOINT_NAMES = ("shoulder_pan", "shoulder_lift", "elbow_flex", "wrist_flex", "wrist_roll", "gripper")
 
 # Addresses from Feetech's STS memory table, written out here as the oracle
-# (so101/sts3215.py holds the same numbers for the code).
+# (so101/feetech/sts3215.py holds the same numbers for the code).
 MODEL_NUMBER, ID, BAUD_RATE, MIN_LIMIT, MAX_LIMIT, HOMING_OFFSET, OPERATING_MODE = 3, 5, 6, 9, 11, 31, 33
 TORQUE_ENABLE, ACCELERATION, GOAL_POSITION, GOAL_VELOCITY, LOCK = 40, 41, 42, 46, 55
 PRESENT_POSITION, PRESENT_VELOCITY, PRESENT_VOLTAGE, PRESENT_TEMPERATURE, MOVING = 56, 58, 62, 63, 66

@@ -22,9 +22,9 @@ from pathlib import Path
 import pytest
 import yaml
 
-from so101.bodies import BODIES
-from so101.dataflow import timer_period_s
-from so101.processes import processes_with_env
+from so101.bodies.registry import BODIES
+from so101.runtime.dataflow import timer_period_s
+from so101.runtime.processes import processes_with_env
 from tests.dataflow_helpers import PROMPT_COMMAND, DoraRun, body_environment, dora_env, prompt_env, write_test_dataflow
 
 pytestmark = pytest.mark.dataflow

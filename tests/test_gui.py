@@ -18,9 +18,9 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from so101.bodies import BODIES, SIMULATED_BODIES
-from so101.dataflow import dataflow_copy, write_dataflow
-from so101.display import DisplayError, virtual_display
+from so101.bodies.registry import BODIES, SIMULATED_BODIES
+from so101.runtime.dataflow import dataflow_copy, write_dataflow
+from so101.gui.display import DisplayError, virtual_display
 from tests.dataflow_helpers import ROOT, DoraRun
 
 pytestmark = [

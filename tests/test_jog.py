@@ -1,5 +1,5 @@
-"""Key jogging without a terminal or dora: what each key does (so101/jog.py), and the raw key
-reader on a pseudo-terminal, restored however it ends (so101/terminal.py)."""
+"""Key jogging without a terminal or dora: what each key does (so101/prompt/jog.py), and the raw key
+reader on a pseudo-terminal, restored however it ends (so101/prompt/terminal.py)."""
 
 from __future__ import annotations
 
@@ -12,9 +12,9 @@ import time
 import pytest
 from hypothesis import given, strategies as st
 
-from so101.jog import JOINT_KEYS, MAX_IK_SWING_DEG, STEPS_DEG, Jog, press, status_line
+from so101.prompt.jog import JOINT_KEYS, MAX_IK_SWING_DEG, STEPS_DEG, Jog, press, status_line
 from so101.robot import ACTUATED_JOINTS
-from so101.terminal import KeyReader, single_keys
+from so101.prompt.terminal import KeyReader, single_keys
 
 HOME6 = (0.0, 0.0, 0.0, 0.0, 0.0, 45.0)
 

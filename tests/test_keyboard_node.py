@@ -12,7 +12,7 @@ from dora.testing import MockNode
 
 from nodes import keyboard_control
 from nodes.keyboard_control import EventPump, KeyboardControl, joint_cmd_sender, run_prompt
-from so101.poses import PoseStore
+from so101.prompt.poses import PoseStore
 
 STATE_DEG = [-30.004, 44.981, -59.687, 30.0, -0.001]
 GRIPPER_DEG = 12.345
@@ -344,7 +344,7 @@ def test_the_prompt_does_not_load_pybullet_until_asked():
     import sys
 
     probe = ("import sys, nodes.keyboard_control; "
-             "print(sorted(m for m in ('pybullet', 'numpy', 'so101.kinematics', 'so101.jog') if m in sys.modules))")
+             "print(sorted(m for m in ('pybullet', 'numpy', 'so101.kinematics', 'so101.prompt.jog') if m in sys.modules))")
     result = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, cwd=keyboard_control.ROOT)
     assert result.stdout.strip() == "[]", result.stderr
 

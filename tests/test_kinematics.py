@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from so101.assets import ModelFilesError
-from so101.cli import main
+from so101.cli.main import main
 from so101.kinematics import REACH_TOLERANCE_MM, Kinematics, Reach
 from so101.robot import ARM_JOINTS, HOME_POSE_DEG, NUM_ARM_JOINTS
 from tests.dataflow_helpers import run_so101
@@ -154,7 +154,7 @@ def test_of_the_exact_answers_solve_takes_one_the_arm_can_move_to_without_meetin
     # A point above and to the right of the base. Its first exact answer from home folds the
     # arm forward and down, and on the way the simulated gripper meets the floor and the arm
     # jams 520 mm away; solve passes it over for one whose way is clear.
-    from so101 import cmd_reach
+    from so101.cli import reach as cmd_reach
 
     target = (59.64, -102.27, 170.73)
     home = HOME_POSE_DEG[:NUM_ARM_JOINTS]
@@ -219,7 +219,7 @@ def test_importing_the_module_does_not_import_pybullet():
 def test_a_target_reached_after_a_reset_ends_where_a_fresh_simulator_does(kin, make_sim):
     # `so101 reach` reuses one simulator, reset to home before each target: faithful only if
     # that is the state a new one (as the node has) starts in.
-    from so101 import cmd_reach
+    from so101.cli import reach as cmd_reach
 
     pose, target = cmd_reach.draw_targets(kin, 1, seed=3).pairs[0]
     goal = kin.solve(target).joints_deg + (0.0,)

@@ -6,7 +6,7 @@ import re
 import subprocess
 import sys
 
-from so101.cli import main
+from so101.cli.main import main
 from tests.image_helpers import png_size
 
 ROW = re.compile(r"^\s+(?P<damping>[\d.]+)\s+(?P<overshoot>[\d.]+) %\s+(?P<settling>[\d.]+ s|never)\s+(?P<error>[+-][\d.]+)°$")

@@ -12,7 +12,7 @@ import time
 
 import pytest
 
-from so101.poses import Pose, PoseStore
+from so101.prompt.poses import Pose, PoseStore
 
 
 def test_saved_poses_survive_a_new_store(tmp_path):
@@ -107,7 +107,7 @@ def test_a_failed_write_is_reported_and_the_pose_kept_in_memory(tmp_path):
 
 SAVE_FOREVER = """
 import sys
-from so101.poses import Pose, PoseStore
+from so101.prompt.poses import Pose, PoseStore
 store = PoseStore(sys.argv[1])
 count = 0
 while True:

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from so101.display import virtual_display
+from so101.gui.display import virtual_display
 from tests.dataflow_helpers import SO101
 
 pytestmark = [

@@ -15,9 +15,9 @@ import uuid
 
 import pytest
 
-from so101.calibration import MOTOR_IDS, save_calibration
-from so101.fake_arm import FakeArm, calibrate_as_at_the_factory
-from so101.real_arm import SO101Real
+from so101.feetech.calibration import MOTOR_IDS, save_calibration
+from so101.feetech.fake_arm import FakeArm, calibrate_as_at_the_factory
+from so101.bodies.real_arm import SO101Real
 from tests.dataflow_helpers import TICK, DoraRun, body_environment, run_simulation_node, write_test_dataflow
 
 

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from so101.servo import SERVO_TORQUE_LIMIT_NM, joint_damping_stable, pd_gains, pd_torque_nm
+from so101.bodies.pd_servo import SERVO_TORQUE_LIMIT_NM, joint_damping_stable, pd_gains, pd_torque_nm
 from so101.step_response import overshoot_percent, settling_time_s, step_metrics
 
 TIME_STEP_S = 0.004

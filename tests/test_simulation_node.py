@@ -1,6 +1,6 @@
 """The body nodes' event loop, driven by dora.testing.MockNode (no daemon).
 
-The contract tests take the `body` fixture and run on every body in so101.bodies
+The contract tests take the `body` fixture and run on every body in so101.bodies.registry
 (PyBullet's node, MuJoCo's, and the real arm's on `so101 fake-arm`'s emulated bus); the
 `simulated_body` ones on the simulations only (a model file, a camera); the rest are
 PyBullet's own (the course's motion, servo mode).
@@ -14,8 +14,8 @@ import math
 import pyarrow as pa
 import pytest
 
-from so101.bodies import BODIES, SIMULATED_BODIES
-from so101.dataflow import MAX_STEPS_PER_TICK, TickClock
+from so101.bodies.registry import BODIES, SIMULATED_BODIES
+from so101.runtime.dataflow import MAX_STEPS_PER_TICK, TickClock
 from tests.dataflow_helpers import TICK, body_environment, run_simulation_node
 
 

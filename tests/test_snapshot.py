@@ -6,8 +6,8 @@ import numpy as np
 import pybullet as p
 import pytest
 
-from so101.cli import main
-from so101.simulator import SO101Sim
+from so101.cli.main import main
+from so101.bodies.pybullet_sim import SO101Sim
 from tests.image_helpers import arm_pixels, open_png, png_rgb, png_size
 
 SIZE = (160, 120)
@@ -148,8 +148,8 @@ def snapshot_rgb(tmp_path, *options) -> np.ndarray:
 
 
 def test_axes_are_drawn_in_their_colours_along_their_projected_lines(tmp_path):
-    from so101.camera import DEFAULT_CAMERA
-    from so101.cmd_snapshot import pybullet_projector
+    from so101.bodies.camera import DEFAULT_CAMERA
+    from so101.cli.snapshot import pybullet_projector
 
     colours = axis_colour_pixels(snapshot_rgb(tmp_path, "--axes"))
     projector = pybullet_projector(DEFAULT_CAMERA, *AXES_SIZE)
@@ -192,8 +192,8 @@ def test_the_axes_are_an_overlay_on_the_rendered_picture(tmp_path):
 def test_projected_points_land_on_the_arm_in_the_render(make_sim, camera_options, pose):
     """The origin on the arm's base, and the tip (from FK) where the gripper is: the farthest
     arm pixel from the base is a jaw's end, a little beyond the tip (which lies between the jaws)."""
-    from so101.camera import DEFAULT_CAMERA, Camera
-    from so101.cmd_snapshot import pybullet_projector
+    from so101.bodies.camera import DEFAULT_CAMERA, Camera
+    from so101.cli.snapshot import pybullet_projector
 
     options = dict(zip(camera_options[::2], map(float, camera_options[1::2])))
     camera = Camera(
@@ -221,7 +221,7 @@ def test_projected_points_land_on_the_arm_in_the_render(make_sim, camera_options
 
 
 def test_the_axes_use_the_matrices_the_render_used(tmp_path, monkeypatch):
-    from so101 import cmd_snapshot
+    from so101.cli import snapshot as cmd_snapshot
 
     used, made = [], []
     get_camera_image, pybullet_projector = p.getCameraImage, cmd_snapshot.pybullet_projector
@@ -244,7 +244,7 @@ def test_the_axes_use_the_matrices_the_render_used(tmp_path, monkeypatch):
 
 
 def test_a_line_is_cut_where_it_passes_behind_the_camera():
-    from so101.cmd_snapshot import Projector
+    from so101.cli.snapshot import Projector
 
     # A camera at the origin looking along -z (OpenGL's eye frame), 90° field of view, 100x100.
     near_m, far_m = 0.01, 10.0
@@ -262,8 +262,8 @@ def test_a_line_is_cut_where_it_passes_behind_the_camera():
 
 
 def test_mujoco_draws_the_axes_where_its_camera_sees_the_base_frame(tmp_path):
-    from so101.cmd_snapshot import mujoco_projector
-    from so101.mujoco_sim import SO101MuJoCo
+    from so101.cli.snapshot import mujoco_projector
+    from so101.bodies.mujoco_sim import SO101MuJoCo
 
     colours = axis_colour_pixels(snapshot_rgb(tmp_path, "--body", "mujoco", "--axes"))
     with SO101MuJoCo(mode="direct", log=lambda message: None) as sim:

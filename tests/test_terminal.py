@@ -14,7 +14,7 @@ def test_descriptor_1_goes_to_the_log_and_python_output_stays_where_it_was(tmp_p
     script = textwrap.dedent(f"""
         import os, sys
         from pathlib import Path
-        from so101.terminal import dora_logs_to
+        from so101.prompt.terminal import dora_logs_to
         print("before")
         with dora_logs_to(Path({str(log)!r})):
             os.write(1, b'{{"level":"WARN","fields":{{"message":"Discarding event"}}}}\\n')

@@ -19,8 +19,8 @@ from pathlib import Path
 
 import pytest
 
-from so101.processes import kill_with_env, running_with_env
-from so101.venv import env_with_bin_first
+from so101.runtime.processes import kill_with_env, running_with_env
+from so101.runtime.venv import env_with_bin_first
 from tests.dataflow_helpers import PROMPT_COMMAND, SO101
 
 ARM_IP, DESK_IP = "10.231.0.1", "10.231.0.2"

@@ -1,11 +1,11 @@
 """MuJoCo's window, in a process of its own that mirrors the arm's joint angles.
 
-The same rule as the PyBullet window (so101/viewer.py, whose shared slots and priority
+The same rule as the PyBullet window (so101/gui/viewer.py, whose shared slots and priority
 this uses): the physics runs headless in the node, and this process, at the lowest CPU
 priority, shows the latest angles in MuJoCo's own viewer (`mujoco.viewer`: drag to turn,
 right drag to move, wheel to zoom), never stepping the physics itself.
 
-    python -m so101.mujoco_viewer --shared FILE --mjcf MJCF [--fps N]    (started by `Window`, not by hand)
+    python -m so101.gui.mujoco_viewer --shared FILE --mjcf MJCF [--fps N]    (started by `Window`, not by hand)
 """
 
 from __future__ import annotations
@@ -17,14 +17,14 @@ import time
 from pathlib import Path
 
 from so101.robot import ACTUATED_JOINTS
-from so101.viewer import ANGLES, FRAME, OPEN, SHOWING, STATUS, lowest_priority, shared_array, viewer_main
+from so101.gui.viewer import ANGLES, FRAME, OPEN, SHOWING, STATUS, lowest_priority, shared_array, viewer_main
 
 
 def run_viewer(shared_path: Path, mjcf: Path, fps: float) -> int:
     import mujoco
     import mujoco.viewer
 
-    from so101.mujoco_sim import scene_model
+    from so101.bodies.mujoco_sim import scene_model
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the process group: the physics closes this
     lowest_priority()
@@ -58,7 +58,7 @@ def run_viewer(shared_path: Path, mjcf: Path, fps: float) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    return viewer_main(argv, "so101.mujoco_viewer", __doc__.splitlines()[0], "mjcf", run_viewer)
+    return viewer_main(argv, "so101.gui.mujoco_viewer", __doc__.splitlines()[0], "mjcf", run_viewer)
 
 
 if __name__ == "__main__":

@@ -12,7 +12,7 @@ import importlib.util
 import sys
 from pathlib import Path
 
-BENCH_SCRIPT = Path(__file__).resolve().parents[1] / "bench" / "run_bench.py"
+BENCH_SCRIPT = Path(__file__).resolve().parents[2] / "bench" / "run_bench.py"
 
 
 @functools.cache  # `so101` builds every subcommand's parser: load the script once

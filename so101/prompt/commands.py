@@ -8,7 +8,7 @@ Commands (course step D and exercise 1, plus the gripper):
 Beyond the course (its mini project 7, and Cartesian targets):
   xyz X Y Z                the gripper tip to that point: millimetres, in the arm's base frame
   where                    where the tip is now (forward kinematics of joint_state)
-  jog                      key jogging (so101/jog.py)
+  jog                      key jogging (so101/prompt/jog.py)
 
 Out-of-limit angles are refused, not clamped: at a keyboard a value beyond the
 URDF limits is far more likely a typo (900 for 90) than a wish for the limit.

@@ -30,11 +30,11 @@ from typing import Mapping
 
 import pyarrow as pa
 
-from so101.bodies import BodyFailed
-from so101.dataflow import TICK_PERIOD_S, TickClock, timer_period_s
+from so101.bodies.registry import BodyFailed
+from so101.runtime.dataflow import TICK_PERIOD_S, TickClock, timer_period_s
 from so101.joint_cmd import decode_joint_cmd
 from so101.robot import GRIPPER_COMMAND_INDEX, HOME_POSE_DEG, NUM_ARM_JOINTS
-from so101.versions import spawning_daemon_version_problem
+from so101.runtime.versions import spawning_daemon_version_problem
 
 IMAGE_SIZE = (320, 240)
 

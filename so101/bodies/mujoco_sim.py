@@ -1,4 +1,4 @@
-"""The SO-101 in MuJoCo, behind the same small surface as `so101.simulator.SO101Sim`.
+"""The SO-101 in MuJoCo, behind the same small surface as `so101.bodies.pybullet_sim.SO101Sim`.
 
 Targets and states in degrees, in `so101.robot.ACTUATED_JOINTS` order; `step(count)`
 advances `count` periods of the node's tick; `render_rgb` draws offscreen; `close()` is
@@ -17,10 +17,10 @@ from typing import Sequence
 import numpy as np
 
 from so101 import assets
-from so101.camera import DEFAULT_CAMERA, Camera, check_picture
-from so101.display import DisplayError, display_available, resolve_mode
+from so101.bodies.camera import DEFAULT_CAMERA, Camera, check_picture
+from so101.gui.display import DisplayError, display_available, resolve_mode
 from so101.robot import ACTUATED_JOINTS, HOME_POSE_DEG, goal_deg
-from so101.viewer import WINDOW_SHOWING, Window
+from so101.gui.viewer import WINDOW_SHOWING, Window
 
 # Offscreen drawing without a display needs an OpenGL back end: EGL, with Mesa's
 # software renderer where there is no GPU. MuJoCo reads this when it is imported.
@@ -78,10 +78,10 @@ class SO101MuJoCo:
         self.renders = renders
         self._renderer = None
         self.steps = 0
-        # GUI mode: MuJoCo's viewer in a process of its own, mirroring the angles (so101/mujoco_viewer.py).
+        # GUI mode: MuJoCo's viewer in a process of its own, mirroring the angles (so101/gui/mujoco_viewer.py).
         self._window = None
         if self.mode == "gui":
-            self._window = Window(["so101.mujoco_viewer", "--mjcf", str(mjcf)], on_showing=lambda: log(WINDOW_SHOWING))
+            self._window = Window(["so101.gui.mujoco_viewer", "--mjcf", str(mjcf)], on_showing=lambda: log(WINDOW_SHOWING))
         self.set_time_step_s(time_step_s)
         self.set_targets_deg(HOME_POSE_DEG)
         mujoco.mj_forward(self.model, self.data)

@@ -1,7 +1,7 @@
 """Feetech STS3215 facts: the registers this project touches, from Feetech's STS memory table.
 
-One place for the driver (so101/feetech.py), the calibration command and the emulator
-(so101/fake_arm.py). Multi-byte registers are little-endian. Values that can be negative
+One place for the driver (so101/feetech/bus.py), the calibration command and the emulator
+(so101/feetech/fake_arm.py). Multi-byte registers are little-endian. Values that can be negative
 use a sign bit (not two's complement): bit 11 for Homing_Offset, bit 15 for the velocities.
 """
 

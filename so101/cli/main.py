@@ -12,22 +12,22 @@ import importlib
 import sys
 
 from so101.assets import ModelFilesError
-from so101.display import DisplayError
+from so101.gui.display import DisplayError
 
 # name -> (module, one-line help)
 SUBCOMMANDS = {
-    "assets": ("so101.cmd_assets", "fetch the SO-101 model (URDF + meshes) and verify it"),
-    "inspect": ("so101.steps", "course step A: load the arm and print its joint table"),
-    "joints": ("so101.steps", "course step B: drive joints 0-4 and print the angles reached"),
-    "plot-step": ("so101.cmd_plot", "exercise 2: plot one joint's step response for a few damping values (PNG)"),
-    "bench": ("so101.cmd_bench", "benchmark the simulation node's 4 ms real-time budget against raw PyBullet (JSON + table)"),
-    "snapshot": ("so101.cmd_snapshot", "render the arm in a pose to a PNG, headless (no window needed)"),
-    "reach": ("so101.cmd_reach", "check IK and the simulated arm against Cartesian targets: tip errors in mm (table, JSON)"),
-    "calibrate": ("so101.cmd_calibrate", "calibrate a real SO-101 follower arm into LeRobot's calibration format (JSON)"),
-    "cluster-demo": ("so101.cluster", "the dataflow on a dora cluster: two daemons on this machine, the prompt on the second"),
-    "cluster-dataflow": ("so101.cluster", "write the dataflow for a dora cluster of two machines: the body on `arm`, the prompt on `desk`"),
-    "teleop": ("so101.teleop", "steps D + exercise 1: the dataflow and the keyboard prompt in one terminal"),
-    "fake-arm": ("so101.fake_arm", "an emulated SO-101 servo bus on a pseudo-terminal, for trying the real-arm driver without hardware"),
+    "assets": ("so101.cli.assets", "fetch the SO-101 model (URDF + meshes) and verify it"),
+    "inspect": ("so101.cli.course_steps", "course step A: load the arm and print its joint table"),
+    "joints": ("so101.cli.course_steps", "course step B: drive joints 0-4 and print the angles reached"),
+    "plot-step": ("so101.cli.plot_step", "exercise 2: plot one joint's step response for a few damping values (PNG)"),
+    "bench": ("so101.cli.bench", "benchmark the simulation node's 4 ms real-time budget against raw PyBullet (JSON + table)"),
+    "snapshot": ("so101.cli.snapshot", "render the arm in a pose to a PNG, headless (no window needed)"),
+    "reach": ("so101.cli.reach", "check IK and the simulated arm against Cartesian targets: tip errors in mm (table, JSON)"),
+    "calibrate": ("so101.cli.calibrate", "calibrate a real SO-101 follower arm into LeRobot's calibration format (JSON)"),
+    "cluster-demo": ("so101.runtime.cluster", "the dataflow on a dora cluster: two daemons on this machine, the prompt on the second"),
+    "cluster-dataflow": ("so101.runtime.cluster", "write the dataflow for a dora cluster of two machines: the body on `arm`, the prompt on `desk`"),
+    "teleop": ("so101.cli.teleop", "steps D + exercise 1: the dataflow and the keyboard prompt in one terminal"),
+    "fake-arm": ("so101.feetech.fake_arm", "an emulated SO-101 servo bus on a pseudo-terminal, for trying the real-arm driver without hardware"),
 }
 
 

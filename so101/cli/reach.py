@@ -37,7 +37,7 @@ import time
 from pathlib import Path
 from typing import NamedTuple
 
-from so101.argtypes import number
+from so101.cli.argtypes import number
 
 MIN_TIP_HEIGHT_MM = 30.0
 GOAL_MM = 5.0
@@ -162,10 +162,10 @@ def _figures(values) -> dict:
 
 
 def run(args: argparse.Namespace) -> int:
-    from so101.dataflow import TICK_PERIOD_S
+    from so101.runtime.dataflow import TICK_PERIOD_S
     from so101.kinematics import FLOOR_CLEARANCE_MM, REACH_TOLERANCE_MM, Kinematics
     from so101.robot import GRIPPER_COMMAND_INDEX, HOME_POSE_DEG, NUM_ARM_JOINTS
-    from so101.simulator import SO101Sim
+    from so101.bodies.pybullet_sim import SO101Sim
 
     started = time.perf_counter()
     home = HOME_POSE_DEG[:NUM_ARM_JOINTS]

@@ -15,11 +15,11 @@ from pathlib import Path
 
 import numpy as np
 
-from so101 import argtypes
-from so101.bodies import DEFAULT_BODY, SIMULATED_BODIES
-from so101.dataflow import TICK_PERIOD_S
+from so101.cli import argtypes
+from so101.bodies.registry import DEFAULT_BODY, SIMULATED_BODIES
+from so101.runtime.dataflow import TICK_PERIOD_S
 from so101.robot import ACTUATED_JOINTS, HOME_POSE_DEG
-from so101.servo import DEFAULT_NATURAL_FREQ_RAD_S, SERVO_TORQUE_LIMIT_NM
+from so101.bodies.pd_servo import DEFAULT_NATURAL_FREQ_RAD_S, SERVO_TORQUE_LIMIT_NM
 from so101.step_response import SETTLING_BAND, StepMetrics, step_metrics
 
 # Keyed by what is stepped: PyBullet's two control modes, or the MuJoCo body.
@@ -74,11 +74,11 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
 
 def _simulator(kind: str, damping: float):
     if kind == "mujoco":
-        from so101.mujoco_sim import SO101MuJoCo
+        from so101.bodies.mujoco_sim import SO101MuJoCo
 
         return SO101MuJoCo(mode="direct", time_step_s=TICK_PERIOD_S, joint_damping_n_m_s=damping, renders=False,
                            log=lambda message: None)
-    from so101.simulator import SO101Sim
+    from so101.bodies.pybullet_sim import SO101Sim
 
     options = {"servo_damping_ratio": damping} if kind == "servo" else {"link_damping": damping}
     return SO101Sim(mode="direct", time_step_s=TICK_PERIOD_S, control_mode=kind, log=lambda message: None, **options)

@@ -17,9 +17,9 @@ import pybullet as p
 import pybullet_data
 
 from so101 import assets
-from so101.camera import DEFAULT_CAMERA, Camera, check_picture
-from so101.display import resolve_mode
-from so101.servo import (
+from so101.bodies.camera import DEFAULT_CAMERA, Camera, check_picture
+from so101.gui.display import resolve_mode
+from so101.bodies.pd_servo import (
     DEFAULT_DAMPING_RATIO,
     DEFAULT_NATURAL_FREQ_RAD_S,
     SERVO_TORQUE_LIMIT_NM,
@@ -33,7 +33,7 @@ from so101.robot import (
     HOME_POSE_DEG,
     goal_deg,
 )
-from so101.viewer import WINDOW_SHOWING, Window
+from so101.gui.viewer import WINDOW_SHOWING, Window
 
 JOINT_TYPE_NAMES = {
     p.JOINT_REVOLUTE: "revolute",
@@ -126,7 +126,7 @@ class SO101Sim:
             log(notice)
         self.time_step_s = float(time_step_s)
         # The physics is always DIRECT: a GUI client would hold every step back to the
-        # window's frame rate. GUI mode adds a window that mirrors the arm (so101.viewer).
+        # window's frame rate. GUI mode adds a window that mirrors the arm (so101.gui.viewer).
         self.client = p.connect(p.DIRECT)
         if self.client < 0:
             raise RuntimeError("PyBullet could not connect in DIRECT mode")
@@ -147,7 +147,7 @@ class SO101Sim:
             useFixedBase=True, physicsClientId=cid,
         )
         if self.mode == "gui":
-            self._window = Window(["so101.viewer", "--urdf", str(urdf)], on_showing=lambda: log(WINDOW_SHOWING))
+            self._window = Window(["so101.gui.viewer", "--urdf", str(urdf)], on_showing=lambda: log(WINDOW_SHOWING))
         self.joints = [self._joint_info(i) for i in range(p.getNumJoints(self.robot_id, physicsClientId=cid))]
         self._indices = [joint.index for joint in ACTUATED_JOINTS]
         if link_damping is not None:

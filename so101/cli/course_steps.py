@@ -15,9 +15,9 @@ import time
 from pathlib import Path
 
 from so101.assets import ModelFilesError, urdf_path
-from so101.commands import LANGUAGES
+from so101.prompt.commands import LANGUAGES
 from so101.robot import ACTUATED_JOINTS, NUM_ARM_JOINTS
-from so101.display import MODE_ENV_VAR, MODES, DisplayError, resolve_mode
+from so101.gui.display import MODE_ENV_VAR, MODES, DisplayError, resolve_mode
 
 COURSE_STEP_B_TARGETS_RAD = (0.5, -0.5, 0.5, -0.5, 0.5)
 COURSE_STEP_B_STEPS = 500
@@ -105,7 +105,7 @@ def keep_running(sim, steps: int | None, lang: str) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from so101.simulator import SO101Sim  # imported here: pybullet prints a banner on import
+    from so101.bodies.pybullet_sim import SO101Sim  # imported here: pybullet prints a banner on import
 
     with SO101Sim(mode=args.mode, time_step_s=COURSE_TIME_STEP_S) as sim:
         if args.step == "inspect":

@@ -27,15 +27,15 @@ import tempfile
 import time
 from pathlib import Path, PurePath, PurePosixPath
 
-from so101.bodies import BODIES, DEFAULT_BODY, Body, body_node_env
-from so101.dataflow import dataflow_copy, dataflow_text, write_dataflow
-from so101.display import MODES, resolve_mode
-from so101.processes import kill_with_env, running_with_env
-from so101.steps import _language
-from so101.venv import env_with_bin_first, executable
-from so101.versions import dora_version_problem
+from so101.bodies.registry import BODIES, DEFAULT_BODY, Body, body_node_env
+from so101.runtime.dataflow import dataflow_copy, dataflow_text, write_dataflow
+from so101.gui.display import MODES, resolve_mode
+from so101.runtime.processes import kill_with_env, running_with_env
+from so101.cli.course_steps import _language
+from so101.runtime.venv import env_with_bin_first, executable
+from so101.runtime.versions import dora_version_problem
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 CLUSTER_DATAFLOW = ROOT / "dataflow_cluster.yml"
 PROMPT = ROOT / "nodes" / "keyboard_control.py"
 DATAFLOW_NAME = "so101"

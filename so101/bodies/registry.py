@@ -11,7 +11,7 @@ import importlib
 from dataclasses import dataclass
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 class BodyFailed(Exception):
@@ -35,11 +35,11 @@ class Body:
 
 BODIES = {
     # The course's choice, and the default.
-    "pybullet": Body("pybullet", ROOT / "nodes" / "simulation_node.py", ROOT / "dataflow.yml", "so101.simulator:SO101Sim"),
+    "pybullet": Body("pybullet", ROOT / "nodes" / "simulation_node.py", ROOT / "dataflow.yml", "so101.bodies.pybullet_sim:SO101Sim"),
     "mujoco": Body("mujoco", ROOT / "nodes" / "simulation_mujoco.py", ROOT / "dataflow_mujoco.yml",
-                   "so101.mujoco_sim:SO101MuJoCo"),
+                   "so101.bodies.mujoco_sim:SO101MuJoCo"),
     # The course's next section: the same contract on a real SO-101 follower (or `so101 fake-arm`).
-    "real": Body("real", ROOT / "nodes" / "arm_node.py", ROOT / "dataflow_real.yml", "so101.real_arm:SO101Real",
+    "real": Body("real", ROOT / "nodes" / "arm_node.py", ROOT / "dataflow_real.yml", "so101.bodies.real_arm:SO101Real",
                  node_id="arm", simulated=False),
 }
 SIMULATED_BODIES = [name for name, body in BODIES.items() if body.simulated]

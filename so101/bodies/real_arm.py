@@ -21,8 +21,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Mapping
 
-from so101.bodies import BodyFailed
-from so101.calibration import (
+from so101.bodies.registry import BodyFailed
+from so101.feetech.calibration import (
     MOTOR_IDS,
     MOTOR_NAMES,
     Calibration,
@@ -32,9 +32,9 @@ from so101.calibration import (
     step_toward,
     steps_to_deg,
 )
-from so101.feetech import BusError, FeetechBus
+from so101.feetech.bus import BusError, FeetechBus
 from so101.robot import ACTUATED_JOINTS, goal_deg
-from so101.sts3215 import MODEL_NUMBER, SIGN_BITS, decode_signed
+from so101.feetech.sts3215 import MODEL_NUMBER, SIGN_BITS, decode_signed
 
 DEFAULT_MAX_SPEED_DEG_S = 90.0
 DEFAULT_RETRIES = 5
@@ -72,7 +72,7 @@ class ArmSettings:
     @classmethod
     def from_environ(cls, environ: Mapping[str, str]) -> "ArmSettings":
         """Raises ValueError naming a missing or bad value and what is accepted."""
-        from so101.body_node import number_setting, whole_number_setting
+        from so101.bodies.node_loop import number_setting, whole_number_setting
 
         port = environ.get("SO101_PORT", "").strip()
         if not port:

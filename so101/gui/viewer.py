@@ -12,7 +12,7 @@ zooms, Ctrl + middle drag pans).
 The two processes share one small file, mapped into both: a frame counter, the
 viewer's state, and the six joint angles in radians (so101.robot.ACTUATED_JOINTS order).
 
-    python -m so101.viewer --shared FILE --urdf URDF [--fps N]    (started by `Window`, not by hand)
+    python -m so101.gui.viewer --shared FILE --urdf URDF [--fps N]    (started by `Window`, not by hand)
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from so101.bodies import BodyFailed
+from so101.bodies.registry import BodyFailed
 from so101.robot import ACTUATED_JOINTS
 
 DEFAULT_FPS = 30.0
@@ -67,7 +67,7 @@ class Window:
     """The physics side: starts a viewer process and hands it the angles, at most `fps` times a second.
 
     `viewer` is the viewer's module with its model options: this file's PyBullet window
-    (`["so101.viewer", "--urdf", URDF]`) or MuJoCo's (`["so101.mujoco_viewer", "--mjcf", MJCF]`);
+    (`["so101.gui.viewer", "--urdf", URDF]`) or MuJoCo's (`["so101.gui.mujoco_viewer", "--mjcf", MJCF]`);
     both take `--shared FILE --fps N` and keep to this file's shared slots.
     """
 
@@ -87,7 +87,7 @@ class Window:
             # The GUIs chatter on stdout (GL versions, threads); their errors, such as
             # "X connection ... broken", stay on stderr, in the node's log.
             stdout=subprocess.DEVNULL,
-            env=dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(Path(__file__).resolve().parents[1]),
+            env=dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(Path(__file__).resolve().parents[2]),
                                                                            os.environ.get("PYTHONPATH")]))),
         )
 
@@ -213,7 +213,7 @@ def viewer_main(argv: list[str] | None, module: str, description: str, model_opt
 
 
 def main(argv: list[str] | None = None) -> int:
-    return viewer_main(argv, "so101.viewer", __doc__.splitlines()[0], "urdf", run_viewer)
+    return viewer_main(argv, "so101.gui.viewer", __doc__.splitlines()[0], "urdf", run_viewer)
 
 
 if __name__ == "__main__":

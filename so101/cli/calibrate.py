@@ -19,7 +19,7 @@ import shutil
 import sys
 from pathlib import Path
 
-from so101.calibration import (
+from so101.feetech.calibration import (
     MIN_RANGE_STEPS,
     MOTOR_IDS,
     MOTOR_NAMES,
@@ -27,9 +27,9 @@ from so101.calibration import (
     homing_offset,
     save_calibration,
 )
-from so101.feetech import BusError, FeetechBus
-from so101.real_arm import check_servos_answer
-from so101.sts3215 import MAX_STEP, SIGN_BITS, STEPS_PER_TURN, encode_signed
+from so101.feetech.bus import BusError, FeetechBus
+from so101.bodies.real_arm import check_servos_answer
+from so101.feetech.sts3215 import MAX_STEP, SIGN_BITS, STEPS_PER_TURN, encode_signed
 
 FULL_TURN_JOINT = "wrist_roll"
 POLL_S = 0.01  # how often positions are read while the person moves the joints

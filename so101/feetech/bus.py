@@ -14,7 +14,7 @@ import time
 import scservo_sdk as scs
 import serial
 
-from so101.sts3215 import BAUD_RATE, REGISTERS
+from so101.feetech.sts3215 import BAUD_RATE, REGISTERS
 
 CHECK_SERVO = "check its power, its cable and that its ID is {servo_id}"
 

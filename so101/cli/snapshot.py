@@ -18,8 +18,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from so101.bodies import BODIES, DEFAULT_BODY, SIMULATED_BODIES
-from so101.dataflow import TICK_PERIOD_S
+from so101.bodies.registry import BODIES, DEFAULT_BODY, SIMULATED_BODIES
+from so101.runtime.dataflow import TICK_PERIOD_S
 from so101.robot import ACTUATED_JOINTS, HOME_POSE_DEG, NUM_ARM_JOINTS
 
 REACHED_TOLERANCE_DEG = 0.5
@@ -55,7 +55,7 @@ def _image_side(text: str) -> int:
 
 
 def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
-    from so101.camera import DEFAULT_CAMERA
+    from so101.bodies.camera import DEFAULT_CAMERA
 
     parser.add_argument(
         "--body", choices=SIMULATED_BODIES, default=DEFAULT_BODY,
@@ -224,7 +224,7 @@ def draw_axes(image, projector: Projector) -> None:
 def run(args: argparse.Namespace) -> int:
     from PIL import Image
 
-    from so101.camera import DEFAULT_CAMERA, Camera
+    from so101.bodies.camera import DEFAULT_CAMERA, Camera
 
     error = pose_error(args.pose)
     if not args.distance > 0:

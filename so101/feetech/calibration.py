@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Mapping, Sequence
 
 from so101.robot import ACTUATED_JOINTS, GRIPPER_COMMAND_INDEX
-from so101.sts3215 import MAX_STEP, STEPS_PER_TURN
+from so101.feetech.sts3215 import MAX_STEP, STEPS_PER_TURN
 
 # LeRobot's motor names for the SO-101 follower, and their bus IDs: the URDF's joint names.
 MOTOR_NAMES: tuple[str, ...] = tuple(joint.name for joint in ACTUATED_JOINTS)

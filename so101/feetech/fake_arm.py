@@ -3,7 +3,7 @@
 Six Feetech STS3215 servos (IDs 1-6) answer Feetech's serial protocol ("protocol 0", the
 one `scservo_sdk.PacketHandler(0)` speaks) on a pseudo-terminal such as /dev/pts/7, so the
 real-arm driver, `so101 calibrate` and their tests run without hardware. It emulates the
-protocol, the register table (so101/sts3215.py) and an assembled arm's hard stops; it is not
+protocol, the register table (so101/feetech/sts3215.py) and an assembled arm's hard stops; it is not
 a physics model: no gravity, no load, no inertia, a constant speed.
 
 The protocol, from Feetech's published description:
@@ -54,8 +54,8 @@ import time
 import tty
 from dataclasses import dataclass
 
-from so101 import sts3215
-from so101.argtypes import number
+from so101.feetech import sts3215
+from so101.cli.argtypes import number
 from so101.robot import ACTUATED_JOINTS
 
 # -- the protocol ------------------------------------------------------------------------
@@ -348,7 +348,7 @@ class FakeArm:
             port = PortHandler(arm.port)   # scservo_sdk, as for a real arm
 
     `servo_id` in this API is a servo's power-up ID (its joint, 1-6), whatever its ID register
-    says later. Registers are read and written by name (so101/sts3215.py), signed ones as
+    says later. Registers are read and written by name (so101/feetech/sts3215.py), signed ones as
     signed numbers. All methods are safe to call from any thread.
     """
 
@@ -460,7 +460,7 @@ class FakeArm:
     def read_register(self, servo_id: int, name: str) -> int:
         """A register's value now (signed registers decoded)."""
         if name not in sts3215.REGISTERS:
-            raise KeyError(f"no register {name!r}; see so101/sts3215.py")
+            raise KeyError(f"no register {name!r}; see so101/feetech/sts3215.py")
         with self._lock:
             servo = self._servo(servo_id)
             servo.advance(time.monotonic(), self.speed_steps_s)
@@ -472,7 +472,7 @@ class FakeArm:
         """Write a register as a host's WRITE would (same rules: EEPROM and Lock, 128 to
         Torque_Enable, ...), but whatever the faults. ValueError for a read-only register."""
         if name not in sts3215.REGISTERS:
-            raise KeyError(f"no register {name!r}; see so101/sts3215.py")
+            raise KeyError(f"no register {name!r}; see so101/feetech/sts3215.py")
         address, size = sts3215.REGISTERS[name]
         if not FIRST_WRITABLE <= address < FIRST_READ_ONLY:
             raise ValueError(f"{name} is read-only: the servo writes it")
@@ -825,9 +825,9 @@ class FakeArm:
 def calibrate_as_at_the_factory(arm: FakeArm):
     """Write into `arm`'s servos the calibration a person's `so101 calibrate` would find (the
     middle pose at each joint's centre, the ranges at its stops, wrist_roll the whole turn) and
-    return it, in so101.calibration's form: an emulated arm ready for the driver, for tests and
+    return it, in so101.feetech.calibration's form: an emulated arm ready for the driver, for tests and
     `so101 bench --body real`."""
-    from so101.calibration import MOTOR_NAMES, MotorCalibration, homing_offset
+    from so101.feetech.calibration import MOTOR_NAMES, MotorCalibration, homing_offset
 
     calibration = {}
     for servo_id in arm.ids:

@@ -5,13 +5,13 @@ from __future__ import annotations
 import re
 from pathlib import Path, PurePath
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 DATAFLOW_FILE = ROOT / "dataflow.yml"
 # The period of dataflow.yml's `dora/timer/millis/4` tick, and so of the physics step
 # (tests/test_dataflow_file.py holds the two equal). Tools that simulate without the
 # dataflow (plot-step, snapshot, bench) step with it too.
 TICK_PERIOD_S = 0.004
-# The start of the simulation node's "loaded" log line, in its two languages (so101/body_node.py):
+# The start of the simulation node's "loaded" log line, in its two languages (so101/bodies/node_loop.py):
 # every body logs it once the arm is loaded, just before it starts publishing joint_state.
 LOADED_MARKS = ("SO-101 loaded", "SO-101 加载完成")
 

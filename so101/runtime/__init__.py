@@ -1,0 +1,1 @@
+"""The plumbing: dataflow files, processes, dora versions, the virtual environment, a dora cluster."""
