@@ -21,6 +21,22 @@ class Joint:
     label_zh: str
     label_en: str
 
+    def clamp_deg(self, angle_deg: float) -> float:
+        """The angle held within this joint's URDF limits."""
+        return min(max(angle_deg, self.lower_deg), self.upper_deg)
+
+    def allows_deg(self, angle_deg: float, decimals: int | None = None) -> bool:
+        """Whether `angle_deg` is finite and within the limits; with `decimals`, within the limits
+        as shown to that many places (110.0° for 109.99998°), so a value a person read is accepted."""
+        lower, upper = self.lower_deg, self.upper_deg
+        if decimals is not None:
+            lower, upper = round(lower, decimals), round(upper, decimals)
+        return math.isfinite(angle_deg) and lower <= angle_deg <= upper
+
+    def limits_text(self) -> str:
+        """The limits as people read them: "[-110.0°, 110.0°]"."""
+        return f"[{self.lower_deg:.1f}°, {self.upper_deg:.1f}°]"
+
 
 def _deg(rad: float) -> float:
     return math.degrees(rad)
