@@ -49,12 +49,9 @@ def _describe(value: object) -> str:
 def clamp_to_limits(joint_position: int, angle_deg: float) -> tuple[float, str | None]:
     """Clamp one angle to its joint's URDF limits; returns (angle, note or None)."""
     joint = ACTUATED_JOINTS[joint_position]
-    clamped = min(max(angle_deg, joint.lower_deg), joint.upper_deg)
+    clamped = joint.clamp_deg(angle_deg)
     if clamped != angle_deg:
-        return clamped, (
-            f"{joint.name} {angle_deg:g}° is beyond its limits "
-            f"[{joint.lower_deg:.1f}°, {joint.upper_deg:.1f}°]: clamped to {clamped:.1f}°"
-        )
+        return clamped, f"{joint.name} {angle_deg:g}° is beyond its limits {joint.limits_text()}: clamped to {clamped:.1f}°"
     return angle_deg, None
 
 

@@ -151,7 +151,7 @@ def test_teleop_with_mismatched_dora_stops_before_starting_anything(tmp_path, mo
     from so101.cli import teleop
 
     bin_dir = fake_dora(tmp_path, 'echo "dora-cli 1.0.4"')
-    monkeypatch.setattr(teleop, "_dora_executable", lambda: str(bin_dir / "dora"))
+    monkeypatch.setattr(teleop, "dora_executable", lambda: str(bin_dir / "dora"))
     log_file = tmp_path / "dora.log"
     assert cli.main(["teleop", "--mode", "direct", "--lang", "en", "--log", str(log_file)]) == 2
     error = capsys.readouterr().err.strip()

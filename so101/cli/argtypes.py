@@ -1,9 +1,12 @@
-"""Number options for the command line: one error line that says what was wrong and what is accepted."""
+"""Options shared by the subcommands: one error line that says what was wrong and what is accepted."""
 
 from __future__ import annotations
 
 import argparse
+import os
 from typing import Callable
+
+from so101 import lang
 
 
 def number(accepted: Callable[[float], bool], expected: str) -> Callable[[str], float]:
@@ -20,3 +23,20 @@ def number(accepted: Callable[[float], bool], expected: str) -> Callable[[str], 
         return value
 
     return parse
+
+
+def _checked_language(text: str) -> str:
+    # A `type`, not `choices`: argparse passes a string default through `type` but never checks it
+    # against `choices`, so a bad $SO101_LANG would crash later.
+    try:
+        return lang.language(text)
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
+
+
+def add_language_option(parser: argparse.ArgumentParser, what: str) -> None:
+    """--lang zh|en, defaulting to $SO101_LANG, else zh (the course's); `what` says what it sets."""
+    parser.add_argument(
+        "--lang", type=_checked_language, metavar="{zh,en}", default=os.environ.get(lang.ENV_VAR, ""),
+        help=f"language of {what} (default: ${lang.ENV_VAR}, else zh as in the course)",
+    )

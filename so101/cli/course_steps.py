@@ -15,7 +15,7 @@ import time
 from pathlib import Path
 
 from so101.assets import ModelFilesError, urdf_path
-from so101.prompt.commands import LANGUAGES
+from so101.cli.argtypes import add_language_option
 from so101.robot import ACTUATED_JOINTS, NUM_ARM_JOINTS
 from so101.gui.display import MODE_ENV_VAR, MODES, DisplayError, resolve_mode
 
@@ -29,23 +29,12 @@ TYPE_LABELS = {
 }
 
 
-def _language(value: str) -> str:
-    # A `type`, not `choices`: argparse passes a string default through `type` but
-    # never checks it against `choices`, so a bad $SO101_LANG would crash later.
-    if value not in LANGUAGES:
-        raise argparse.ArgumentTypeError(f"unknown language {value!r} (from --lang or $SO101_LANG); use zh or en")
-    return value
-
-
 def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
     parser.add_argument(
         "--mode", choices=MODES, default="auto",
         help="gui opens a window; direct is headless; auto (default) picks gui where a display is available",
     )
-    parser.add_argument(
-        "--lang", type=_language, metavar="{zh,en}", default=os.environ.get("SO101_LANG", "zh"),
-        help="language of the printed text (default: $SO101_LANG, else zh as in the course)",
-    )
+    add_language_option(parser, "the printed text")
     parser.add_argument(
         "--steps", type=int, default=None,
         help="simulate this many steps after printing, then exit (default: until Ctrl-C with a window, "

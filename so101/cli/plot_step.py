@@ -170,12 +170,9 @@ def write_plot(runs: list[StepRun], joint: int, start_deg: float, target_deg: fl
 
 def run(args: argparse.Namespace) -> int:
     joint = ACTUATED_JOINTS[args.joint]
-    if not np.isfinite(args.target) or not joint.lower_deg <= args.target <= joint.upper_deg:
-        print(
-            f"so101 plot-step: --target {args.target:g}° is outside joint {args.joint} ({joint.name})'s range "
-            f"[{joint.lower_deg:.1f}°, {joint.upper_deg:.1f}°]",
-            file=sys.stderr,
-        )
+    if not joint.allows_deg(args.target):
+        print(f"so101 plot-step: --target {args.target:g}° is outside joint {args.joint} ({joint.name})'s range "
+              f"{joint.limits_text()}", file=sys.stderr)
         return 2
     start_deg = HOME_POSE_DEG[args.joint]
     if args.target == start_deg:

@@ -90,11 +90,8 @@ def pose_error(pose_deg: list[float] | None) -> str | None:
     if len(pose_deg) not in (NUM_ARM_JOINTS, NUM_ARM_JOINTS + 1):
         return f"--pose takes {NUM_ARM_JOINTS} angles (joints 0-4) or {NUM_ARM_JOINTS + 1} (with the gripper), got {len(pose_deg)}"
     for position, (angle, joint) in enumerate(zip(pose_deg, ACTUATED_JOINTS)):
-        if not np.isfinite(angle) or not joint.lower_deg <= angle <= joint.upper_deg:
-            return (
-                f"--pose angle {position} ({joint.name}) is {angle:g}°, "
-                f"outside its range [{joint.lower_deg:.1f}°, {joint.upper_deg:.1f}°]"
-            )
+        if not joint.allows_deg(angle):
+            return f"--pose angle {position} ({joint.name}) is {angle:g}°, outside its range {joint.limits_text()}"
     return None
 
 

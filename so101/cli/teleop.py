@@ -23,18 +23,18 @@ import time
 from pathlib import Path
 
 from so101.bodies.registry import BODIES, DEFAULT_BODY, body_node_env
-from so101.runtime.dataflow import LOADED_MARKS, dataflow_copy, write_dataflow
+from so101.runtime.dataflow import LOADED_MARKS, PROMPT_NODE_FILE, ROOT, dataflow_copy, write_dataflow
 from so101.gui.display import MODES, resolve_mode
-from so101.runtime.processes import alive
-from so101.cli.course_steps import _language
-from so101.runtime.venv import env_with_bin_first, executable
+from so101.runtime.processes import alive, descendants, kill_until_gone, stop_process
+from so101.cli.argtypes import add_language_option
+from so101.runtime.venv import dora_executable, env_with_bin_first
 from so101.runtime.versions import dora_version_problem
 
-ROOT = Path(__file__).resolve().parents[2]
-PROMPT = ROOT / "nodes" / "keyboard_control.py"
 DEFAULT_LOG = ROOT / "out" / "teleop-dora.log"
 START_TIMEOUT_S = 90.0
 STOP_TIMEOUT_S = 20.0
+# How long a node may take to end after dora stopped, before it is killed (the real arm switches torque off).
+NODE_GRACE_S = 5.0
 LOG_TAIL_LINES = 15
 
 TEXT = {
@@ -82,36 +82,11 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
         help="simulation window: gui, direct (headless) or auto (gui where a display exists; default $SO101_MODE, "
         "else auto); passed to the simulation as SO101_MODE",
     )
-    parser.add_argument(
-        "--lang", type=_language, metavar="{zh,en}", default=os.environ.get("SO101_LANG", "zh"),
-        help="language of the prompt and the logs (default: $SO101_LANG, else zh as in the course)",
-    )
+    add_language_option(parser, "the prompt and the logs")
     parser.add_argument(
         "--log", type=Path, default=DEFAULT_LOG, metavar="FILE",
         help=f"where the dataflow's log goes (default: {DEFAULT_LOG})",
     )
-
-
-def _dora_executable() -> str:
-    return executable("dora") or "dora"
-
-
-def _descendants(pid: int) -> list[int]:
-    """Every process below `pid` (Linux /proc; elsewhere an empty list)."""
-    children: dict[int, list[int]] = {}
-    for entry in Path("/proc").glob("[0-9]*/stat"):
-        try:
-            # The command name may hold spaces and parentheses: the fields after the last ')' are safe.
-            fields = entry.read_text().rsplit(")", 1)[1].split()
-            children.setdefault(int(fields[1]), []).append(int(entry.parent.name))
-        except (OSError, IndexError, ValueError):
-            continue
-    found, queue = [], [pid]
-    while queue:
-        for child in children.get(queue.pop(), []):
-            found.append(child)
-            queue.append(child)
-    return found
 
 
 def _log_tail(log: Path) -> str:
@@ -130,7 +105,7 @@ class Dataflow:
         self.log = log
         self._log_stream = log.open("wb")
         self.process = subprocess.Popen(
-            [_dora_executable(), "run", str(dataflow)], cwd=dataflow.parent,
+            [dora_executable() or "dora", "run", str(dataflow)], cwd=dataflow.parent,
             stdin=subprocess.DEVNULL, stdout=self._log_stream, stderr=subprocess.STDOUT,
             env=env, start_new_session=True,
         )
@@ -149,23 +124,9 @@ class Dataflow:
 
     def stop(self) -> None:
         """Ctrl-C for dora (it stops every node), then SIGKILL for anything still alive."""
-        nodes = _descendants(self.process.pid)
-        if self.process.poll() is None:
-            self.process.send_signal(signal.SIGINT)
-            try:
-                self.process.wait(STOP_TIMEOUT_S)
-            except subprocess.TimeoutExpired:
-                self.process.kill()
-                self.process.wait()
-        deadline = time.monotonic() + 5
-        for pid in nodes:
-            while alive(pid) and time.monotonic() < deadline:
-                time.sleep(0.1)
-            if alive(pid):
-                try:
-                    os.kill(pid, signal.SIGKILL)
-                except OSError:
-                    pass
+        nodes = descendants(self.process.pid)
+        stop_process(self.process, STOP_TIMEOUT_S)
+        kill_until_gone(lambda: [pid for pid in nodes if alive(pid)], timeout_s=5, grace_s=NODE_GRACE_S)
         self._log_stream.close()
 
 
@@ -181,11 +142,11 @@ def run(args: argparse.Namespace) -> int:
     if notice:
         print(notice, flush=True)
     dataflow_file = body.dataflow_file
-    if not dataflow_file.exists() or not PROMPT.exists():
-        print(f"so101 teleop: {dataflow_file} or {PROMPT} is missing: run it from a checkout of the project", file=sys.stderr)
+    if not dataflow_file.exists() or not PROMPT_NODE_FILE.exists():
+        print(f"so101 teleop: {dataflow_file} or {PROMPT_NODE_FILE} is missing: run it from a checkout of the project", file=sys.stderr)
         return 2
     # A CLI and library of different versions fail deep in the daemon; say it here, in one line.
-    version_problem = dora_version_problem(_dora_executable())
+    version_problem = dora_version_problem(dora_executable())
     if version_problem:
         print(f"so101 teleop: {version_problem}", file=sys.stderr)
         return 2
@@ -236,7 +197,7 @@ def _run_prompt(dataflow: Dataflow, env: dict[str, str], text: dict, log: Path, 
             print(f"so101 teleop: {message}\n{_log_tail(log)}", file=sys.stderr, flush=True)
             return 1
         _show(text["ready" if simulated else "ready_real"])
-        prompt = subprocess.Popen([sys.executable, str(PROMPT)], env=env)
+        prompt = subprocess.Popen([sys.executable, str(PROMPT_NODE_FILE)], env=env)
         # Ctrl-C at the terminal goes to the whole foreground group: the prompt quits on it,
         # teleop must outlive it to stop the dataflow.
         previous = signal.signal(signal.SIGINT, signal.SIG_IGN)

@@ -7,6 +7,8 @@ from pathlib import Path, PurePath
 
 ROOT = Path(__file__).resolve().parents[2]
 DATAFLOW_FILE = ROOT / "dataflow.yml"
+# The keyboard prompt, a dynamic node: `so101 teleop` and `so101 cluster-demo` start it themselves.
+PROMPT_NODE_FILE = ROOT / "nodes" / "keyboard_control.py"
 # The period of dataflow.yml's `dora/timer/millis/4` tick, and so of the physics step
 # (tests/test_dataflow_file.py holds the two equal). Tools that simulate without the
 # dataflow (plot-step, snapshot, bench) step with it too.

@@ -22,3 +22,10 @@ def env_with_bin_first(base: dict[str, str] | None = None) -> dict[str, str]:
     env = dict(os.environ if base is None else base)
     env["PATH"] = f"{BIN}{os.pathsep}{env.get('PATH', '')}"
     return env
+
+
+def dora_executable(beside_python: bool = True) -> str | None:
+    """The dora CLI. With `beside_python`, the one installed beside this interpreter (pinned with the
+    library) when there is one: what this project runs itself. Otherwise the first on PATH: what a
+    person's shell runs. None when there is none."""
+    return executable("dora") if beside_python else shutil.which("dora")

@@ -9,9 +9,10 @@ from __future__ import annotations
 import importlib.metadata
 import os
 import re
-import shutil
 import subprocess
 from pathlib import Path
+
+from so101.runtime.venv import dora_executable as find_dora
 
 LIBRARY_DISTRIBUTION = "dora-rs"
 CLI_DISTRIBUTION = "dora-rs-cli"
@@ -57,7 +58,7 @@ def cli_version(dora_executable: str) -> str | None:
 
 def dora_version_problem(dora_executable: str | None = None) -> str | None:
     """Check the `dora` on PATH (or the one given) against the installed library: a message, or None if they match."""
-    dora_executable = dora_executable or shutil.which("dora")
+    dora_executable = dora_executable or find_dora(beside_python=False)
     library = library_version()
     if library is None:
         return f"the dora-rs library is not installed: pip install '{LIBRARY_DISTRIBUTION}'"
@@ -74,7 +75,7 @@ def dora_version_problem(dora_executable: str | None = None) -> str | None:
 
 def dora_version_mismatch(dora_executable: str | None = None) -> str | None:
     """Only a proven mismatch: both versions read and different (for hints after another error)."""
-    dora_executable = dora_executable or shutil.which("dora")
+    dora_executable = dora_executable or find_dora(beside_python=False)
     library = library_version()
     cli = cli_version(dora_executable) if dora_executable else None
     if library is None or cli is None:
