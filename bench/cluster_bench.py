@@ -19,15 +19,16 @@ from pathlib import Path
 
 import yaml
 
+from bench.common import (
+    FIRST_STATE_MARK, PACED_PROBE_ENV, WARMUP_S, machine_facts, machine_line, put_prober, realtime_figures, run_dataflow,
+    tick_records,
+)
 from so101.runtime.cluster import BODY_MACHINE, PROMPT_MACHINE, Cluster, cluster_dataflow
-
-PROBE_ENV = {"PROBE_PERIOD_S": "0.075", "PROBE_STEP_DEG": "4"}
+from so101.runtime.dataflow import TICK_PERIOD_S
 
 
 def _cluster_record(work_dir: Path, duration_s: float) -> dict:
-    """The cluster run's records, in the form bench.run_bench.realtime_figures reads."""
-    from bench.run_bench import FIRST_STATE_MARK, PROBER, WARMUP_S, tick_records
-
+    """The cluster run's records, in the form bench.common.realtime_figures reads."""
     tick_log, probe_log = work_dir / "ticks.bin", work_dir / "probe.json"
     cluster = Cluster(work_dir / "cluster")
     try:
@@ -37,11 +38,7 @@ def _cluster_record(work_dir: Path, duration_s: float) -> dict:
         cluster.start_daemon(PROMPT_MACHINE)
         dataflow = cluster_dataflow(work_dir, {"SO101_MODE": "direct", "SO101_LANG": "en", "SO101_TICK_LOG": str(tick_log)})
         descriptor = yaml.safe_load(dataflow.read_text())
-        for node in descriptor["nodes"]:
-            if node["id"] == "keyboard_control":  # the prober, spawned by daemon `desk`
-                node["path"] = str(PROBER)
-                node["env"] = {**PROBE_ENV, "PROBE_LOG": str(probe_log)}
-                node["inputs"] = {name: {**spec, "queue_size": 1000} for name, spec in node["inputs"].items()}
+        put_prober(descriptor, {**PACED_PROBE_ENV, "PROBE_LOG": str(probe_log)})  # spawned by daemon `desk`
         dataflow.write_text(yaml.safe_dump(descriptor, sort_keys=False))
         cluster.start_dataflow(dataflow)
         deadline = time.monotonic() + 60
@@ -67,14 +64,12 @@ def _cluster_record(work_dir: Path, duration_s: float) -> dict:
 
 
 def run_cluster_benchmark(duration_s: float) -> dict:
-    from bench.run_bench import TICK_PERIOD_S, WARMUP_S, machine_facts, realtime_figures, run_dataflow
-
     load_start = os.getloadavg()
     with tempfile.TemporaryDirectory(prefix="so101-bench-cluster-") as tmp:
         work_dir = Path(tmp)
         print(f"dora run dataflow.yml (one daemon), {duration_s:g} s ...", flush=True)
         single = realtime_figures(run_dataflow(work_dir / "single", duration_s + WARMUP_S, {"SO101_FAST_STEPS": "0"},
-                                               PROBE_ENV), TICK_PERIOD_S)
+                                               PACED_PROBE_ENV), TICK_PERIOD_S)
         print(f"dataflow_cluster.yml on two daemons (arm, desk) on 127.0.0.1, {duration_s:g} s ...", flush=True)
         (work_dir / "cluster").mkdir()
         across = realtime_figures(_cluster_record(work_dir / "cluster", duration_s), TICK_PERIOD_S)
@@ -102,8 +97,7 @@ def table(result: dict) -> str:
 
     return "\n".join([
         f"SO-101 across dora daemons on 127.0.0.1 (loopback, not a network), {machine['date']}",
-        f"{machine['cpu']}, {machine['cores']} cores, Python {machine['python']}, dora-rs {machine['dora_rs']}; "
-        "load average at start/end " + " / ".join(f"{result['load_average_1_5_15min'][key][0]:.2f}" for key in ("start", "end")),
+        machine_line(result),
         "",
         f"{'figure':<48} {'one daemon':>14} {'two daemons':>14}",
         f"{'joint_state per s at the prompt (against 250)':<48} {one['joint_state_per_s']:>14.1f} {two['joint_state_per_s']:>14.1f}",

@@ -19,9 +19,14 @@ import tempfile
 import time
 from pathlib import Path
 
+from bench.common import (
+    PROBE_STEP_DEG, WARMUP_S, latency_breakdown, machine_facts, machine_line, reflecting_states, run_dataflow, target_lines,
+    target_row, tick_figures,
+)
+from so101.bodies.real_arm import SO101Real
 from so101.feetech.calibration import save_calibration
 from so101.feetech.fake_arm import FakeArm, calibrate_as_at_the_factory
-from so101.bodies.real_arm import SO101Real
+from so101.stats import summary
 
 TICK_S = 0.02  # dataflow_real.yml's timer
 TARGETS = {
@@ -36,8 +41,6 @@ PROBE_PERIOD_S = "0.3"  # a 4° probe at 90°/s takes 45 ms: each probe is done 
 
 
 def measure_bus(arm: FakeArm, calibration, exchanges: int) -> dict:
-    from bench.run_bench import summary
-
     body = SO101Real(arm.port, calibration, time_step_s=TICK_S, log=lambda line: None)
     try:
         body.round_trips_s = type(body.round_trips_s)("d")
@@ -53,8 +56,6 @@ def measure_bus(arm: FakeArm, calibration, exchanges: int) -> dict:
 
 
 def run_real_benchmark(duration_s: float, exchanges: int) -> dict:
-    from bench.run_bench import WARMUP_S, latency_breakdown, machine_facts, reflecting_states, run_dataflow, summary, tick_figures
-
     load_start = os.getloadavg()
     with tempfile.TemporaryDirectory(prefix="so101-bench-real-") as tmp, FakeArm() as arm:
         work_dir = Path(tmp)
@@ -67,7 +68,7 @@ def run_real_benchmark(duration_s: float, exchanges: int) -> dict:
         record = run_dataflow(
             work_dir / "paced", duration_s + WARMUP_S,
             {"SO101_PORT": arm.port, "SO101_CALIBRATION": str(calibration_file)},
-            {"PROBE_PERIOD_S": PROBE_PERIOD_S, "PROBE_STEP_DEG": "4", "PROBE_PHASE_S": str(TICK_S)}, body="real",
+            {"PROBE_PERIOD_S": PROBE_PERIOD_S, "PROBE_STEP_DEG": PROBE_STEP_DEG, "PROBE_PHASE_S": str(TICK_S)}, body="real",
         )
     probe = record["probe"]
     states = probe["states"]
@@ -89,7 +90,7 @@ def run_real_benchmark(duration_s: float, exchanges: int) -> dict:
     }
     figures = {"bus": bus, "dataflow": dataflow, "command_latency_ms": {**latency, "probes_sent": len(probe["commands"])}}
     figures["targets"] = [
-        {"figure": name, "value": value, "target": target, "met": bool(met)} for name, value, target, met in (
+        target_row(name, value, target, met) for name, value, target, met in (
             ("joint_state per s (dora run)", dataflow["joint_state_per_s"], f">= {TARGETS['joint_state_per_s']}",
              dataflow["joint_state_per_s"] >= TARGETS["joint_state_per_s"]),
             ("bus round trip p99 (ms)", bus["sync_read_ms"]["p99"], f"<= {TARGETS['round_trip_p99_ms']:g}",
@@ -117,8 +118,7 @@ def table(result: dict) -> str:
 
     lines = [
         f"SO-101 real-arm driver benchmark, on so101 fake-arm's emulated bus (not a USB adapter), {machine['date']}",
-        f"{machine['cpu']}, {machine['cores']} cores, Python {machine['python']}, dora-rs {machine['dora_rs']}; "
-        "load average at start/end " + " / ".join(f"{result['load_average_1_5_15min'][key][0]:.2f}" for key in ("start", "end")),
+        machine_line(result),
         "",
         f"{'figure':<66} {'value':>22}",
         f"{'bus round trip, SYNC READ of 6 positions (ms, p50 | p99 | max)':<66} {ms(bus['sync_read_ms']):>22}",
@@ -130,8 +130,6 @@ def table(result: dict) -> str:
         f"{'joint_cmd -> joint_state latency (ms, p50 | p99 | max)':<66} {ms(latency):>22}",
         f"{'start-up to first joint_state (s)':<66} {flow['startup_s']:>22.2f}",
         "",
-        "targets:",
+        *target_lines(result["targets"]),
     ]
-    for row in result["targets"]:
-        lines.append(f"  {'met   ' if row['met'] else 'MISSED'} {row['figure']:<58} {row['value']:>9.3f}  (target {row['target']})")
     return "\n".join(lines)

@@ -18,24 +18,18 @@ import pyarrow as pa
 import pytest
 
 from so101.bodies import node_loop as body_node
-from bench import run_bench
+from bench import common, run_bench
 from tests.dataflow_helpers import TICK, run_simulation_node
 
 MS = 1_000_000  # ns
 
 
-# -- analysis ---------------------------------------------------------------------------
-def test_percentile_interpolates():
-    assert run_bench.percentile([1, 2, 3, 4, 5], 0.5) == 3
-    assert run_bench.percentile([0, 10], 0.99) == pytest.approx(9.9)
-    assert math.isnan(run_bench.percentile([], 0.5))
-
-
+# -- analysis (the percentiles: tests/test_stats.py) --------------------------------------
 def test_tick_figures_count_missed_ticks_from_the_gaps():
     starts_ms = [0, 4, 8, 20, 24, 28.7, 32]  # 8 -> 20 ms: the ticks at 12 and 16 were dropped
     steps = [1, 2, 3, 6, 7, 8, 9]  # and the tick at 20 ms took their steps
     ticks = [(int(start * MS), int(start * MS) + 30_000, count) for start, count in zip(starts_ms, steps)]
-    figures = run_bench.tick_figures(ticks, 0.004)
+    figures = common.tick_figures(ticks, 0.004)
     assert figures["ticks_served"] == 7
     assert figures["ticks_missed"] == 2
     assert figures["steps_per_s"] == pytest.approx(8 / 0.032)  # 8 steps from the first tick's end to the last's
@@ -46,20 +40,20 @@ def test_tick_figures_count_missed_ticks_from_the_gaps():
 
 def test_tick_log_bytes_become_start_end_steps_records():
     raw = array("q", [10, 15, 1, 20, 26, 3]).tobytes()
-    assert run_bench.tick_records(raw) == [(10, 15, 1), (20, 26, 3)]
-    assert run_bench.tick_records(raw + b"\x01\x02") == [(10, 15, 1), (20, 26, 3)]  # a torn write is ignored
+    assert common.tick_records(raw) == [(10, 15, 1), (20, 26, 3)]
+    assert common.tick_records(raw + b"\x01\x02") == [(10, 15, 1), (20, 26, 3)]  # a torn write is ignored
 
 
 def test_latency_is_send_to_first_state_moving_toward_the_target():
     # States every 4 ms; joint 0 rests at 0.0 until the state at 16 ms shows +0.07°.
     states = [[t * MS, 0.0, 0.0] for t in (0, 4, 8, 12)] + [[16 * MS, 0.07, 0.0], [20 * MS, 0.3, 0.0]]
     commands = [[5 * MS, 0, 2.0]]
-    pairs = run_bench.reflecting_states(states, commands, [0, 4])
+    pairs = common.reflecting_states(states, commands, [0, 4])
     assert pairs == [(5 * MS, 16 * MS)]
     # Ticks start 0.3 ms before each state arrives; the first tick after the send (7.7 ms)
     # did not carry the command, the one at 15.7 ms did.
     tick_starts = [int((t - 0.3) * MS) for t in (4, 8, 12, 16, 20)]
-    breakdown = run_bench.latency_breakdown(pairs, tick_starts)
+    breakdown = common.latency_breakdown(pairs, tick_starts)
     assert breakdown["p50"] == pytest.approx(11.0)
     assert breakdown["wait_for_next_tick_ms"]["p50"] == pytest.approx(2.7)
     assert breakdown["tick_start_to_arrival_ms"]["p50"] == pytest.approx(0.3)
@@ -69,14 +63,14 @@ def test_latency_is_send_to_first_state_moving_toward_the_target():
 def test_a_visible_move_is_the_first_state_past_the_visible_threshold():
     states = [[0, 0.0, 0.0], [4 * MS, 0.07, 0.0], [8 * MS, 0.3, 0.0], [12 * MS, 0.5, 0.0]]
     commands = [[1 * MS, 0, 4.0]]
-    assert run_bench.reflecting_states(states, commands, [0, 4]) == [(1 * MS, 4 * MS)]
-    assert run_bench.reflecting_states(states, commands, [0, 4], run_bench.VISIBLE_MOVE_DEG) == [(1 * MS, 12 * MS)]
+    assert common.reflecting_states(states, commands, [0, 4]) == [(1 * MS, 4 * MS)]
+    assert common.reflecting_states(states, commands, [0, 4], common.VISIBLE_MOVE_DEG) == [(1 * MS, 12 * MS)]
 
 
 def test_motion_away_from_the_target_does_not_count():
     states = [[0, 0.0, 0.0], [4 * MS, -0.5, 0.0], [8 * MS, 0.2, 0.0]]
-    assert run_bench.reflecting_states(states, [[1 * MS, 0, 2.0]], [0, 4]) == [(1 * MS, 8 * MS)]
-    assert run_bench.reflecting_states(states, [[1 * MS, 4, 2.0]], [0, 4]) == []  # joint 4 never moved
+    assert common.reflecting_states(states, [[1 * MS, 0, 2.0]], [0, 4]) == [(1 * MS, 8 * MS)]
+    assert common.reflecting_states(states, [[1 * MS, 4, 2.0]], [0, 4]) == []  # joint 4 never moved
 
 
 def test_dropped_tick_warnings_split_at_the_first_state():
@@ -89,7 +83,7 @@ def test_dropped_tick_warnings_split_at_the_first_state():
         "not json",
     ])
     first_state = 1767225602.0  # 2026-01-01T00:00:02Z
-    assert run_bench.dropped_tick_warnings(jsonl, first_state) == (2, 1)
+    assert common.dropped_tick_warnings(jsonl, first_state) == (2, 1)
 
 
 # -- the node's fast mode and tick log ---------------------------------------------------
@@ -132,7 +126,7 @@ def test_tick_log_holds_start_and_end_of_each_tick(monkeypatch, tmp_path):
     events = [TICK] * 30 + [("joint_cmd", pa.array([0, 10]))]
     code, node = run_simulation_node(monkeypatch, events, SO101_TICK_LOG=str(tick_log))
     assert code == 0
-    records = run_bench.tick_records(tick_log.read_bytes())
+    records = common.tick_records(tick_log.read_bytes())
     assert len(records) == 30  # one per tick, none for the joint_cmd
     assert all(start < end for start, end, _ in records)
     assert all(end <= next_start for (_, end, _), (next_start, _, _) in zip(records, records[1:]))

@@ -156,9 +156,9 @@ def _distance(a, b) -> float:
 
 
 def _figures(values) -> dict:
-    import numpy as np
+    from so101.stats import percentile
 
-    return {"p50": float(np.quantile(values, 0.5)), "p99": float(np.quantile(values, 0.99)), "max": float(max(values))}
+    return {"p50": percentile(values, 0.5), "p99": percentile(values, 0.99), "max": float(max(values))}
 
 
 def run(args: argparse.Namespace) -> int:

@@ -5,9 +5,12 @@ from __future__ import annotations
 import contextlib
 import os
 import shutil
+import signal
 import subprocess
 import sys
 from pathlib import Path
+
+from so101.runtime.processes import stop_process
 
 MODES = ("auto", "gui", "direct")
 MODE_ENV_VAR = "SO101_MODE"
@@ -72,7 +75,6 @@ def virtual_display(log_path: Path | None = None, size: str = "1280x800x24"):
             raise DisplayError(f"Xvfb did not start{': ' + said if said else ''}")
         yield f":{number.decode()}"
     finally:
-        server.terminate()
-        server.wait(10)
+        stop_process(server, 10, first_signal=signal.SIGTERM)
         if log_path:
             log.close()

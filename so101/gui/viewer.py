@@ -29,7 +29,9 @@ from pathlib import Path
 
 import numpy as np
 
-from so101.bodies.registry import BodyFailed
+from so101.bodies.protocol import BodyFailed
+from so101.runtime.dataflow import ROOT
+from so101.runtime.processes import stop_process
 from so101.robot import ACTUATED_JOINTS
 
 DEFAULT_FPS = 30.0
@@ -87,8 +89,7 @@ class Window:
             # The GUIs chatter on stdout (GL versions, threads); their errors, such as
             # "X connection ... broken", stay on stderr, in the node's log.
             stdout=subprocess.DEVNULL,
-            env=dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(Path(__file__).resolve().parents[2]),
-                                                                           os.environ.get("PYTHONPATH")]))),
+            env=dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))),
         )
 
     def due(self) -> bool:
@@ -115,13 +116,7 @@ class Window:
 
     def close(self) -> None:
         """Close the window and its process; safe to call twice."""
-        if self.process.poll() is None:
-            self.process.terminate()
-            try:
-                self.process.wait(5)
-            except subprocess.TimeoutExpired:
-                self.process.kill()
-                self.process.wait()
+        stop_process(self.process, 5, first_signal=signal.SIGTERM)
         if not self._mapping.closed:
             self._shared = None
             self._mapping.close()

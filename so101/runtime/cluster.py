@@ -159,7 +159,7 @@ class Cluster:
                 pass
         for name in sorted(self.processes, key=lambda name: name == "coordinator"):
             # Its session: the nodes a daemon spawned, if any outlived it.
-            stop_process(self.processes[name], STOP_TIMEOUT_S, whole_session=True)
+            stop_process(self.processes[name], STOP_TIMEOUT_S, ask_session=True, kill_session=True)
         kill_with_env("SO101_CLUSTER_RUN", self.marker, STOP_TIMEOUT_S)
         for log in self._logs:
             log.close()

@@ -42,26 +42,27 @@ def running_with_env(name: str, value: str) -> list[int]:
     return [pid for pid in processes_with_env(name, value) if alive(pid)]
 
 
-def stop_process(process: subprocess.Popen, timeout_s: float, *, whole_session: bool = False,
-                 first_signal: int = signal.SIGINT) -> int:
+def stop_process(process: subprocess.Popen, timeout_s: float, *, ask_session: bool = False,
+                 kill_session: bool = False, first_signal: int = signal.SIGINT) -> int:
     """Ask `process` to stop (Ctrl-C unless `first_signal` says otherwise), give it `timeout_s`, then
-    SIGKILL it; returns its exit code. With `whole_session` (a process started with
-    start_new_session) both signals go to its session's process group, and the SIGKILL always does:
-    it also ends what the process spawned and left behind. Safe on a process already gone, and twice."""
+    SIGKILL it; returns its exit code. For a process started with start_new_session:
+    `ask_session` sends the first signal to its whole process group, as a terminal's Ctrl-C does;
+    `kill_session` always ends with SIGKILL to the group, which also ends what the process spawned
+    and left behind. Safe on a process already gone, and twice."""
 
-    def send(signal_number: int) -> None:
+    def send(signal_number: int, session: bool) -> None:
         with contextlib.suppress(ProcessLookupError, PermissionError):
-            if whole_session:
+            if session:
                 os.killpg(process.pid, signal_number)
             elif process.poll() is None:
                 process.send_signal(signal_number)
 
     if process.poll() is None:
-        send(first_signal)
+        send(first_signal, ask_session)
         with contextlib.suppress(subprocess.TimeoutExpired):
             process.wait(timeout_s)
-    if whole_session or process.poll() is None:
-        send(signal.SIGKILL)
+    if kill_session or process.poll() is None:
+        send(signal.SIGKILL, kill_session)
     return process.wait()
 
 
