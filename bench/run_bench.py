@@ -152,7 +152,7 @@ def measure_raw_step(steps: int, after_sleep_steps: int, body: str = "pybullet")
 
 def body_simulator(body: str):
     """A headless simulator of `body`, stepped by the tick's period, without a renderer (as the node's)."""
-    return BODIES[body].simulator_class()(mode="direct", time_step_s=TICK_PERIOD_S, renders=False, log=lambda message: None)
+    return BODIES[body].body_class()(mode="direct", time_step_s=TICK_PERIOD_S, renders=False, log=lambda message: None)
 
 
 def measure_node_work_in_process(ticks: int, work_dir: Path, body: str = "pybullet") -> dict:

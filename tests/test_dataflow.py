@@ -27,7 +27,7 @@ def settled_in_process(body: str, targets_deg: list[float]) -> list[float]:
     """Where the body itself, with no dataflow, holds the arm for these arm targets (gripper at 0)."""
     if not BODIES[body].simulated:
         return list(targets_deg)  # the emulator has no gravity: the goal itself
-    with BODIES[body].simulator_class()(mode="direct", time_step_s=0.004, log=lambda message: None) as sim:
+    with BODIES[body].body_class()(mode="direct", time_step_s=0.004, log=lambda message: None) as sim:
         sim.set_targets_deg(list(targets_deg) + [0.0])
         sim.step(round(SETTLE_S / 0.004))
         return list(sim.joint_angles_deg()[:5])

@@ -54,6 +54,18 @@ def test_without_a_port_or_a_calibration_the_node_refuses_in_one_line(monkeypatc
     assert torque(fake_arm) == [0] * 6 and "joint_state" not in node.outputs
 
 
+@pytest.mark.parametrize("setting, message", [
+    ("SO101_IMAGE_HZ", "the real arm has no camera: set SO101_IMAGE_HZ to 0"),
+    ("SO101_FAST_STEPS", "the real arm has no fast mode (its goals ramp by the tick): set SO101_FAST_STEPS to 0"),
+])
+def test_pictures_and_fast_mode_are_refused_in_one_line(monkeypatch, capsys, fake_arm, setting, message):
+    # Fast mode makes up ticks as fast as the bus answers: the goal ramp would outrun SO101_MAX_SPEED_DEG_S.
+    code, node = run_arm(monkeypatch, [TICK], **{setting: "10"})
+    err = capsys.readouterr().err
+    assert code == 2 and err == f"[arm] cannot start: {message}\n"
+    assert torque(fake_arm) == [0] * 6 and "joint_state" not in node.outputs
+
+
 def test_a_calibration_of_another_arm_is_refused_and_torque_stays_off(monkeypatch, capsys, tmp_path, fake_arm):
     other = json.loads(open(os.environ["SO101_CALIBRATION"]).read())
     other["elbow_flex"]["homing_offset"] += 40

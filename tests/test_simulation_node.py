@@ -53,6 +53,15 @@ def test_each_tick_publishes_five_arm_angles_and_the_gripper(monkeypatch, body):
     assert all(abs(angle) < 2.5 for angle in state.to_pylist())
 
 
+def test_the_loaded_line_says_how_the_body_runs(monkeypatch, capsys, body):
+    # Tools wait for this line (so101.runtime.dataflow.LOADED_MARKS); a simulation names its display
+    # mode, the real arm says REAL.
+    run_simulation_node(monkeypatch, ticks(1), body=body)
+    loaded = [line for line in capsys.readouterr().out.splitlines() if "SO-101 loaded, " in line]
+    assert len(loaded) == 1
+    assert f"({'REAL' if body == 'real' else 'DIRECT'} mode, step 4 ms, " in loaded[0]
+
+
 @pytest.mark.parametrize(
     "command",
     [pa.array([0, 45]), pa.array([0, 45], type=pa.int8()), pa.array([0.0, 45.0], type=pa.float32())],
@@ -152,6 +161,14 @@ def test_bad_environment_value_gives_one_line_and_exit_2(monkeypatch, capsys, bo
     assert "SO101_IMAGE_HZ='fast' is not a number >= 0" in capsys.readouterr().err
 
 
+def test_a_bad_language_gives_one_line_and_exit_2(monkeypatch, capsys, body):
+    # so101.lang's one rule: anything but zh or en is refused, not taken for zh.
+    code, node = run_simulation_node(monkeypatch, ticks(1), body=body, SO101_LANG="english")
+    err = capsys.readouterr().err
+    assert code == 2 and "joint_state" not in node.outputs
+    assert err.count("\n") == 1 and "cannot start: unknown language 'english'" in err and "use zh or en" in err
+
+
 def test_servo_mode_is_chosen_by_the_environment_and_low_damping_overshoots(monkeypatch, capsys):
     step = [("joint_cmd", pa.array([0, 90]))] + ticks(200)
     _, servo = run_simulation_node(monkeypatch, step, SO101_CONTROL="servo", SO101_SERVO_ZETA="0.2")
@@ -172,7 +189,7 @@ def test_unknown_control_mode_gives_one_line_and_exit_2(monkeypatch, capsys):
 def test_stop_and_ctrl_c_close_the_body_and_exit_0(monkeypatch, ending, body):
     from dora.testing import MockNode
 
-    body_class = BODIES[body].simulator_class()
+    body_class = BODIES[body].body_class()
     closed = []
     close = body_class.close
     # What is closed: PyBullet's client id (it is gone after close), or the MuJoCo body itself.

@@ -12,14 +12,18 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
+import numpy.typing as npt
 
 from so101 import assets
 from so101.bodies.camera import DEFAULT_CAMERA, Camera, check_picture
+from so101.bodies.protocol import BodyName, RgbImage
+from so101.bodies.settings import MuJoCoSettings, NodeSettings
 from so101.gui.display import DisplayError, display_available, resolve_mode
 from so101.robot import ACTUATED_JOINTS, HOME_POSE_DEG, goal_deg
+from so101.runtime.dataflow import TICK_PERIOD_S
 from so101.gui.viewer import WINDOW_SHOWING, Window
 
 # Offscreen drawing without a display needs an OpenGL back end: EGL, with Mesa's
@@ -32,9 +36,11 @@ import mujoco  # noqa: E402
 # The Debian packages EGL drawing needs (the README names them, .ci/run installs them).
 EGL_PACKAGES = "libegl1 libegl-mesa0 libgl1-mesa-dri"
 
+FloatArray = npt.NDArray[np.float64]
 
-def scene_model(mjcf: Path) -> "mujoco.MjModel":
-    """The MJCF's arm with what PyBullet's scene has too: a ground plane at z = 0 and a light."""
+
+def scene_model(mjcf: Path) -> Any:
+    """The MJCF's arm (a mujoco.MjModel) with what PyBullet's scene has too: a ground plane at z = 0 and a light."""
     spec = mujoco.MjSpec.from_file(str(mjcf))
     spec.worldbody.add_geom(
         name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 0.05], rgba=[0.85, 0.87, 0.92, 1],
@@ -49,21 +55,26 @@ class SO101MuJoCo:
     joint_damping_n_m_s None keeps the MJCF's damping (0.60 N·m·s/rad, the STS3215
     class); a number sets every joint's (exercise 2: 0 swings). MuJoCo steps at the
     MJCF's 2 ms; a tick period is a whole number of those steps.
+
+    `mode` is the display mode asked for (auto, gui, direct); `display_mode` the one it got.
     """
+
+    kind: BodyName = "mujoco"
 
     def __init__(
         self,
         mode: str = "auto",
         time_step_s: float = 0.004,
         assets_dir: Path | str | None = None,
-        log=print,
+        log: Callable[[str], None] = print,
         joint_damping_n_m_s: float | None = None,
         renders: bool = True,
     ):
         if joint_damping_n_m_s is not None and not joint_damping_n_m_s >= 0:
             raise ValueError(f"joint damping must be a number >= 0 N·m·s/rad, got {joint_damping_n_m_s!r}")
-        mjcf = assets.mjcf_path(assets_dir)  # a missing file gives our message, not MuJoCo's
-        self.mode, notice = resolve_mode(mode)
+        # A missing file gives our message, not MuJoCo's.
+        mjcf = assets.mjcf_path(None if assets_dir is None else Path(assets_dir))
+        self.display_mode, notice = resolve_mode(mode)
         if notice:
             log(notice)
         self.model = scene_model(mjcf)
@@ -76,17 +87,30 @@ class SO101MuJoCo:
             self.model.dof_damping[self._qvel] = float(joint_damping_n_m_s)
         self._actuators = [int(self.model.actuator(joint.name).id) for joint in ACTUATED_JOINTS]
         self.renders = renders
-        self._renderer = None
+        self._renderer: Any = None  # a mujoco.Renderer once render_rgb has drawn
         self.steps = 0
         # GUI mode: MuJoCo's viewer in a process of its own, mirroring the angles (so101/gui/mujoco_viewer.py).
-        self._window = None
-        if self.mode == "gui":
+        self._window: Window | None = None
+        if self.display_mode == "gui":
             self._window = Window(["so101.gui.mujoco_viewer", "--mjcf", str(mjcf)], on_showing=lambda: log(WINDOW_SHOWING))
         self.set_time_step_s(time_step_s)
         self.set_targets_deg(HOME_POSE_DEG)
         mujoco.mj_forward(self.model, self.data)
 
+    @classmethod
+    def from_settings(cls, settings: MuJoCoSettings, node: NodeSettings, log: Callable[[str], None] = print) -> "SO101MuJoCo":
+        """The simulation node's body: the joint damping asked for, a window as `node` asks, the
+        offscreen renderer only when the node publishes pictures, and the tick's step."""
+        return cls(
+            mode=node.display_mode, time_step_s=TICK_PERIOD_S, assets_dir=settings.assets_dir, log=log,
+            joint_damping_n_m_s=settings.joint_damping_n_m_s, renders=node.image_hz > 0,
+        )
+
     # -- control ---------------------------------------------------------------------
+    def start_targets_deg(self) -> tuple[float, ...]:
+        """Home, as in PyBullet's simulation."""
+        return HOME_POSE_DEG
+
     def set_targets_deg(self, targets_deg: Sequence[float]) -> None:
         """Goal angles in degrees for all six actuated joints (arm 0-4, gripper)."""
         self.data.ctrl[self._actuators] = np.radians(goal_deg(targets_deg))
@@ -95,8 +119,8 @@ class SO101MuJoCo:
         """The joints' damping (one value for all, as the MJCF's STS3215 class and this class set it)."""
         return float(self.model.dof_damping[self._qvel[0]])
 
-    def targets_deg(self) -> np.ndarray:
-        return np.degrees(self.data.ctrl[self._actuators])
+    def targets_deg(self) -> FloatArray:
+        return np.degrees(np.asarray(self.data.ctrl[self._actuators], dtype=np.float64))
 
     def set_time_step_s(self, time_step_s: float) -> None:
         """The period of one `step()`: a whole number of the model's own steps."""
@@ -113,19 +137,19 @@ class SO101MuJoCo:
             self._window.show(self.data.qpos[self._qpos])
 
     # -- state -----------------------------------------------------------------------
-    def joint_angles_deg(self) -> np.ndarray:
+    def joint_angles_deg(self) -> FloatArray:
         """Measured angles in degrees, arm joints 0-4 then the gripper."""
-        return np.degrees(self.data.qpos[self._qpos])
+        return np.degrees(np.asarray(self.data.qpos[self._qpos], dtype=np.float64))
 
-    def joint_velocities_deg_s(self) -> np.ndarray:
-        return np.degrees(self.data.qvel[self._qvel])
+    def joint_velocities_deg_s(self) -> FloatArray:
+        return np.degrees(np.asarray(self.data.qvel[self._qvel], dtype=np.float64))
 
     @property
     def sim_time_s(self) -> float:
         return self.steps * self.time_step_s
 
     # -- pictures --------------------------------------------------------------------
-    def render_rgb(self, width: int = 640, height: int = 480, camera: Camera = DEFAULT_CAMERA) -> np.ndarray:
+    def render_rgb(self, width: int = 640, height: int = 480, camera: Camera = DEFAULT_CAMERA) -> RgbImage:
         """The scene as an RGB image, uint8 of shape (height, width, 3), drawn offscreen."""
         check_picture(self.renders, width, height)
         if self._renderer is None or (self._renderer.width, self._renderer.height) != (width, height):
@@ -146,11 +170,11 @@ class SO101MuJoCo:
         view.azimuth = camera.yaw_deg + 90.0
         view.elevation = camera.pitch_deg
         self._renderer.update_scene(self.data, view)
-        return self._renderer.render().copy()
+        return np.array(self._renderer.render(), dtype=np.uint8)
 
     # -- life cycle ------------------------------------------------------------------
-    def drawn_scene(self):
-        """The scene of the picture render_rgb drew last (its camera), to project points onto it."""
+    def drawn_scene(self) -> Any:
+        """The scene (a mujoco.MjvScene) of the picture render_rgb drew last (its camera), to project points onto it."""
         if self._renderer is None:
             raise RuntimeError("no picture drawn yet: call render_rgb first")
         return self._renderer.scene
@@ -170,5 +194,5 @@ class SO101MuJoCo:
     def __enter__(self) -> "SO101MuJoCo":
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()

@@ -1,23 +1,17 @@
 """One dora event loop for any body of the SO-101 (PyBullet, MuJoCo, the real arm): the node's contract.
 
-A body has the small surface `SO101Sim`, `SO101MuJoCo` and `SO101Real` share: set_targets_deg,
-set_time_step_s, step(count), steps, joint_angles_deg, render_rgb, close. This loop turns
-one into the node dataflow.yml declares: each `tick` advances the physics by the tick's
-period (and the periods of ticks dora dropped while the node was late) and publishes
-`joint_state` and `gripper_state`; a `joint_cmd` is decoded, clamped to the joint limits
-and logged, and only updates the targets, which the next tick applies; bad ones are
-logged and ignored; STOP or Ctrl-C closes the body and ends with 0. The real arm differs
-only where hardware must: it starts from where it stands (`start_targets_deg`), a tick whose
-read failed publishes nothing (`joint_angles_deg` is None), and a bus past saving ends the
-node with one line and exit code 1 (BodyFailed).
+A body is what so101.bodies.protocol.Body describes. This loop turns one into the node
+dataflow.yml declares: each `tick` advances the physics by the tick's period (and the
+periods of ticks dora dropped while the node was late) and publishes `joint_state` and
+`gripper_state`; a `joint_cmd` is decoded, clamped to the joint limits and logged, and only
+updates the targets, which the next tick applies; bad ones are logged and ignored; STOP or
+Ctrl-C closes the body and ends with 0. The real arm differs only where hardware must: it
+starts from where it stands (`start_targets_deg`), a tick whose read failed publishes
+nothing (`joint_angles_deg` is None), and a bus past saving ends the node with one line and
+exit code 1 (BodyFailed).
 
-Settings read from the node's environment (declared in the dataflow file):
-  SO101_MODE        auto | gui | direct   (auto: a window where a display exists)
-  SO101_IMAGE_HZ    rate of the optional `image` output, 0 = off
-  SO101_FAST_STEPS  0 = paced by the tick (default); N > 0 = fast mode for batch use:
-                    no wall-clock pacing, N physics steps per published state
-  SO101_TICK_LOG    file to write per-tick timings and step counts to at exit, for `so101 bench`; empty = off
-  SO101_LANG        zh | en               (log language)
+The loop's settings (display mode, image rate, fast mode, tick log, language) are
+so101.bodies.settings.NodeSettings.
 """
 
 from __future__ import annotations
@@ -25,16 +19,21 @@ from __future__ import annotations
 import sys
 import time
 from array import array
-from dataclasses import dataclass
-from typing import Mapping
+from typing import TYPE_CHECKING, Any, Iterable, Iterator, Mapping, Protocol, cast
 
 import pyarrow as pa
 
-from so101.bodies.registry import BodyFailed
-from so101.runtime.dataflow import TICK_PERIOD_S, TickClock, timer_period_s
+from so101.bodies.protocol import Body, BodyFailed
+from so101.bodies.settings import NodeSettings
 from so101.joint_cmd import decode_joint_cmd
-from so101.robot import GRIPPER_COMMAND_INDEX, HOME_POSE_DEG, NUM_ARM_JOINTS
-from so101.runtime.versions import spawning_daemon_version_problem
+from so101.robot import GRIPPER_COMMAND_INDEX, NUM_ARM_JOINTS
+from so101.runtime.dataflow import TICK_PERIOD_S, TickClock, timer_period_s
+
+if TYPE_CHECKING:
+    from dora import Node
+
+# A dora event: {"type": "INPUT", "id": ..., "value": ..., "metadata": {...}}, or STOP, ...
+Event = dict[str, Any]
 
 IMAGE_SIZE = (320, 240)
 
@@ -76,51 +75,7 @@ def cannot_start(error: Exception, node_id: str = "simulation") -> int:
     return 2
 
 
-def number_setting(environ: Mapping[str, str], name: str, default: str, minimum: float) -> float:
-    raw = environ.get(name, default)
-    try:
-        value = float(raw)
-    except ValueError:
-        value = float("nan")
-    if not value >= minimum:  # also rejects NaN
-        raise ValueError(f"{name}={raw!r} is not a number >= {minimum:g}")
-    return value
-
-
-def whole_number_setting(environ: Mapping[str, str], name: str, default: str) -> int:
-    raw = environ.get(name, default)
-    if not raw.strip().isdigit():
-        raise ValueError(f"{name}={raw!r} is not a whole number >= 0")
-    return int(raw)
-
-
-@dataclass(frozen=True)
-class NodeSettings:
-    """What every body's node reads from its environment (the body's own settings apart)."""
-
-    mode: str
-    image_hz: float
-    fast_steps: int
-    tick_log_path: str
-    lang: str
-
-    @classmethod
-    def from_environ(cls, environ: Mapping[str, str]) -> "NodeSettings":
-        """Raises ValueError naming a bad value and what is accepted, or the dora daemon that
-        started the node when it runs another dora version than the node's library."""
-        problem = spawning_daemon_version_problem()
-        if problem:
-            raise ValueError(problem)
-        return cls(
-            mode=environ.get("SO101_MODE", "auto"),
-            image_hz=number_setting(environ, "SO101_IMAGE_HZ", "0", 0.0),
-            fast_steps=whole_number_setting(environ, "SO101_FAST_STEPS", "0"),
-            tick_log_path=environ.get("SO101_TICK_LOG", ""),
-            lang="en" if environ.get("SO101_LANG", "zh") == "en" else "zh",
-        )
-
-
-def check_pictures(body, settings: NodeSettings) -> None:
+def check_pictures(body: Body, settings: NodeSettings) -> None:
     """With the `image` output on, draw one picture before joining: a renderer that cannot
     work (no OpenGL back end) must stop the node with its one-line reason, not in the loop."""
     if settings.image_hz > 0:
@@ -128,10 +83,16 @@ def check_pictures(body, settings: NodeSettings) -> None:
 
 
 # In fast mode a tick is made up whenever no input is waiting.
-FAST_TICK = {"type": "INPUT", "id": "tick", "value": None, "metadata": {}}
+FAST_TICK: Event = {"type": "INPUT", "id": "tick", "value": None, "metadata": {}}
 
 
-def fast_events(node):
+class Polled(Protocol):
+    """A node whose queue can be read without waiting."""
+
+    def try_recv(self) -> Event | None: ...
+
+
+def fast_events(node: Polled) -> Iterator[Event]:
     """The node's events without waiting: FAST_TICK whenever its queue is empty.
 
     Fast mode polls instead of taking a 0 ms timer: the physics step stays the
@@ -143,7 +104,7 @@ def fast_events(node):
         yield FAST_TICK if event is None else event
 
 
-def run_body_node(body, node, settings: NodeSettings, identity: str, detail: Mapping[str, str],
+def run_body_node(body: Body, node: Node, settings: NodeSettings, identity: str, detail: Mapping[str, str],
                   node_id: str = "simulation") -> int:
     """The event loop, until STOP; closes `body`. `identity` and `detail[lang]` go into the
     "loaded" log line (`so101 teleop` waits for it). Returns the node's exit code."""
@@ -158,15 +119,17 @@ def run_body_node(body, node, settings: NodeSettings, identity: str, detail: Map
         tick_s = TICK_PERIOD_S
         log(text["no_timer"].format(step_ms=tick_s * 1000))
     body.set_time_step_s(tick_s)
-    log(text["loaded"].format(identity=identity, mode=body.mode.upper(), step_ms=tick_s * 1000, detail=detail[settings.lang]))
+    # GUI or DIRECT: where the arm is seen; hardware has no display and says REAL.
+    shown_mode = (body.display_mode or body.kind).upper()
+    log(text["loaded"].format(identity=identity, mode=shown_mode, step_ms=tick_s * 1000, detail=detail[settings.lang]))
 
     # A simulation starts at home; the real arm where it stands, so a one-joint command moves one joint.
-    start_targets = getattr(body, "start_targets_deg", None)
-    joint_targets_deg = tuple(start_targets() if start_targets else HOME_POSE_DEG)
-    events = fast_events(node) if fast_steps else node
+    joint_targets_deg = body.start_targets_deg()
+    # dora's type stubs (1.1.0) lack try_recv, which its Node has.
+    events: Iterable[Event] = fast_events(cast(Polled, node)) if fast_steps else node
     # (start ns, end ns, physics steps so far) of each tick, in time.monotonic_ns, when asked for;
     # None costs nothing per tick.
-    tick_log = array("q") if settings.tick_log_path else None
+    tick_log: array[int] | None = array("q") if settings.tick_log_path else None
     tick_clock = TickClock(tick_s)
     # Counted in physics steps, so fast mode (several steps per tick) keeps the simulated rate.
     steps_per_image = max(1, round(1.0 / (image_hz * tick_s))) if image_hz > 0 else 0
@@ -198,7 +161,7 @@ def run_body_node(body, node, settings: NodeSettings, identity: str, detail: Map
                         )
                 elif event["id"] == "joint_cmd":
                     decoded = decode_joint_cmd(event["value"], joint_targets_deg)
-                    if decoded.error:
+                    if decoded.targets_deg is None:  # what arrived is not a command: decoded.error says why
                         log(text["rejected"].format(error=decoded.error))
                         continue
                     for note in decoded.notes:

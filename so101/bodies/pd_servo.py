@@ -7,6 +7,9 @@ velocities, and the tests check it directly.
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
+
+FloatArray = npt.NDArray[np.float64]
 
 # STS3215 servos give about 2.9-3.35 N·m; the SO-101 MuJoCo model uses forcerange ±3.35.
 SERVO_TORQUE_LIMIT_NM = 3.35
@@ -14,7 +17,7 @@ DEFAULT_DAMPING_RATIO = 0.7
 DEFAULT_NATURAL_FREQ_RAD_S = 20.0
 
 
-def pd_gains(inertia_kg_m2, natural_freq_rad_s: float, damping_ratio: float) -> tuple[np.ndarray, np.ndarray]:
+def pd_gains(inertia_kg_m2: npt.ArrayLike, natural_freq_rad_s: float, damping_ratio: float) -> tuple[FloatArray, FloatArray]:
     """(Kp in N·m/rad, Kd in N·m·s/rad) per joint so that I·q̈ + Kd·q̇ + Kp·q = 0 has the given ωn and ζ.
 
     Scaling by each joint's inertia gives every joint the same ωn and ζ: with one
@@ -33,17 +36,18 @@ def pd_gains(inertia_kg_m2, natural_freq_rad_s: float, damping_ratio: float) -> 
 
 
 def pd_torque_nm(
-    error_rad, velocity_rad_s, kp, kd, gravity_nm, limit_nm: float = SERVO_TORQUE_LIMIT_NM,
-) -> np.ndarray:
+    error_rad: npt.ArrayLike, velocity_rad_s: npt.ArrayLike, kp: npt.ArrayLike, kd: npt.ArrayLike,
+    gravity_nm: npt.ArrayLike, limit_nm: float = SERVO_TORQUE_LIMIT_NM,
+) -> FloatArray:
     """τ = clip(Kp·e − Kd·q̇ + gravity compensation, ±limit).
 
     The derivative acts on the measured velocity, not on the error, so a step in
     the goal gives no torque kick; the overshoot then comes from ζ alone.
     """
     torque = (
-        np.asarray(kp, dtype=float) * np.asarray(error_rad, dtype=float)
-        - np.asarray(kd, dtype=float) * np.asarray(velocity_rad_s, dtype=float)
-        + np.asarray(gravity_nm, dtype=float)
+        np.asarray(kp, dtype=np.float64) * np.asarray(error_rad, dtype=np.float64)
+        - np.asarray(kd, dtype=np.float64) * np.asarray(velocity_rad_s, dtype=np.float64)
+        + np.asarray(gravity_nm, dtype=np.float64)
     )
     return np.clip(torque, -limit_nm, limit_nm)
 

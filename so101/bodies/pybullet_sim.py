@@ -10,15 +10,19 @@ from __future__ import annotations
 import ctypes
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
+import numpy.typing as npt
 import pybullet as p
 import pybullet_data
 
 from so101 import assets
 from so101.bodies.camera import DEFAULT_CAMERA, Camera, check_picture
+from so101.bodies.protocol import BodyName, RgbImage
+from so101.bodies.settings import NodeSettings, PyBulletSettings, check_control_mode
 from so101.gui.display import resolve_mode
+from so101.runtime.dataflow import TICK_PERIOD_S
 from so101.bodies.pd_servo import (
     DEFAULT_DAMPING_RATIO,
     DEFAULT_NATURAL_FREQ_RAD_S,
@@ -45,9 +49,7 @@ JOINT_TYPE_NAMES = {
 
 M_MMAP_THRESHOLD = -3  # glibc's mallopt parameter number
 
-# "position": the course's POSITION_CONTROL motor. "servo": a PD torque servo, in
-# which the damping ratio decides whether a step overshoots (exercise 2).
-CONTROL_MODES = ("position", "servo")
+FloatArray = npt.NDArray[np.float64]
 
 
 def release_freed_memory() -> None:
@@ -93,7 +95,11 @@ class SO101Sim:
 
     renders=False leaves out PyBullet's CPU renderer (render_rgb then refuses): it keeps
     a copy of every visual mesh, 68 MB of this arm's, that only pictures need.
+
+    `mode` is the display mode asked for (auto, gui, direct); `display_mode` the one it got.
     """
+
+    kind: BodyName = "pybullet"
 
     def __init__(
         self,
@@ -102,15 +108,14 @@ class SO101Sim:
         assets_dir: Path | str | None = None,
         link_damping: float | None = COURSE_LINK_DAMPING,
         max_velocity_rad_s: float = COURSE_MAX_VELOCITY_RAD_S,
-        log=print,
+        log: Callable[[str], None] = print,
         control_mode: str = "position",
         servo_damping_ratio: float = DEFAULT_DAMPING_RATIO,
         servo_natural_freq_rad_s: float = DEFAULT_NATURAL_FREQ_RAD_S,
         servo_torque_limit_nm: float = SERVO_TORQUE_LIMIT_NM,
         renders: bool = True,
     ):
-        if control_mode not in CONTROL_MODES:
-            raise ValueError(f"unknown control mode {control_mode!r}; use one of: {', '.join(CONTROL_MODES)}")
+        check_control_mode(control_mode)
         if not servo_torque_limit_nm > 0:
             raise ValueError(f"servo torque limit must be a positive number of N·m, got {servo_torque_limit_nm!r}")
         # Checks ζ and ωn before anything connects (the inertia here is a stand-in).
@@ -120,18 +125,19 @@ class SO101Sim:
         self.servo_natural_freq_rad_s = float(servo_natural_freq_rad_s)
         self.servo_torque_limit_nm = float(servo_torque_limit_nm)
         # Resolve the model first: a missing file must give our message, not PyBullet's.
-        urdf = assets.urdf_path(assets_dir)
-        self.mode, notice = resolve_mode(mode)
+        urdf = assets.urdf_path(None if assets_dir is None else Path(assets_dir))
+        self.display_mode, notice = resolve_mode(mode)
         if notice:
             log(notice)
         self.time_step_s = float(time_step_s)
         # The physics is always DIRECT: a GUI client would hold every step back to the
         # window's frame rate. GUI mode adds a window that mirrors the arm (so101.gui.viewer).
-        self.client = p.connect(p.DIRECT)
-        if self.client < 0:
+        cid: int = p.connect(p.DIRECT)
+        if cid < 0:
             raise RuntimeError("PyBullet could not connect in DIRECT mode")
-        cid = self.client
-        self._window = None
+        # None once closed.
+        self.client: int | None = cid
+        self._window: Window | None = None
         self.renders = renders
         # Static plugins of every client, unloaded before anything loads (the renderer
         # cannot be loaded back). fileIOPlugin caches each file it opens, 15 MB of STL
@@ -141,12 +147,12 @@ class SO101Sim:
         p.setAdditionalSearchPath(pybullet_data.getDataPath(), physicsClientId=cid)
         p.setGravity(0, 0, -9.81, physicsClientId=cid)
         p.setPhysicsEngineParameter(fixedTimeStep=self.time_step_s, physicsClientId=cid)
-        self.plane_id = p.loadURDF("plane.urdf", physicsClientId=cid)
-        self.robot_id = p.loadURDF(
+        self.plane_id: int = p.loadURDF("plane.urdf", physicsClientId=cid)
+        self.robot_id: int = p.loadURDF(
             str(urdf), basePosition=[0, 0, 0], baseOrientation=[0, 0, 0, 1],
             useFixedBase=True, physicsClientId=cid,
         )
-        if self.mode == "gui":
+        if self.display_mode == "gui":
             self._window = Window(["so101.gui.viewer", "--urdf", str(urdf)], on_showing=lambda: log(WINDOW_SHOWING))
         self.joints = [self._joint_info(i) for i in range(p.getNumJoints(self.robot_id, physicsClientId=cid))]
         self._indices = [joint.index for joint in ACTUATED_JOINTS]
@@ -159,13 +165,13 @@ class SO101Sim:
                     physicsClientId=cid,
                 )
         self.max_velocity_rad_s = float(max_velocity_rad_s)
-        self._goal_rad = np.radians(np.asarray(HOME_POSE_DEG, dtype=float))
+        self._goal_rad: FloatArray = np.radians(np.asarray(HOME_POSE_DEG, dtype=np.float64))
         # (joint index, goal in radians) pairs for the per-joint motor calls, while they are
         # still to be made; None once the motors have them.
-        self._motor_goals = list(zip(self._indices, self._goal_rad.tolist()))
+        self._motor_goals: list[tuple[int, float]] | None = list(zip(self._indices, self._goal_rad.tolist()))
         self.steps = 0
         # The torques sent on the last step (servo mode; zeros in position mode).
-        self.last_torques_nm = np.zeros(len(self._indices))
+        self.last_torques_nm: FloatArray = np.zeros(len(self._indices))
         if self.control_mode == "servo":
             # The default velocity motors would fight the torques: switch them off once.
             p.setJointMotorControlArray(
@@ -182,7 +188,7 @@ class SO101Sim:
             lower_rad=info[8], upper_rad=info[9], max_force=info[10], max_velocity=info[11],
         )
 
-    def effective_inertias_kg_m2(self, angles_deg: Sequence[float] | None = None) -> np.ndarray:
+    def effective_inertias_kg_m2(self, angles_deg: Sequence[float] | None = None) -> FloatArray:
         """Each actuated joint's inertia about its own axis (the mass matrix diagonal) at a pose.
 
         It counts everything the joint carries (the outer links through their lever
@@ -193,11 +199,25 @@ class SO101Sim:
         angles_rad = np.radians(self.joint_angles_deg() if angles_deg is None else np.asarray(angles_deg, float))
         return self._inertias_at(angles_rad)
 
-    def _inertias_at(self, angles_rad: np.ndarray) -> np.ndarray:
+    def _inertias_at(self, angles_rad: FloatArray) -> FloatArray:
         mass_matrix = p.calculateMassMatrix(self.robot_id, angles_rad.tolist(), physicsClientId=self.client)
-        return np.diag(np.asarray(mass_matrix))
+        return np.diag(np.asarray(mass_matrix, dtype=np.float64))
+
+    @classmethod
+    def from_settings(cls, settings: PyBulletSettings, node: NodeSettings, log: Callable[[str], None] = print) -> "SO101Sim":
+        """The simulation node's body: the course's motor or the servo, a window as `node` asks, the
+        CPU renderer only when the node publishes pictures, and the tick's step."""
+        return cls(
+            mode=node.display_mode, time_step_s=TICK_PERIOD_S, assets_dir=settings.assets_dir, log=log,
+            control_mode=settings.control_mode, servo_damping_ratio=settings.servo_damping_ratio,
+            renders=node.image_hz > 0,
+        )
 
     # -- control ---------------------------------------------------------------------
+    def start_targets_deg(self) -> tuple[float, ...]:
+        """Home: the course's simulation starts there."""
+        return HOME_POSE_DEG
+
     def set_targets_deg(self, targets_deg: Sequence[float]) -> None:
         """Goal angles in degrees for all six actuated joints (arm 0-4, gripper)."""
         self._goal_rad = np.radians(goal_deg(targets_deg))
@@ -210,7 +230,7 @@ class SO101Sim:
         self.time_step_s = float(time_step_s)
         p.setPhysicsEngineParameter(fixedTimeStep=self.time_step_s, physicsClientId=self.client)
 
-    def targets_deg(self) -> np.ndarray:
+    def targets_deg(self) -> FloatArray:
         return np.degrees(self._goal_rad)
 
     def step(self, count: int = 1) -> None:
@@ -261,21 +281,21 @@ class SO101Sim:
         )
 
     # -- state -----------------------------------------------------------------------
-    def joint_angles_deg(self) -> np.ndarray:
+    def joint_angles_deg(self) -> FloatArray:
         """Measured angles in degrees, arm joints 0-4 then the gripper."""
         states = p.getJointStates(self.robot_id, self._indices, physicsClientId=self.client)
-        return np.degrees([state[0] for state in states])
+        return np.degrees(np.array([state[0] for state in states], dtype=np.float64))
 
-    def joint_velocities_deg_s(self) -> np.ndarray:
+    def joint_velocities_deg_s(self) -> FloatArray:
         states = p.getJointStates(self.robot_id, self._indices, physicsClientId=self.client)
-        return np.degrees([state[1] for state in states])
+        return np.degrees(np.array([state[1] for state in states], dtype=np.float64))
 
     @property
     def sim_time_s(self) -> float:
         return self.steps * self.time_step_s
 
     # -- pictures --------------------------------------------------------------------
-    def render_rgb(self, width: int = 640, height: int = 480, camera: Camera = DEFAULT_CAMERA) -> np.ndarray:
+    def render_rgb(self, width: int = 640, height: int = 480, camera: Camera = DEFAULT_CAMERA) -> RgbImage:
         """The scene as an RGB image, uint8 of shape (height, width, 3).
 
         Uses the CPU renderer (ER_TINY_RENDERER), so it works in DIRECT mode with no
@@ -312,5 +332,5 @@ class SO101Sim:
     def __enter__(self) -> "SO101Sim":
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()

@@ -1,4 +1,4 @@
-"""The real SO-101 follower arm behind the simulators' surface: six STS3215 servos on a Feetech bus.
+"""The real SO-101 follower arm as a body (so101.bodies.protocol.Body): six STS3215 servos on a Feetech bus.
 
 `SO101Real` takes goals in the URDF's degrees and, once per tick (`step`), writes the
 next Goal_Position of each servo with one SYNC WRITE and reads every Present_Position
@@ -15,30 +15,25 @@ with one SYNC READ. The safety rules live here, so every user of the body has th
 
 from __future__ import annotations
 
-import statistics
 from array import array
-from dataclasses import dataclass
-from pathlib import Path
-from typing import Callable, Mapping
+from typing import Callable, NoReturn, Sequence
 
-from so101.bodies.registry import BodyFailed
+from so101.bodies.protocol import BodyFailed, BodyName
+from so101.bodies.settings import CALIBRATE_HINT, DEFAULT_BUS_RETRIES, DEFAULT_MAX_SPEED_DEG_S, ArmSettings, NodeSettings
+from so101.feetech.bus import BusError, FeetechBus
 from so101.feetech.calibration import (
     MOTOR_IDS,
     MOTOR_NAMES,
     Calibration,
-    load_calibration,
     goal_steps,
-    parse_joint_signs,
+    load_calibration,
     step_toward,
     steps_to_deg,
 )
-from so101.feetech.bus import BusError, FeetechBus
-from so101.robot import ACTUATED_JOINTS, goal_deg
 from so101.feetech.sts3215 import MODEL_NUMBER, SIGN_BITS, decode_signed
+from so101.robot import ACTUATED_JOINTS, goal_deg
+from so101.stats import percentile
 
-DEFAULT_MAX_SPEED_DEG_S = 90.0
-DEFAULT_RETRIES = 5
-CALIBRATE_HINT = "make one with `so101 calibrate --port {port} --out FILE`, or use LeRobot's so101_follower calibration"
 # Round trips measured before the first tick, for the log's "bus round trip" figure.
 PROBE_READS = 20
 
@@ -58,59 +53,32 @@ def check_servos_answer(bus: FeetechBus) -> None:
             raise BusError(f"servo {servo_id} ({name}) is model {model}, not an STS3215 ({MODEL_NUMBER})")
 
 
-@dataclass(frozen=True)
-class ArmSettings:
-    """The arm node's own settings, from its environment (dataflow_real.yml's `env:`)."""
-
-    port: str
-    calibration_file: Path
-    max_speed_deg_s: float
-    joint_signs: tuple[int, ...]
-    torque_limit_percent: float
-    retries: int
-
-    @classmethod
-    def from_environ(cls, environ: Mapping[str, str]) -> "ArmSettings":
-        """Raises ValueError naming a missing or bad value and what is accepted."""
-        from so101.bodies.node_loop import number_setting, whole_number_setting
-
-        port = environ.get("SO101_PORT", "").strip()
-        if not port:
-            raise ValueError("SO101_PORT is empty: set it (the dataflow's env:, or so101 teleop --port) to the arm's "
-                             "serial port (/dev/ttyACM0, ...; `so101 fake-arm` prints an emulated one)")
-        calibration = environ.get("SO101_CALIBRATION", "").strip()
-        if not calibration:
-            raise ValueError("SO101_CALIBRATION is empty: set it (the dataflow's env:, or so101 teleop --calibration) "
-                             "to the arm's calibration file; " + CALIBRATE_HINT.format(port=port))
-        torque = number_setting(environ, "SO101_TORQUE_LIMIT", "100", 1.0)
-        if torque > 100:
-            raise ValueError(f"SO101_TORQUE_LIMIT={torque:g} is above 100 (a percentage of the servo's maximum)")
-        return cls(
-            port=port,
-            calibration_file=Path(calibration).expanduser(),
-            max_speed_deg_s=number_setting(environ, "SO101_MAX_SPEED_DEG_S", str(DEFAULT_MAX_SPEED_DEG_S), 1.0),
-            joint_signs=parse_joint_signs(environ.get("SO101_JOINT_SIGNS", "1,1,1,1,1,1")),
-            torque_limit_percent=torque,
-            retries=whole_number_setting(environ, "SO101_BUS_RETRIES", str(DEFAULT_RETRIES)),
-        )
+def check_node_settings(settings: NodeSettings) -> None:
+    """Refuses, in one line, what the shared loop offers the simulations but the arm must not take:
+    pictures (it has no camera) and fast mode (its goals ramp by the tick: ticks made up as fast as
+    the bus answers would move it faster than SO101_MAX_SPEED_DEG_S)."""
+    if settings.image_hz > 0:
+        raise ValueError("the real arm has no camera: set SO101_IMAGE_HZ to 0")
+    if settings.fast_steps > 0:
+        raise ValueError("the real arm has no fast mode (its goals ramp by the tick): set SO101_FAST_STEPS to 0")
 
 
-def _percentiles_ms(samples_s) -> str:
-    ordered = sorted(samples_s)
-    if not ordered:
+def _percentiles_ms(samples_s: Sequence[float]) -> str:
+    if not samples_s:
         return "no reads"
-    p99 = ordered[min(len(ordered) - 1, round(0.99 * (len(ordered) - 1)))]
-    return f"p50 {statistics.median(ordered) * 1000:.2f} ms, p99 {p99 * 1000:.2f} ms, max {ordered[-1] * 1000:.2f} ms"
+    return (f"p50 {percentile(samples_s, 0.50) * 1000:.2f} ms, p99 {percentile(samples_s, 0.99) * 1000:.2f} ms, "
+            f"max {max(samples_s) * 1000:.2f} ms")
 
 
 class SO101Real:
     """The arm on `port`, with `calibration` (LeRobot's format). Raises ArmFailed if it must not start."""
 
-    mode = "real"
+    kind: BodyName = "real"
+    display_mode: None = None  # hardware: no window, no headless rendering
 
     def __init__(self, port: str, calibration: Calibration, *, calibration_name: str = "the calibration",
                  joint_signs: tuple[int, ...] = (1,) * 6, max_speed_deg_s: float = DEFAULT_MAX_SPEED_DEG_S,
-                 torque_limit_percent: float = 100.0, retries: int = DEFAULT_RETRIES,
+                 torque_limit_percent: float = 100.0, retries: int = DEFAULT_BUS_RETRIES,
                  time_step_s: float = 0.02, log: Callable[[str], None] = print):
         self.port = port
         self._motors = [calibration[name] for name in MOTOR_NAMES]
@@ -119,29 +87,32 @@ class SO101Real:
         self.retries = retries
         self._log = log
         self.steps = 0
-        self.round_trips_s = array("d")
+        self.round_trips_s: array[float] = array("d")
         self._failed_reads = 0
         self.set_time_step_s(time_step_s)
-        self.bus = None
+        # None once closed.
+        self.bus: FeetechBus | None = None
         try:
-            self.bus = FeetechBus(port).open()
-            self._check_servos(calibration_name)
-            present = self._read_present()
-            self._angles_deg: tuple[float, ...] | None = self._to_deg(present)
-            self._check_in_range(present)
+            bus = self.bus = FeetechBus(port).open()
+            self._check_servos(bus, calibration_name)
+            present = self._read_present(bus)
+            start_deg = self._to_deg(present)
+            self._check_in_range(present, start_deg)
             # Torque on with each goal where the joint stands: the arm holds still.
-            self.bus.sync_write("Goal_Position", present)
-            self.bus.sync_write("Torque_Limit", {i: round(torque_limit_percent * 10) for i in MOTOR_IDS})
-            self.bus.sync_write("Torque_Enable", {i: 1 for i in MOTOR_IDS})
+            bus.sync_write("Goal_Position", present)
+            bus.sync_write("Torque_Limit", {i: round(torque_limit_percent * 10) for i in MOTOR_IDS})
+            bus.sync_write("Torque_Enable", {i: 1 for i in MOTOR_IDS})
             for _ in range(PROBE_READS):
-                self._read_present()
+                self._read_present(bus)
         except BusError as error:
             self.close()
             raise ArmFailed(str(error)) from None
         except BaseException:
             self.close()
             raise
-        self._sent_deg = self._targets_deg = self._start_deg = self._angles_deg
+        # The angles read this tick; None when this tick's read failed.
+        self._angles_deg: tuple[float, ...] | None = start_deg
+        self._sent_deg = self._targets_deg = self._start_deg = start_deg
 
     @classmethod
     def from_settings(cls, settings: ArmSettings, log: Callable[[str], None] = print) -> "SO101Real":
@@ -153,13 +124,13 @@ class SO101Real:
 
     # -- start-up checks ------------------------------------------------------------------
 
-    def _check_servos(self, calibration_name: str) -> None:
-        check_servos_answer(self.bus)
+    def _check_servos(self, bus: FeetechBus, calibration_name: str) -> None:
+        check_servos_answer(bus)
         for name, servo_id, motor in zip(MOTOR_NAMES, MOTOR_IDS, self._motors):
             on_servo = {
-                "homing_offset": decode_signed(self.bus.read(servo_id, "Homing_Offset"), SIGN_BITS["Homing_Offset"]),
-                "range_min": self.bus.read(servo_id, "Min_Position_Limit"),
-                "range_max": self.bus.read(servo_id, "Max_Position_Limit"),
+                "homing_offset": decode_signed(bus.read(servo_id, "Homing_Offset"), SIGN_BITS["Homing_Offset"]),
+                "range_min": bus.read(servo_id, "Min_Position_Limit"),
+                "range_max": bus.read(servo_id, "Max_Position_Limit"),
             }
             for field_name, value in on_servo.items():
                 if value != getattr(motor, field_name):
@@ -168,21 +139,21 @@ class SO101Real:
                         f"{field_name} {value}, the file says {getattr(motor, field_name)}; "
                         + CALIBRATE_HINT.format(port=self.port) + " for this arm"
                     )
-            if self.bus.read(servo_id, "Operating_Mode") != 0:
+            if bus.read(servo_id, "Operating_Mode") != 0:
                 raise ArmFailed(f"servo {servo_id} ({name}) is not in position mode (Operating_Mode 0)")
 
-    def _check_in_range(self, present: dict[int, int]) -> None:
+    def _check_in_range(self, present: dict[int, int], angles_deg: tuple[float, ...]) -> None:
         # The servo clamps goals to its limits: torque on outside them would jump to the limit.
-        for name, servo_id, motor, angle in zip(MOTOR_NAMES, MOTOR_IDS, self._motors, self._angles_deg):
+        for name, servo_id, motor, angle in zip(MOTOR_NAMES, MOTOR_IDS, self._motors, angles_deg):
             if not motor.range_min <= present[servo_id] <= motor.range_max:
                 raise ArmFailed(f"{name} stands at {angle:.1f}°, outside its calibrated range: "
                                 "move it inside by hand (torque is off) and start again")
 
-    # -- the simulators' surface ----------------------------------------------------------
+    # -- the body's surface (so101.bodies.protocol.Body) ---------------------------------
 
-    def _read_present(self) -> dict[int, int]:
-        present = self.bus.sync_read("Present_Position", MOTOR_IDS)
-        self.round_trips_s.append(self.bus.last_round_trip_s)
+    def _read_present(self, bus: FeetechBus) -> dict[int, int]:
+        present = bus.sync_read("Present_Position", MOTOR_IDS)
+        self.round_trips_s.append(bus.last_round_trip_s)
         return present
 
     def _to_deg(self, present: dict[int, int]) -> tuple[float, ...]:
@@ -199,28 +170,30 @@ class SO101Real:
         self.time_step_s = time_step_s
         self.max_step_deg = self.max_speed_deg_s * time_step_s
 
-    def set_targets_deg(self, targets_deg) -> None:
+    def set_targets_deg(self, targets_deg: Sequence[float]) -> None:
         """New goals, clamped to the URDF's limits; `step` ramps toward them."""
         goal = goal_deg(targets_deg)
-        self._targets_deg = tuple(min(max(angle, joint.lower_deg), joint.upper_deg) for angle, joint in zip(goal, ACTUATED_JOINTS))
+        self._targets_deg = tuple(joint.clamp_deg(angle) for angle, joint in zip(goal, ACTUATED_JOINTS))
 
     def step(self, count: int = 1) -> None:
         """One bus exchange, whatever `count` (a late tick does not make the arm hurry):
         the ramped goals out, the present positions in."""
+        if self.bus is None:
+            raise ArmFailed(f"the arm on {self.port} is closed")
         try:
-            self._exchange()
+            self._exchange(self.bus)
         except BusError as error:
             raise ArmFailed(str(error)) from None
         self.steps += 1
 
-    def _exchange(self) -> None:
+    def _exchange(self, bus: FeetechBus) -> None:
         self._sent_deg = step_toward(self._sent_deg, self._targets_deg, self.max_step_deg)
-        self.bus.sync_write("Goal_Position", {
+        bus.sync_write("Goal_Position", {
             servo_id: goal_steps(index, angle, motor, sign)
             for index, (servo_id, motor, sign, angle) in enumerate(zip(MOTOR_IDS, self._motors, self._signs, self._sent_deg))
         })
         try:
-            present = self._read_present()
+            present = self._read_present(bus)
         except BusError as error:
             self._angles_deg = None  # nothing fresh to publish this tick
             self._failed_reads += 1
@@ -242,7 +215,7 @@ class SO101Real:
     def sim_time_s(self) -> float:
         return self.steps * self.time_step_s
 
-    def render_rgb(self, width: int, height: int):
+    def render_rgb(self, width: int, height: int) -> NoReturn:
         raise ValueError("the real arm has no camera: set SO101_IMAGE_HZ to 0")
 
     def round_trip_summary(self) -> str:
@@ -267,6 +240,6 @@ class SO101Real:
     def __enter__(self) -> "SO101Real":
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()
 

@@ -1,0 +1,240 @@
+"""The body nodes' settings: environment variables, each declared once, as a field of a frozen dataclass.
+
+A field's metadata holds its variable's name, the value an unset variable has, one line of
+meaning and how the value is read; `from_environ` reads every field from it, and the
+README's tables of the body nodes are held to these declarations (tests/test_settings.py).
+`NodeSettings` is what the shared loop reads for every body; each body adds its own
+(so101.bodies.registry names which). A bad value is a ValueError in one line, which the
+node prints and exits 2 on (node_loop.cannot_start).
+
+Light on purpose: no physics engine and no serial port is imported here.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Any, Callable, Mapping, Self
+
+from so101.assets import ASSETS_ENV_VAR
+from so101.bodies.pd_servo import DEFAULT_DAMPING_RATIO
+from so101.feetech.calibration import parse_joint_signs
+from so101.gui.display import MODE_ENV_VAR
+from so101.lang import DEFAULT_LANGUAGE, ENV_VAR as LANG_ENV_VAR, language_from_environ
+from so101.runtime.versions import spawning_daemon_version_problem
+
+# The key of a field's Setting in its metadata.
+SETTING = "so101.setting"
+
+# "position": the course's POSITION_CONTROL motor. "servo": a PD torque servo, in
+# which the damping ratio decides whether a step overshoots (exercise 2).
+CONTROL_MODES = ("position", "servo")
+
+DEFAULT_MAX_SPEED_DEG_S = 90.0
+DEFAULT_BUS_RETRIES = 5
+CALIBRATE_HINT = "make one with `so101 calibrate --port {port} --out FILE`, or use LeRobot's so101_follower calibration"
+
+
+@dataclass(frozen=True)
+class Setting:
+    """One environment variable: its name, the value an unset one has, its meaning, and its reader."""
+
+    env_var: str
+    default: str
+    meaning: str  # one line, as the README's table of the node gives it
+    # (environment, this setting) -> the value; ValueError in one line for a bad one.
+    read: Callable[[Mapping[str, str], "Setting"], Any]
+    # Where to set it, for a variable that may not be empty ("" = empty is allowed). It may
+    # name the values of the fields declared before it, as {field_name}.
+    required: str = ""
+
+    def raw(self, environ: Mapping[str, str]) -> str:
+        return environ.get(self.env_var, self.default)
+
+
+def setting(env_var: str, default: str, meaning: str, read: Callable[[Mapping[str, str], Setting], Any],
+            required: str = "") -> Any:
+    """A dataclass field that is read from `env_var` (Any: the field's own annotation gives its type)."""
+    return field(metadata={SETTING: Setting(env_var, default, meaning, read, required)})
+
+
+def declared(settings_class: type[EnvironSettings]) -> tuple[Setting, ...]:
+    """The settings a class declares, in field order."""
+    return tuple(each.metadata[SETTING] for each in fields(settings_class))
+
+
+@dataclass(frozen=True)
+class EnvironSettings:
+    """A frozen dataclass whose every field is a `setting(...)`."""
+
+    @classmethod
+    def from_environ(cls, environ: Mapping[str, str]) -> Self:
+        """Every field from its variable, in declaration order; ValueError naming the first bad value
+        and what is accepted."""
+        values: dict[str, Any] = {}
+        for each in fields(cls):
+            declared_setting: Setting = each.metadata[SETTING]
+            if declared_setting.required and not declared_setting.raw(environ).strip():
+                where = declared_setting.required.format(**values)
+                raise ValueError(f"{declared_setting.env_var} is empty: set it {where}")
+            values[each.name] = declared_setting.read(environ, declared_setting)
+        return cls(**values)
+
+
+# -- readers: (environment, setting) -> the field's value --------------------------------------------------
+
+
+def read_text(environ: Mapping[str, str], declared_setting: Setting) -> str:
+    return declared_setting.raw(environ)
+
+
+def read_stripped_text(environ: Mapping[str, str], declared_setting: Setting) -> str:
+    return declared_setting.raw(environ).strip()
+
+
+def read_file_path(environ: Mapping[str, str], declared_setting: Setting) -> Path:
+    return Path(declared_setting.raw(environ).strip()).expanduser()
+
+
+def read_optional_path(environ: Mapping[str, str], declared_setting: Setting) -> Path | None:
+    raw = declared_setting.raw(environ).strip()
+    return Path(raw).expanduser() if raw else None
+
+
+def parse_number(env_var: str, raw: str, minimum: float) -> float:
+    try:
+        value = float(raw)
+    except ValueError:
+        value = float("nan")
+    if not value >= minimum:  # also rejects NaN
+        raise ValueError(f"{env_var}={raw!r} is not a number >= {minimum:g}")
+    return value
+
+
+def read_number(minimum: float) -> Callable[[Mapping[str, str], Setting], float]:
+    def read(environ: Mapping[str, str], declared_setting: Setting) -> float:
+        return parse_number(declared_setting.env_var, declared_setting.raw(environ), minimum)
+    return read
+
+
+def read_optional_number(minimum: float) -> Callable[[Mapping[str, str], Setting], float | None]:
+    """A number, or None for an empty value."""
+    def read(environ: Mapping[str, str], declared_setting: Setting) -> float | None:
+        raw = declared_setting.raw(environ)
+        return parse_number(declared_setting.env_var, raw, minimum) if raw.strip() else None
+    return read
+
+
+def read_whole_number(environ: Mapping[str, str], declared_setting: Setting) -> int:
+    raw = declared_setting.raw(environ)
+    if not raw.strip().isdigit():
+        raise ValueError(f"{declared_setting.env_var}={raw!r} is not a whole number >= 0")
+    return int(raw)
+
+
+def read_language(environ: Mapping[str, str], declared_setting: Setting) -> str:
+    # The project's one rule for SO101_LANG (so101.lang); the field's env_var is its LANG_ENV_VAR.
+    return language_from_environ(environ)
+
+
+def check_control_mode(control_mode: str) -> str:
+    """`control_mode` if it is one of CONTROL_MODES; ValueError in one line otherwise."""
+    if control_mode not in CONTROL_MODES:
+        raise ValueError(f"unknown control mode {control_mode!r}; use one of: {', '.join(CONTROL_MODES)}")
+    return control_mode
+
+
+def read_control_mode(environ: Mapping[str, str], declared_setting: Setting) -> str:
+    return check_control_mode(declared_setting.raw(environ))
+
+
+def read_joint_signs(environ: Mapping[str, str], declared_setting: Setting) -> tuple[int, ...]:
+    return parse_joint_signs(declared_setting.raw(environ))
+
+
+def read_torque_percent(environ: Mapping[str, str], declared_setting: Setting) -> float:
+    torque = parse_number(declared_setting.env_var, declared_setting.raw(environ), 1.0)
+    if torque > 100:
+        raise ValueError(f"{declared_setting.env_var}={torque:g} is above 100 (a percentage of the servo's maximum)")
+    return torque
+
+
+# -- the settings ------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class NodeSettings(EnvironSettings):
+    """What the shared loop reads for every body (the body's own settings apart)."""
+
+    display_mode: str = setting(
+        MODE_ENV_VAR, "auto",
+        "`gui` (window), `direct` (headless) or `auto` (a window where a display is reachable, else headless with a "
+        "one-line notice)", read_text)
+    image_hz: float = setting("SO101_IMAGE_HZ", "0", "rate of the `image` output; 0 = off", read_number(0.0))
+    fast_steps: int = setting(
+        "SO101_FAST_STEPS", "0", "N > 0: fast mode (no wall-clock pacing, N steps per published state; see the benchmark)",
+        read_whole_number)
+    tick_log_path: str = setting(
+        "SO101_TICK_LOG", "", "a file for per-tick timings and step counts (used by `so101 bench`)", read_text)
+    lang: str = setting(LANG_ENV_VAR, DEFAULT_LANGUAGE, "log language, `zh` or `en`", read_language)
+
+    @classmethod
+    def from_environ(cls, environ: Mapping[str, str]) -> Self:
+        """Also refuses, in one line, a dora daemon that started the node and runs another dora
+        version than the node's library."""
+        problem = spawning_daemon_version_problem()
+        if problem:
+            raise ValueError(problem)
+        return super().from_environ(environ)
+
+
+@dataclass(frozen=True)
+class ModelSettings(EnvironSettings):
+    """What a simulated body loads: the model files."""
+
+    assets_dir: Path | None = setting(
+        ASSETS_ENV_VAR, "", "where the model is; empty = where `so101 assets` puts it (the checkout's `assets/SO101`)",
+        read_optional_path)
+
+
+@dataclass(frozen=True)
+class PyBulletSettings(ModelSettings):
+    """The PyBullet body's own settings (nodes/simulation_node.py)."""
+
+    control_mode: str = setting(
+        "SO101_CONTROL", "position",
+        "`position`: the course's `POSITION_CONTROL`; `servo`: a PD torque servo for exercise 2", read_control_mode)
+    servo_damping_ratio: float = setting(
+        "SO101_SERVO_ZETA", f"{DEFAULT_DAMPING_RATIO:g}", "the servo's damping ratio ζ (servo mode only)", read_number(0.0))
+
+
+@dataclass(frozen=True)
+class MuJoCoSettings(ModelSettings):
+    """The MuJoCo body's own settings (nodes/simulation_mujoco.py)."""
+
+    joint_damping_n_m_s: float | None = setting(
+        "SO101_MUJOCO_DAMPING", "", "every joint's damping in N·m·s/rad; empty = the MJCF's 0.60", read_optional_number(0.0))
+
+
+@dataclass(frozen=True)
+class ArmSettings(EnvironSettings):
+    """The real arm's own settings (nodes/arm_node.py, dataflow_real.yml's `env:`)."""
+
+    port: str = setting(
+        "SO101_PORT", "", "the arm's serial port (`so101 fake-arm` prints an emulated one)", read_stripped_text,
+        required="(the dataflow's env:, or so101 teleop --port) to the arm's serial port "
+                 "(/dev/ttyACM0, ...; `so101 fake-arm` prints an emulated one)")
+    calibration_file: Path = setting(
+        "SO101_CALIBRATION", "", "LeRobot's so101_follower calibration JSON, or one from `so101 calibrate`", read_file_path,
+        required="(the dataflow's env:, or so101 teleop --calibration) to the arm's calibration file; "
+                 + CALIBRATE_HINT)
+    max_speed_deg_s: float = setting(
+        "SO101_MAX_SPEED_DEG_S", f"{DEFAULT_MAX_SPEED_DEG_S:g}", "how fast a goal may move, °/s", read_number(1.0))
+    joint_signs: tuple[int, ...] = setting(
+        "SO101_JOINT_SIGNS", "1,1,1,1,1,1", "`-1` flips a joint whose direction differs from the URDF's",
+        read_joint_signs)
+    torque_limit_percent: float = setting(
+        "SO101_TORQUE_LIMIT", "100", "% of the servos' maximum torque (the Torque_Limit register)", read_torque_percent)
+    retries: int = setting(
+        "SO101_BUS_RETRIES", f"{DEFAULT_BUS_RETRIES}", "ticks a servo may fail to answer before the node stops",
+        read_whole_number)
