@@ -123,6 +123,7 @@ def _uv_executable() -> str | None:
 def _download_wheel(dest: Path) -> Path:
     """The wheel, downloaded into `dest` by this interpreter's pip; where pip is missing
     (a venv made by uv), the folder uv installed the wheel's files into."""
+    tool: str | None
     if _pip_available():
         tool = "pip"
         command = [

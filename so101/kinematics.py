@@ -263,8 +263,10 @@ class Kinematics:
         home = self._clamped([0.0] * NUM_ARM_JOINTS + [self._gripper_rad])
         starts = [current] + ([home] if home != current else []) + self._seeds_rad
         # The nearest answer, and the exact answer whose way is least blocked (see _path_margin_mm).
-        nearest, nearest_error_m = None, math.inf
-        exact, exact_margin_mm = None, -math.inf
+        nearest: list[float] = current
+        nearest_error_m = math.inf
+        exact: list[float] | None = None
+        exact_margin_mm = -math.inf
         for start in starts:
             angles, error_m = self._refine(target_m, start)
             if error_m < nearest_error_m:
@@ -277,9 +279,10 @@ class Kinematics:
                     break
         best_angles = exact if exact is not None else nearest
         tip_m = self._tip_m(best_angles)
+        x_m, y_m, z_m = tip_m
         return Reach(
             joints_deg=tuple(math.degrees(angle) for angle in best_angles[:NUM_ARM_JOINTS]),
-            tip_mm=tuple(coordinate * 1000.0 for coordinate in tip_m),
+            tip_mm=(x_m * 1000.0, y_m * 1000.0, z_m * 1000.0),
             error_mm=_distance(tip_m, target_m) * 1000.0,
         )
 

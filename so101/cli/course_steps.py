@@ -79,7 +79,7 @@ def print_angles(sim, lang: str) -> None:
 def keep_running(sim, steps: int | None, lang: str) -> None:
     """Step in real time: forever (until Ctrl-C) with a window, else `steps` (240 headless by default)."""
     if steps is None:
-        steps = None if sim.mode == "gui" else 240
+        steps = None if sim.display_mode == "gui" else 240
     if steps is None:
         print("\n运行中... 按 Ctrl+C 退出" if lang == "zh" else "\nrunning... press Ctrl+C to quit", flush=True)
     count = 0
@@ -87,7 +87,7 @@ def keep_running(sim, steps: int | None, lang: str) -> None:
         while steps is None or count < steps:
             sim.step()
             count += 1
-            if sim.mode == "gui":
+            if sim.display_mode == "gui":
                 time.sleep(sim.time_step_s)
     except KeyboardInterrupt:
         print("\n停止仿真" if lang == "zh" else "\nsimulation stopped")

@@ -80,8 +80,11 @@ def _simulator(kind: str, damping: float):
                            log=lambda message: None)
     from so101.bodies.pybullet_sim import SO101Sim
 
-    options = {"servo_damping_ratio": damping} if kind == "servo" else {"link_damping": damping}
-    return SO101Sim(mode="direct", time_step_s=TICK_PERIOD_S, control_mode=kind, log=lambda message: None, **options)
+    if kind == "servo":
+        return SO101Sim(mode="direct", time_step_s=TICK_PERIOD_S, control_mode=kind, log=lambda message: None,
+                        servo_damping_ratio=damping)
+    return SO101Sim(mode="direct", time_step_s=TICK_PERIOD_S, control_mode=kind, log=lambda message: None,
+                    link_damping=damping)
 
 
 def record_step(joint: int, target_deg: float, kind: str, damping: float, duration_s: float) -> StepRun:

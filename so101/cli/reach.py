@@ -35,7 +35,7 @@ import math
 import random
 import time
 from pathlib import Path
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 from so101.cli.argtypes import number
 
@@ -97,7 +97,8 @@ def draw_targets(kin, count: int, seed: int, any_path: bool = False) -> Targets:
 
     home = HOME_POSE_DEG[:NUM_ARM_JOINTS]
     draw = random.Random(seed)
-    pairs, draws, too_low, near_floor = [], 0, 0, 0
+    pairs: list[tuple[tuple[float, ...], tuple[float, float, float]]] = []
+    draws, too_low, near_floor = 0, 0, 0
     while len(pairs) < count:
         if draws >= MAX_DRAWS_PER_POINT * count:  # does not happen with this arm: more than half qualify
             raise RuntimeError(f"drew {draws} poses and found only {len(pairs)} targets")
@@ -155,7 +156,7 @@ def _distance(a, b) -> float:
     return math.sqrt(sum((x - y) ** 2 for x, y in zip(a, b)))
 
 
-def _figures(values) -> dict:
+def _figures(values: list[float]) -> dict[str, float]:
     from so101.stats import percentile
 
     return {"p50": percentile(values, 0.5), "p99": percentile(values, 0.99), "max": float(max(values))}
@@ -170,7 +171,8 @@ def run(args: argparse.Namespace) -> int:
     started = time.perf_counter()
     home = HOME_POSE_DEG[:NUM_ARM_JOINTS]
     gripper = HOME_POSE_DEG[GRIPPER_COMMAND_INDEX]
-    records, ik_seconds, sim_seconds = [], 0.0, 0.0
+    records: list[dict[str, Any]] = []  # one per target, as the JSON report writes them
+    ik_seconds, sim_seconds = 0.0, 0.0
     with Kinematics() as kin:
         targets = draw_targets(kin, args.points, args.seed, args.any_path)
         with SO101Sim(mode="direct", time_step_s=TICK_PERIOD_S, renders=False, log=lambda line: None) as sim:

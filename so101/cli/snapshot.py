@@ -187,8 +187,8 @@ def draw_axes(image, projector: Projector) -> None:
     tick_px = max(3, round(side / 80))
     origin = np.zeros(3)
     labels = []
-    for direction, colour, label in AXES:
-        direction = np.asarray(direction)
+    for axis, colour, label in AXES:
+        direction = np.asarray(axis)
         end_mm = direction * AXIS_LENGTH_MM
         segment = projector.segment(origin, end_mm)
         if segment is None:
@@ -236,7 +236,7 @@ def run(args: argparse.Namespace) -> int:
         target_xyz_m=DEFAULT_CAMERA.target_xyz_m, distance_m=args.distance,
         yaw_deg=args.yaw, pitch_deg=args.pitch, fov_deg=DEFAULT_CAMERA.fov_deg,
     )
-    simulator = BODIES[args.body].simulator_class()
+    simulator = BODIES[args.body].body_class()
     with simulator(mode="direct", time_step_s=TICK_PERIOD_S, log=lambda message: None) as sim:
         sim.set_targets_deg(targets_deg)
         for _ in range(round(SETTLE_BUDGET_S / TICK_PERIOD_S)):

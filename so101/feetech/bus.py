@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import termios
 import time
+from typing import Any
 
 import scservo_sdk as scs
 import serial
@@ -49,8 +50,9 @@ class FeetechBus:
     def __init__(self, port: str, baudrate: int = BAUD_RATE):
         self.port_name = port
         self.baudrate = baudrate
-        self._port = None
-        self._packets = None
+        # The SDK's PortHandler and PacketHandler (untyped); _port is None while the bus is closed.
+        self._port: Any = None
+        self._packets: Any = None
         self._readers: dict[tuple[str, tuple[int, ...]], scs.GroupSyncRead] = {}
         self.last_round_trip_s = 0.0  # of the last sync read: request out, every reply in
 

@@ -146,13 +146,19 @@ class Mechanics:
 
     @property
     def has_stops(self) -> bool:
-        return self.lower is not None
+        return self.stops is not None
+
+    @property
+    def stops(self) -> tuple[int, int] | None:
+        """The hard stops (lower, upper) in physical steps; None for a joint that turns fully."""
+        return None if self.lower is None or self.upper is None else (self.lower, self.upper)
 
     def clamp(self, physical: float) -> float:
         """Where the joint can be: inside its stops, or on its encoder's turn."""
-        if self.lower is None:
+        if self.stops is None:
             return physical % sts3215.STEPS_PER_TURN
-        return min(max(physical, self.lower), self.upper)
+        lower, upper = self.stops
+        return min(max(physical, lower), upper)
 
 
 def _mechanics() -> dict[int, Mechanics]:
@@ -365,7 +371,7 @@ class FakeArm:
             mechanics = MECHANICS.get(servo_id)
             if servo_id not in ids or mechanics is None:
                 raise ValueError(f"start_positions names servo {servo_id}, which is not on this bus ({ids})")
-            low, high = (mechanics.lower, mechanics.upper) if mechanics.has_stops else (0, sts3215.MAX_STEP)
+            low, high = mechanics.stops or (0, sts3215.MAX_STEP)
             if not low <= position <= high:
                 raise ValueError(
                     f"start position {position} of servo {servo_id} ({mechanics.joint}) is outside "
@@ -545,8 +551,8 @@ class FakeArm:
     def _sweep_points(servo: _Servo, now: float, duration_s: float) -> list[tuple[float, float]]:
         m = servo.mechanics
         start = servo.physical
-        if m.has_stops:
-            lower, upper = float(m.lower), float(m.upper)
+        if m.stops is not None:
+            lower, upper = (float(stop) for stop in m.stops)
         else:  # unwrap around the middle: the hand turns it 180° each way
             turn = sts3215.STEPS_PER_TURN
             start = m.centre + ((start - m.centre + MIDDLE) % turn - MIDDLE)
@@ -829,8 +835,8 @@ def calibrate_as_at_the_factory(arm: FakeArm):
     for servo_id in arm.ids:
         mechanics = arm.mechanics(servo_id)
         offset = homing_offset(mechanics.centre)
-        low, high = ((mechanics.lower - offset, mechanics.upper - offset) if mechanics.has_stops
-                     else (0, sts3215.MAX_STEP))
+        stops = mechanics.stops
+        low, high = (stops[0] - offset, stops[1] - offset) if stops is not None else (0, sts3215.MAX_STEP)
         for name, value in (("Homing_Offset", offset), ("Min_Position_Limit", low), ("Max_Position_Limit", high)):
             arm.write_register(servo_id, name, value)
         arm.write_register(servo_id, "Goal_Position", arm.read_register(servo_id, "Present_Position"))

@@ -76,5 +76,5 @@ def virtual_display(log_path: Path | None = None, size: str = "1280x800x24"):
         yield f":{number.decode()}"
     finally:
         stop_process(server, 10, first_signal=signal.SIGTERM)
-        if log_path:
+        if not isinstance(log, int):  # a file of ours, not subprocess.DEVNULL
             log.close()

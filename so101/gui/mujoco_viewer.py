@@ -52,7 +52,7 @@ def run_viewer(shared_path: Path, mjcf: Path, fps: float) -> int:
                     viewer.sync()
                 time.sleep(frame_period_s)
     finally:
-        shared = None
+        del shared  # the view first: a mapping with a view on it cannot close
         mapping.close()
     return 0
 

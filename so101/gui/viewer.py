@@ -118,7 +118,7 @@ class Window:
         """Close the window and its process; safe to call twice."""
         stop_process(self.process, 5, first_signal=signal.SIGTERM)
         if not self._mapping.closed:
-            self._shared = None
+            del self._shared  # the view first: a mapping with a view on it cannot close
             self._mapping.close()
         self._path.unlink(missing_ok=True)
 
@@ -192,7 +192,7 @@ def run_viewer(shared_path: Path, urdf: Path, fps: float) -> int:
     except p.error:
         return 0  # the window was closed
     finally:
-        shared = None
+        del shared  # the view first: a mapping with a view on it cannot close
         mapping.close()
     return 0
 

@@ -18,8 +18,9 @@ import socket
 import subprocess
 import time
 from pathlib import Path, PurePath
+from typing import IO
 
-from so101.bodies.registry import BODIES, DEFAULT_BODY, Body
+from so101.bodies.registry import BODIES, DEFAULT_BODY, BodyKind
 from so101.runtime.dataflow import ROOT, dataflow_copy, write_dataflow
 from so101.runtime.processes import kill_with_env, running_with_env, stop_process
 from so101.runtime.venv import dora_executable, env_with_bin_first
@@ -61,7 +62,7 @@ class Cluster:
         self.token: str | None = None
         self.processes: dict[str, subprocess.Popen] = {}
         self.daemon_ports: dict[str, int] = {}
-        self._logs = []
+        self._logs: list[IO[bytes]] = []
 
     # -- processes -----------------------------------------------------------------------
 
@@ -176,7 +177,7 @@ class Cluster:
         self.stop()
 
 
-def placed_dataflow(body: Body, node_env: dict[str, str], root: PurePath = ROOT) -> dict:
+def placed_dataflow(body: BodyKind, node_env: dict[str, str], root: PurePath = ROOT) -> dict:
     """The body's dataflow (dataflow.yml for PyBullet) placed as dataflow_cluster.yml places it:
     the body's node on machine `arm`, the prompt on `desk`, with `node_env` over the body
     node's env. Node paths are made absolute under `root`, the project's folder on the arm's

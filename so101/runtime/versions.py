@@ -78,7 +78,7 @@ def dora_version_mismatch(dora_executable: str | None = None) -> str | None:
     dora_executable = dora_executable or find_dora(beside_python=False)
     library = library_version()
     cli = cli_version(dora_executable) if dora_executable else None
-    if library is None or cli is None:
+    if library is None or cli is None or dora_executable is None:
         return None
     return version_mismatch(cli, library, dora_executable)
 
