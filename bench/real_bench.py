@@ -41,7 +41,7 @@ PROBE_PERIOD_S = "0.3"  # a 4° probe at 90°/s takes 45 ms: each probe is done 
 
 
 def measure_bus(arm: FakeArm, calibration, exchanges: int) -> dict:
-    body = SO101Real(arm.port, calibration, time_step_s=TICK_S, log=lambda line: None)
+    body = SO101Real(arm.port, calibration, time_step_s=TICK_S)
     try:
         body.round_trips_s = type(body.round_trips_s)("d")
         tick_s = []

@@ -17,7 +17,7 @@ from types import FrameType
 
 from dora import Node
 
-from so101.bodies.node_loop import cannot_start, log, run_body_node
+from so101.bodies.node_loop import cannot_start, run_body_node
 from so101.bodies.real_arm import ArmFailed, SO101Real, check_node_settings
 from so101.bodies.settings import ArmSettings, NodeSettings
 from so101.feetech.calibration import CalibrationError
@@ -37,7 +37,7 @@ def main() -> int:
     except ValueError as error:
         return cannot_start(error, "arm")
     try:
-        arm = SO101Real.from_settings(arm_settings, log=log)
+        arm = SO101Real.from_settings(arm_settings)
     except (CalibrationError, ArmFailed) as error:
         return cannot_start(error, "arm")
     except KeyboardInterrupt:

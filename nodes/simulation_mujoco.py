@@ -15,7 +15,7 @@ from dora import Node
 
 from so101.assets import ModelFilesError
 from so101.bodies.mujoco_sim import SO101MuJoCo
-from so101.bodies.node_loop import cannot_start, check_pictures, log, run_body_node
+from so101.bodies.node_loop import announce, cannot_start, check_pictures, run_body_node
 from so101.bodies.settings import MuJoCoSettings, NodeSettings
 from so101.gui.display import DisplayError
 
@@ -27,7 +27,7 @@ def main() -> int:
     except ValueError as error:
         return cannot_start(error)
     try:
-        sim = SO101MuJoCo.from_settings(mujoco, settings, log=log)
+        sim = SO101MuJoCo.from_settings(mujoco, settings, log=announce)
         check_pictures(sim, settings)
     except (ModelFilesError, DisplayError, ValueError) as error:
         return cannot_start(error)

@@ -15,7 +15,7 @@ import sys
 from dora import Node
 
 from so101.assets import ModelFilesError
-from so101.bodies.node_loop import cannot_start, check_pictures, log, run_body_node
+from so101.bodies.node_loop import announce, cannot_start, check_pictures, run_body_node
 from so101.bodies.pybullet_sim import SO101Sim, release_freed_memory
 from so101.bodies.settings import NodeSettings, PyBulletSettings
 from so101.gui.display import DisplayError
@@ -31,7 +31,7 @@ def main() -> int:
     # ticks that arrive while the URDF loads would only be discarded, one warning each.
     release_freed_memory()
     try:
-        sim = SO101Sim.from_settings(pybullet, settings, log=log)
+        sim = SO101Sim.from_settings(pybullet, settings, log=announce)
         check_pictures(sim, settings)
     except (ModelFilesError, DisplayError, ValueError) as error:
         return cannot_start(error)

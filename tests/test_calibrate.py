@@ -64,7 +64,7 @@ def test_a_scripted_calibration_finds_the_emulated_arms_offsets_and_ranges(tmp_p
                                                                          "Max_Position_Limit", "Lock")}
                      for i in MOTOR_IDS}
         # The file drives the arm: at the middle pose every arm joint reads 0°.
-        with SO101Real(arm.port, load_calibration(out), log=lambda line: None) as body:
+        with SO101Real(arm.port, load_calibration(out)) as body:
             angles = body.joint_angles_deg()
 
     written = json.loads(out.read_text())

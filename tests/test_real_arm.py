@@ -112,7 +112,7 @@ def test_torque_goes_on_where_each_joint_stands_so_nothing_jumps(tmp_path):
             if stops.has_stops:
                 arm.write_register(servo_id, "Goal_Position", stops.upper - calibration[list(calibration)[servo_id - 1]].homing_offset)
         before = [arm.physical_position(i) for i in MOTOR_IDS]
-        with SO101Real(arm.port, calibration, log=lambda line: None) as body:
+        with SO101Real(arm.port, calibration) as body:
             assert torque(arm) == [1] * 6
             for _ in range(10):
                 body.step()
@@ -124,7 +124,7 @@ def test_torque_goes_on_where_each_joint_stands_so_nothing_jumps(tmp_path):
 def test_each_tick_moves_the_goal_by_at_most_the_speed_limit_times_the_tick(tmp_path):
     with FakeArm() as arm:
         calibration = calibrate_as_at_the_factory(arm)
-        with SO101Real(arm.port, calibration, max_speed_deg_s=90, time_step_s=0.02, log=lambda line: None) as body:
+        with SO101Real(arm.port, calibration, max_speed_deg_s=90, time_step_s=0.02) as body:
             body.set_targets_deg([90, 0, 0, 0, 0, 45])
             goals = []
             for _ in range(60):
@@ -149,7 +149,7 @@ def test_goals_are_held_inside_the_calibrated_range_too(tmp_path):
         calibration["shoulder_pan"] = type(pan)(pan.id, pan.drive_mode, pan.homing_offset, narrow_min, narrow_max)
         arm.write_register(1, "Min_Position_Limit", narrow_min)
         arm.write_register(1, "Max_Position_Limit", narrow_max)
-        with SO101Real(arm.port, calibration, max_speed_deg_s=360, log=lambda line: None) as body:
+        with SO101Real(arm.port, calibration, max_speed_deg_s=360) as body:
             body.set_targets_deg([100, 0, 0, 0, 0, 45])
             for _ in range(60):
                 body.step()

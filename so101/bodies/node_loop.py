@@ -16,6 +16,7 @@ so101.bodies.settings.NodeSettings.
 
 from __future__ import annotations
 
+import logging
 import sys
 import time
 from array import array
@@ -28,6 +29,7 @@ from so101.bodies.settings import NodeSettings
 from so101.joint_cmd import decode_joint_cmd
 from so101.robot import GRIPPER_COMMAND_INDEX, NUM_ARM_JOINTS
 from so101.runtime.dataflow import TICK_PERIOD_S, TickClock, timer_period_s
+from so101.runtime.logs import send_diagnostics_to
 
 if TYPE_CHECKING:
     from dora import Node
@@ -65,7 +67,11 @@ TEXT = {
 }
 
 
-def log(line: str) -> None:
+logger = logging.getLogger(__name__)
+
+
+def announce(line: str) -> None:
+    """A line that tools wait for and parse (the "loaded" line, the window's): stdout, as it is, at once."""
     print(line, flush=True)
 
 
@@ -108,6 +114,7 @@ def run_body_node(body: Body, node: Node, settings: NodeSettings, identity: str,
                   node_id: str = "simulation") -> int:
     """The event loop, until STOP; closes `body`. `identity` and `detail[lang]` go into the
     "loaded" log line (`so101 teleop` waits for it). Returns the node's exit code."""
+    send_diagnostics_to("stdout")  # dora keeps a node's stdout in its log, beside the loaded line
     tag = TAGS[node_id][settings.lang]
     text = {key: line.replace("{tag}", tag) for key, line in TEXT[settings.lang].items()}
     fast_steps = settings.fast_steps
@@ -117,11 +124,11 @@ def run_body_node(body: Body, node: Node, settings: NodeSettings, identity: str,
     tick_s = timer_period_s(node.node_config())
     if tick_s is None:
         tick_s = TICK_PERIOD_S
-        log(text["no_timer"].format(step_ms=tick_s * 1000))
+        logger.warning(text["no_timer"].format(step_ms=tick_s * 1000))
     body.set_time_step_s(tick_s)
     # GUI or DIRECT: where the arm is seen; hardware has no display and says REAL.
     shown_mode = (body.display_mode or body.kind).upper()
-    log(text["loaded"].format(identity=identity, mode=shown_mode, step_ms=tick_s * 1000, detail=detail[settings.lang]))
+    announce(text["loaded"].format(identity=identity, mode=shown_mode, step_ms=tick_s * 1000, detail=detail[settings.lang]))
 
     # A simulation starts at home; the real arm where it stands, so a one-joint command moves one joint.
     joint_targets_deg = body.start_targets_deg()
@@ -162,19 +169,19 @@ def run_body_node(body: Body, node: Node, settings: NodeSettings, identity: str,
                 elif event["id"] == "joint_cmd":
                     decoded = decode_joint_cmd(event["value"], joint_targets_deg)
                     if decoded.targets_deg is None:  # what arrived is not a command: decoded.error says why
-                        log(text["rejected"].format(error=decoded.error))
+                        logger.warning(text["rejected"].format(error=decoded.error))
                         continue
                     for note in decoded.notes:
-                        log(text["clamped"].format(note=note))
+                        logger.warning(text["clamped"].format(note=note))
                     previous_gripper_deg = joint_targets_deg[GRIPPER_COMMAND_INDEX]
                     joint_targets_deg = decoded.targets_deg
                     body.set_targets_deg(joint_targets_deg)
                     if decoded.joint_index is not None:
-                        log(text["one"].format(index=decoded.joint_index, angle=joint_targets_deg[decoded.joint_index]))
+                        logger.info(text["one"].format(index=decoded.joint_index, angle=joint_targets_deg[decoded.joint_index]))
                     else:
-                        log(text["all"].format(angles=[round(a, 2) for a in joint_targets_deg[:NUM_ARM_JOINTS]]))
+                        logger.info(text["all"].format(angles=[round(a, 2) for a in joint_targets_deg[:NUM_ARM_JOINTS]]))
                         if joint_targets_deg[GRIPPER_COMMAND_INDEX] != previous_gripper_deg:
-                            log(text["one"].format(index=GRIPPER_COMMAND_INDEX, angle=joint_targets_deg[GRIPPER_COMMAND_INDEX]))
+                            logger.info(text["one"].format(index=GRIPPER_COMMAND_INDEX, angle=joint_targets_deg[GRIPPER_COMMAND_INDEX]))
             elif event["type"] == "STOP":
                 break
     except KeyboardInterrupt:

@@ -15,8 +15,10 @@ with one SYNC READ. The safety rules live here, so every user of the body has th
 
 from __future__ import annotations
 
+import logging
+import time
 from array import array
-from typing import Callable, NoReturn, Sequence
+from typing import NoReturn, Sequence
 
 from so101.bodies.protocol import BodyFailed, BodyName
 from so101.bodies.settings import CALIBRATE_HINT, DEFAULT_BUS_RETRIES, DEFAULT_MAX_SPEED_DEG_S, ArmSettings, NodeSettings
@@ -34,8 +36,13 @@ from so101.feetech.sts3215 import MODEL_NUMBER, SIGN_BITS, decode_signed
 from so101.robot import ACTUATED_JOINTS, goal_deg
 from so101.stats import percentile
 
+logger = logging.getLogger(__name__)
+
 # Round trips measured before the first tick, for the log's "bus round trip" figure.
 PROBE_READS = 20
+# Reads of Torque_Enable after torque off before a servo that says "on" is believed, and the gap between.
+TORQUE_OFF_READS = 3
+TORQUE_OFF_READ_GAP_S = 0.02
 
 
 class ArmFailed(BodyFailed):
@@ -79,13 +86,12 @@ class SO101Real:
     def __init__(self, port: str, calibration: Calibration, *, calibration_name: str = "the calibration",
                  joint_signs: tuple[int, ...] = (1,) * 6, max_speed_deg_s: float = DEFAULT_MAX_SPEED_DEG_S,
                  torque_limit_percent: float = 100.0, retries: int = DEFAULT_BUS_RETRIES,
-                 time_step_s: float = 0.02, log: Callable[[str], None] = print):
+                 time_step_s: float = 0.02):
         self.port = port
         self._motors = [calibration[name] for name in MOTOR_NAMES]
         self._signs = joint_signs
         self.max_speed_deg_s = max_speed_deg_s
         self.retries = retries
-        self._log = log
         self.steps = 0
         self.round_trips_s: array[float] = array("d")
         self._failed_reads = 0
@@ -115,11 +121,11 @@ class SO101Real:
         self._sent_deg = self._targets_deg = self._start_deg = start_deg
 
     @classmethod
-    def from_settings(cls, settings: ArmSettings, log: Callable[[str], None] = print) -> "SO101Real":
+    def from_settings(cls, settings: ArmSettings) -> "SO101Real":
         return cls(
             settings.port, load_calibration(settings.calibration_file), calibration_name=str(settings.calibration_file),
             joint_signs=settings.joint_signs, max_speed_deg_s=settings.max_speed_deg_s,
-            torque_limit_percent=settings.torque_limit_percent, retries=settings.retries, log=log,
+            torque_limit_percent=settings.torque_limit_percent, retries=settings.retries,
         )
 
     # -- start-up checks ------------------------------------------------------------------
@@ -200,10 +206,10 @@ class SO101Real:
             if self._failed_reads > self.retries:
                 raise BusError(f"{error}; still failing after {self.retries} retries, torque off") from None
             if self._failed_reads == 1:
-                self._log(f"[arm] {error}; retrying, up to {self.retries} times")
+                logger.warning(f"[arm] {error}; retrying, up to {self.retries} times")
             return
         if self._failed_reads:
-            self._log(f"[arm] the servos answer again after {self._failed_reads} failed read(s)")
+            logger.info(f"[arm] the servos answer again after {self._failed_reads} failed read(s)")
             self._failed_reads = 0
         self._angles_deg = self._to_deg(present)
 
@@ -228,14 +234,24 @@ class SO101Real:
             return
         try:
             bus.sync_write("Torque_Enable", {i: 0 for i in MOTOR_IDS})
-            if any(bus.sync_read("Torque_Enable", MOTOR_IDS).values()):
-                self._log("[arm] a servo still reports torque on: switch the arm's power off")
+            if not self._torque_confirmed_off(bus):
+                logger.error("[arm] a servo still reports torque on: switch the arm's power off")
             else:
-                self._log(f"[arm] torque off on servos 1-6; bus round trip over the run: {self.round_trip_summary()}")
+                logger.info(f"[arm] torque off on servos 1-6; bus round trip over the run: {self.round_trip_summary()}")
         except BusError as error:
-            self._log(f"[arm] could not confirm torque off ({error}): switch the arm's power off")
+            logger.error(f"[arm] could not confirm torque off ({error}): switch the arm's power off")
         finally:
             bus.close()
+
+    @staticmethod
+    def _torque_confirmed_off(bus: FeetechBus) -> bool:
+        # Ctrl-C can cut an exchange short with its replies still on the way; one of them, read as
+        # this answer, would say "on". So an "on" is read again before it is believed.
+        for _ in range(TORQUE_OFF_READS):
+            if not any(bus.sync_read("Torque_Enable", MOTOR_IDS).values()):
+                return True
+            time.sleep(TORQUE_OFF_READ_GAP_S)
+        return False
 
     def __enter__(self) -> "SO101Real":
         return self

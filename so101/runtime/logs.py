@@ -1,40 +1,45 @@
 """Diagnostics go through `logging`, one logger per module (`logging.getLogger(__name__)`).
 
 Every logger of the project is a child of "so101"; a program's entry point calls
-`send_diagnostics_to_stderr()` once, and each record is written as its bare message, so a line
-reads the same as a print would. Lines that tools parse (a body's "loaded" line, a CLI's
-results) are not diagnostics: they stay on stdout as they are.
+`send_diagnostics_to()` once, and each record is written as its bare message, so a line reads
+as a print would. A node sends them to stdout, which dora keeps in the node's log; a command
+line tool or the prompt to stderr. Lines that tools parse (a body's "loaded" line, a CLI's
+results) are not diagnostics: they are printed to stdout as they are.
 """
 
 from __future__ import annotations
 
 import logging
 import sys
+from typing import Literal, TextIO
 
 PROJECT_LOGGER = "so101"
 
 
-class _CurrentStderr(logging.StreamHandler):
-    """Writes to whatever sys.stderr is at the time (pytest swaps it per test)."""
+class _CurrentStream(logging.StreamHandler):  # type: ignore[type-arg]
+    """Writes to whatever sys.stdout or sys.stderr is at the time of each record (pytest swaps them)."""
 
-    def __init__(self) -> None:
+    def __init__(self, stream_name: Literal["stdout", "stderr"]) -> None:
         super().__init__()
+        self.stream_name = stream_name
 
     @property  # type: ignore[override]
-    def stream(self):  # noqa: D401 - logging reads this attribute
-        return sys.stderr
+    def stream(self) -> TextIO:
+        return getattr(sys, self.stream_name)  # type: ignore[no-any-return]
 
     @stream.setter
-    def stream(self, _value) -> None:
-        pass
+    def stream(self, _value: TextIO) -> None:
+        pass  # StreamHandler.__init__ sets it; the current one is looked up each time instead
 
 
-def send_diagnostics_to_stderr(level: int = logging.INFO) -> None:
-    """The project's log records to stderr as bare messages; calling it again changes nothing."""
+def send_diagnostics_to(stream_name: Literal["stdout", "stderr"], level: int = logging.INFO) -> None:
+    """The project's log records to stdout or stderr as bare messages; calling it again only moves them."""
     logger = logging.getLogger(PROJECT_LOGGER)
-    if not any(isinstance(handler, _CurrentStderr) for handler in logger.handlers):
-        handler = _CurrentStderr()
+    handler = next((handler for handler in logger.handlers if isinstance(handler, _CurrentStream)), None)
+    if handler is None:
+        handler = _CurrentStream(stream_name)
         handler.setFormatter(logging.Formatter("%(message)s"))
         logger.addHandler(handler)
+    handler.stream_name = stream_name
     logger.setLevel(level)
     logger.propagate = False
