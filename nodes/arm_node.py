@@ -21,6 +21,7 @@ from so101.bodies.node_loop import cannot_start, run_body_node
 from so101.bodies.real_arm import ArmFailed, SO101Real, check_node_settings
 from so101.bodies.settings import ArmSettings, NodeSettings
 from so101.feetech.calibration import CalibrationError
+from so101.runtime.logs import send_diagnostics_to
 
 
 def _interrupt(signum: int, frame: FrameType | None) -> None:
@@ -29,6 +30,7 @@ def _interrupt(signum: int, frame: FrameType | None) -> None:
 
 
 def main() -> int:
+    send_diagnostics_to("stdout")  # dora keeps a node's stdout in its log, beside the loaded line
     signal.signal(signal.SIGTERM, _interrupt)
     try:
         settings = NodeSettings.from_environ(os.environ)

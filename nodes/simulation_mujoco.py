@@ -18,9 +18,11 @@ from so101.bodies.mujoco_sim import SO101MuJoCo
 from so101.bodies.node_loop import announce, cannot_start, check_pictures, run_body_node
 from so101.bodies.settings import MuJoCoSettings, NodeSettings
 from so101.gui.display import DisplayError
+from so101.runtime.logs import send_diagnostics_to
 
 
 def main() -> int:
+    send_diagnostics_to("stdout")  # dora keeps a node's stdout in its log, beside the loaded line
     try:
         settings = NodeSettings.from_environ(os.environ)
         mujoco = MuJoCoSettings.from_environ(os.environ)

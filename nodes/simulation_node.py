@@ -19,9 +19,11 @@ from so101.bodies.node_loop import announce, cannot_start, check_pictures, run_b
 from so101.bodies.pybullet_sim import SO101Sim, release_freed_memory
 from so101.bodies.settings import NodeSettings, PyBulletSettings
 from so101.gui.display import DisplayError
+from so101.runtime.logs import send_diagnostics_to
 
 
 def main() -> int:
+    send_diagnostics_to("stdout")  # dora keeps a node's stdout in its log, beside the loaded line
     try:
         settings = NodeSettings.from_environ(os.environ)
         pybullet = PyBulletSettings.from_environ(os.environ)

@@ -29,7 +29,6 @@ from so101.bodies.settings import NodeSettings
 from so101.joint_cmd import decode_joint_cmd
 from so101.robot import GRIPPER_COMMAND_INDEX, NUM_ARM_JOINTS
 from so101.runtime.dataflow import TICK_PERIOD_S, TickClock, timer_period_s
-from so101.runtime.logs import send_diagnostics_to
 
 if TYPE_CHECKING:
     from dora import Node
@@ -114,7 +113,6 @@ def run_body_node(body: Body, node: Node, settings: NodeSettings, identity: str,
                   node_id: str = "simulation") -> int:
     """The event loop, until STOP; closes `body`. `identity` and `detail[lang]` go into the
     "loaded" log line (`so101 teleop` waits for it). Returns the node's exit code."""
-    send_diagnostics_to("stdout")  # dora keeps a node's stdout in its log, beside the loaded line
     tag = TAGS[node_id][settings.lang]
     text = {key: line.replace("{tag}", tag) for key, line in TEXT[settings.lang].items()}
     fast_steps = settings.fast_steps
