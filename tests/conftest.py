@@ -19,6 +19,13 @@ settings.register_profile("soak", max_examples=10_000, deadline=None, suppress_h
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
 
 
+def pytest_collection_modifyitems(items):
+    """A real dataflow or a person's session is slow too: `-m "not slow"` is the fast subset."""
+    for item in items:
+        if item.get_closest_marker("dataflow") or item.get_closest_marker("person"):
+            item.add_marker(pytest.mark.slow)
+
+
 # -- the model files -------------------------------------------------------------------
 
 

@@ -9,6 +9,8 @@ import pytest
 
 from tests.dataflow_helpers import error_lines, run_so101
 
+pytestmark = pytest.mark.slow  # runs so101 inspect and so101 joints as processes: not in the fast subset
+
 def table_rows(stdout: str, word: str, type_word: str) -> list[tuple[int, str, str]]:
     pattern = re.compile(rf"^\s+{word} (\d+): (\S+)\s+{type_word}: (.+?)(?:\s+\[.*\])?$")
     return [

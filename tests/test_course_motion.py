@@ -19,6 +19,8 @@ from so101 import assets
 from so101.runtime.dataflow import TICK_PERIOD_S
 from so101.bodies.pybullet_sim import SO101Sim
 
+pytestmark = pytest.mark.slow  # steps PyBullet through the course's motions: not in the fast subset
+
 TOLERANCE_DEG = 0.01
 STEPS_PER_COMMAND = 250  # 1 s: every move below ends and settles well within it
 COURSE_JOINTS = [0, 1, 2, 3, 4, 6]  # step C's ARM_JOINTS, and the gripper

@@ -12,6 +12,8 @@ import pytest
 
 from tests.dataflow_helpers import error_lines
 
+pytestmark = pytest.mark.slow  # runs the course's scripts as processes: not in the fast subset
+
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 
 

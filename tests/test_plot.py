@@ -6,8 +6,12 @@ import re
 import subprocess
 import sys
 
+import pytest
+
 from so101.cli.main import main
 from tests.image_helpers import png_size
+
+pytestmark = pytest.mark.slow  # runs so101 plot-step: not in the fast subset
 
 ROW = re.compile(r"^\s+(?P<damping>[\d.]+)\s+(?P<overshoot>[\d.]+) %\s+(?P<settling>[\d.]+ s|never)\s+(?P<error>[+-][\d.]+)°$")
 

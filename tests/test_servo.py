@@ -10,6 +10,8 @@ import pytest
 from so101.bodies.pd_servo import SERVO_TORQUE_LIMIT_NM, joint_damping_stable, pd_gains, pd_torque_nm
 from so101.step_response import overshoot_percent, settling_time_s, step_metrics
 
+pytestmark = pytest.mark.slow  # steps PyBullet through step responses: not in the fast subset
+
 TIME_STEP_S = 0.004
 # Measured with `so101 plot-step` (joint 0, 0° -> 90°, ωn = 20 rad/s): ζ = 0.7 settles
 # into the 2% band after 0.31 s; the bound leaves room for another PyBullet build.

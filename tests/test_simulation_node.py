@@ -18,6 +18,8 @@ from so101.bodies.registry import BODIES, SIMULATED_BODIES
 from so101.runtime.dataflow import MAX_STEPS_PER_TICK, TickClock
 from tests.dataflow_helpers import TICK, body_environment, run_simulation_node
 
+pytestmark = pytest.mark.slow  # drives every body's node for seconds of simulated time: not in the fast subset
+
 
 @pytest.fixture(params=list(BODIES))
 def body(request, monkeypatch, tmp_path) -> str:

@@ -11,6 +11,8 @@ import pytest
 from so101 import assets
 from so101.robot import ACTUATED_JOINTS, ARM_JOINTS, GRIPPER, JOINT_TABLE
 
+pytestmark = pytest.mark.slow  # steps PyBullet until joints settle: not in the fast subset
+
 REACH_TOLERANCE_DEG = 0.5
 # At the course's 3 rad/s a 90° move takes 126 steps; the slowest measured here took 150.
 REACH_STEP_BUDGET = 400

@@ -10,6 +10,8 @@ from so101.cli.main import main
 from so101.bodies.pybullet_sim import SO101Sim
 from tests.image_helpers import arm_pixels, open_png, png_rgb, png_size
 
+pytestmark = pytest.mark.slow  # renders pictures of the arm: not in the fast subset
+
 SIZE = (160, 120)
 
 
