@@ -11,8 +11,9 @@ import dataclasses
 from hypothesis import given
 from hypothesis import strategies as st
 
+from so101.lang import LANGUAGES
 from so101.prompt.commands import (
-    LANGUAGES, NO_ARGUMENT_COMMANDS, Batch, Empty, GoPose, ParseError, SavePose, SetJoint, parse_command,
+    NO_ARGUMENT_COMMANDS, Batch, Empty, GoPose, ParseError, SavePose, SetJoint, parse_command,
 )
 from so101.robot import ACTUATED_JOINTS, NUM_ARM_JOINTS
 

@@ -11,7 +11,8 @@ import pytest
 from dora.testing import MockNode
 
 from nodes import keyboard_control
-from nodes.keyboard_control import EventPump, KeyboardControl, joint_cmd_sender, run_prompt
+from nodes.keyboard_control import EventPump, joint_cmd_sender, run_prompt
+from so101.prompt.control import KeyboardControl
 from so101.prompt.poses import PoseStore
 
 STATE_DEG = [-30.004, 44.981, -59.687, 30.0, -0.001]
@@ -369,3 +370,16 @@ def test_when_joint_state_stops_coming_commands_are_not_sent_and_one_line_says_w
             False)
     assert control.handle_line("help")[0][0] == "  commands:"  # what needs no arm still works
     assert sent(node) == [[0.0, 10.0]]
+
+
+def test_the_readme_lists_the_settings_the_prompt_declares():
+    import dataclasses
+    import re
+
+    from so101.prompt.settings import PromptSettings
+
+    readme = (keyboard_control.ROOT / "README.md").read_text(encoding="utf-8")
+    section = readme.split("### keyboard_control (`nodes/keyboard_control.py`)")[1].split("\n### ")[0]
+    listed = re.findall(r"^\| `(SO101_\w+)` \|", section, flags=re.MULTILINE)
+    declared = [field.metadata["variable"] for field in dataclasses.fields(PromptSettings)]
+    assert listed == declared

@@ -12,8 +12,8 @@ Beyond the course (its mini project 7, and Cartesian targets):
 
 Out-of-limit angles are refused, not clamped: at a keyboard a value beyond the
 URDF limits is far more likely a typo (900 for 90) than a wish for the limit.
-All reply texts, in Chinese (the course) and English, live here too, so the
-node only decides what to send and which text to print.
+All reply texts, in Chinese (the course) and English, live here too, so
+so101/prompt/control.py only decides what to send and which text to print.
 """
 
 from __future__ import annotations
@@ -23,8 +23,6 @@ import re
 from dataclasses import dataclass
 
 from so101.robot import ACTUATED_JOINTS, GRIPPER, GRIPPER_COMMAND_INDEX, NUM_ARM_JOINTS
-
-LANGUAGES = ("zh", "en")
 
 # The gripper's jaw: 0° closes it, 100° (the URDF's upper limit, 1.74533 rad, rounded down) opens it fully.
 GRIPPER_CLOSED_DEG = 0.0
@@ -131,6 +129,9 @@ Command = (
 
 TEXT = {
     "zh": {
+        "title": "  SO-101 键盘控制",
+        "poses_file": "  姿态文件: {path}(已保存 {count} 个)",
+        "stopped": "  数据流已停止,退出",
         "joint_line": "    {index}: {name} ({label})",
         "sent_joint": "  → 关节 {index} ({name}) → {angle}°",
         "sent_batch": "  → 全关节 → {angles}°",
@@ -198,6 +199,9 @@ TEXT = {
         ],
     },
     "en": {
+        "title": "  SO-101 keyboard control",
+        "poses_file": "  poses file: {path} ({count} saved)",
+        "stopped": "  the dataflow stopped: quitting",
         "joint_line": "    {index}: {name} ({label})",
         "sent_joint": "  → joint {index} ({name}) → {angle}°",
         "sent_batch": "  → all joints → {angles}°",
@@ -305,11 +309,11 @@ def _angle(word: str, joint_position: int, text: dict) -> float | ParseError:
     joint = ACTUATED_JOINTS[joint_position]
     # The limits are shown to 0.1° (110.0° for 1.91986 rad = 109.9999°), so the shown values must be accepted;
     # the hair beyond the exact URDF limit is then clamped away.
-    if not round(joint.lower_deg, 1) <= angle <= round(joint.upper_deg, 1):
+    if not joint.allows_deg(angle, decimals=1):
         return ParseError(
             text["limit"].format(name=joint.name, lower=joint.lower_deg, upper=joint.upper_deg, angle=word)
         )
-    return min(max(angle, joint.lower_deg), joint.upper_deg)
+    return joint.clamp_deg(angle)
 
 
 def _set_joint(index: int, word: str, text: dict) -> SetJoint | ParseError:
@@ -323,7 +327,7 @@ def _pose_name(command: str, words: list[str], text: dict) -> str | ParseError:
     return words[1]
 
 
-NO_ARGUMENT_COMMANDS = {
+NO_ARGUMENT_COMMANDS: dict[str, Command] = {
     "home": Home(), "list": ListJoints(), "state": ShowState(), "poses": ListPoses(), "help": Help(), "?": Help(),
     "quit": Quit(), "exit": Quit(), "where": Where(), "jog": JogKeys(),
     "open": SetJoint(GRIPPER_COMMAND_INDEX, GRIPPER_OPEN_DEG),
@@ -372,12 +376,11 @@ def parse_command(line: str, lang: str = "zh") -> Command | ParseError:
     if keyword == "xyz":
         if len(words) != 4:
             return ParseError(text["xyz_form"])
-        coordinates = []
         for word in words[1:]:
             if not _NUMBER.match(word) or not math.isfinite(float(word)):
                 return ParseError(text["bad_mm"].format(text=word))
-            coordinates.append(float(word))
-        return MoveTip(tuple(coordinates))
+        x, y, z = (float(word) for word in words[1:])
+        return MoveTip((x, y, z))
 
     if keyword == "snapshot":
         if len(words) > 2:

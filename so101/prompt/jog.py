@@ -12,7 +12,7 @@ clamped, and the note says which joint is at its limit.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from typing import Sequence
+from typing import Any, Sequence
 
 from so101.robot import ACTUATED_JOINTS, GRIPPER_COMMAND_INDEX, NUM_ARM_JOINTS
 
@@ -35,7 +35,8 @@ DEFAULT_STEP = 2  # 2° or 5 mm
 MAX_IK_SWING_DEG = 20.0
 EXIT_KEYS = ("esc", "q")
 
-TEXT = {
+# Each language's texts: one format string per key, and the key map as a list of lines.
+TEXT: dict[str, dict[str, Any]] = {
     "zh": {
         "map": [
             "  点动模式(按键即动,按住连续动):",
@@ -106,9 +107,9 @@ class Pressed:
     leave: bool = False
 
 
-def _clamped(jog: Jog, index: int, angle_deg: float, text: dict) -> tuple[float, str]:
+def _clamped(index: int, angle_deg: float, text: dict) -> tuple[float, str]:
     joint = ACTUATED_JOINTS[index]
-    clamped = min(max(angle_deg, joint.lower_deg), joint.upper_deg)
+    clamped = joint.clamp_deg(angle_deg)
     if clamped != angle_deg:
         return clamped, text["limit"].format(name=joint.name, limit=clamped)
     return clamped, ""
@@ -141,7 +142,7 @@ def press(jog: Jog, key: str, state_deg: Sequence[float] | None, kinematics, lan
         return _cartesian(jog, key, kinematics, text)
     if key in JOINT_KEYS:
         index, direction = JOINT_KEYS[key]
-        angle, note = _clamped(jog, index, jog.targets_deg[index] + direction * jog.step_deg, text)
+        angle, note = _clamped(index, jog.targets_deg[index] + direction * jog.step_deg, text)
         if angle == jog.targets_deg[index]:
             return Pressed(replace(jog, note=note))
         targets = tuple(angle if i == index else value for i, value in enumerate(jog.targets_deg))

@@ -1,4 +1,5 @@
-"""Keep dora's own log lines out of the prompt's terminal, for the whole session.
+"""The prompt's terminal: dora's log lines kept out of it, line editing with a history, and
+single key presses for jogging.
 
 dora's Rust logging in a node writes JSON lines straight to file descriptor 1 (say, one
 warning per input it had to drop while the machine was busy). Those lines must not land
@@ -14,9 +15,13 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import io
+import logging
 import os
 import sys
 from pathlib import Path
+from typing import Callable
+
+log = logging.getLogger(__name__)
 
 # The name of C's `stdout` variable: glibc, then macOS.
 _C_STDOUT_NAMES = ("stdout", "__stdoutp")
@@ -90,6 +95,19 @@ def dora_logs_to(log_path: Path):
 
 
 @contextlib.contextmanager
+def dora_logs_aside(log_path: Path):
+    """`dora_logs_to(log_path)`; where that file cannot be written, one line says so and dora's
+    log lines are dropped (a terminal full of JSON would be worse than none)."""
+    with contextlib.ExitStack() as stack:
+        try:
+            stack.enter_context(dora_logs_to(log_path))
+        except OSError as error:
+            print(f"  (dora's log lines are dropped: cannot write {log_path}: {error.strerror or error})", flush=True)
+            stack.enter_context(dora_logs_to(Path(os.devnull)))
+        yield
+
+
+@contextlib.contextmanager
 def stderr_to_log():
     """Inside `dora_logs_to`, descriptor 2 goes to the log file too, for the block: PyBullet
     writes its build-time banner there when first imported, not between the prompt's lines."""
@@ -102,6 +120,28 @@ def stderr_to_log():
         sys.stderr.flush()
         os.dup2(saved, 2)
         os.close(saved)
+
+
+def line_editing(history_file: Path) -> Callable[[], None]:
+    """Line editing for input() and a persistent history where readline exists; returns the
+    function that saves the history, to call at exit."""
+    try:
+        import readline
+    except ImportError:  # Windows without pyreadline: plain input() still works
+        return lambda: None
+    readline.set_history_length(1000)
+    try:
+        readline.read_history_file(history_file)
+    except OSError:
+        pass  # no history yet
+
+    def save() -> None:
+        try:
+            readline.write_history_file(history_file)
+        except OSError as error:
+            log.warning("  (history not saved to %s: %s)", history_file, error.strerror or error)
+
+    return save
 
 
 # Key jogging: single key presses, straight from the terminal (termios; works over SSH, in tmux

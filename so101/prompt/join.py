@@ -1,0 +1,52 @@
+"""Joining the running dataflow as a dynamic node, or saying in one line why it cannot.
+
+The reasons go to stderr through logging (`so101.runtime.logs`), each as one bare line.
+"""
+
+from __future__ import annotations
+
+import logging
+
+from so101.runtime.versions import dora_version_mismatch, joined_daemon_version_problem
+
+log = logging.getLogger(__name__)
+
+TEXT = {
+    "zh": {
+        "join_failed": "无法作为 {node_id} 加入数据流(先在另一个终端运行 `dora run dataflow.yml`;集群上,本机的 "
+        "`dora daemon` 须在运行): {error}",
+        "join_no_place": "无法作为 {node_id} 加入数据流(此守护进程上没有含 {node_id} 的数据流:请先启动一个(`dora run "
+        "dataflow.yml`,集群上用 `dora start`);若数据流已在运行,说明此机器的守护进程掉线后重启过,dora 1.1 不会把运行中的"
+        "数据流交还给它:`dora restart so101` 重新启动数据流): {error}",
+    },
+    "en": {
+        "join_failed": "cannot join the dataflow as {node_id} (start it first in another terminal: "
+        "`dora run dataflow.yml`; on a cluster, this machine's `dora daemon` must be running): {error}",
+        "join_no_place": "cannot join the dataflow as {node_id} (this daemon has no dataflow with a {node_id} in it: "
+        "start one (`dora run dataflow.yml`, or `dora start` on a cluster); if one runs, this machine's daemon was "
+        "started again after it dropped out, and dora 1.1 does not hand a running dataflow back: `dora restart so101` "
+        "starts it anew): {error}",
+    },
+}
+
+
+def join_dataflow(node_id: str, daemon_port: int | None, lang: str):
+    """The dora Node `node_id` of the dataflow running on the daemon at `daemon_port` (dora's
+    own port for None), or None once the reason is logged."""
+    from dora import Node
+
+    daemon_problem = joined_daemon_version_problem(daemon_port)
+    if daemon_problem:
+        log.error("%s: %s", node_id, daemon_problem)
+        return None
+    try:
+        return Node(node_id, daemon_port=daemon_port) if daemon_port else Node(node_id)
+    except Exception as error:  # noqa: BLE001 - dora raises a bare RuntimeError with a multi-line chain
+        reason = " ".join(str(error).split("Location:")[0].split())  # drop the Rust backtrace
+        # dora's answer when no dataflow of this daemon has this node
+        text = TEXT[lang]["join_no_place" if "no node with ID" in reason else "join_failed"]
+        log.error("%s", text.format(node_id=node_id, error=reason))
+        mismatch = dora_version_mismatch()  # the likeliest cause when the dataflow does run
+        if mismatch:
+            log.error("%s: %s", node_id, mismatch)
+        return None
