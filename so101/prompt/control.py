@@ -168,7 +168,7 @@ class KeyboardControl:
                 return [text["jog_needs_terminal"]], False
             from so101.prompt.jog_loop import run_jog
 
-            return run_jog(self, self.keys_fd), False
+            return run_jog(self, self.keys_fd, FIRST_STATE_WAIT_S), False
         raise AssertionError(f"unhandled command {command!r}")
 
     def _batch_line(self, angles_deg: Sequence[float]) -> str:

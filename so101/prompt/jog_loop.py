@@ -8,14 +8,30 @@ from __future__ import annotations
 
 import os
 import sys
+from typing import Any, Callable, Protocol, Sequence
 
-from so101.prompt.control import FIRST_STATE_WAIT_S, KeyboardControl
 from so101.prompt.jog import TEXT, Jog, press, status_line
 from so101.prompt.terminal import single_keys
 from so101.robot import NUM_ARM_JOINTS
 
 # Look for a key this often, and send a waiting command once a newer joint_state came.
 JOG_POLL_S = 0.01
+
+
+class JogPrompt(Protocol):
+    """What jogging needs of the prompt (so101.prompt.control.KeyboardControl, which imports this
+    module only when `jog` is typed)."""
+
+    lang: str
+    text: dict[str, str]
+    states_seen: int
+    send_joint_cmd: Callable[[Sequence[float]], None]
+
+    def wait_for_state(self, timeout_s: float) -> tuple[tuple[float, ...] | None, float | None]: ...
+
+    def latest_deg(self) -> tuple[float, ...] | None: ...
+
+    def kinematics(self) -> Any: ...
 
 
 def _columns(fd: int) -> int:
@@ -26,12 +42,12 @@ def _columns(fd: int) -> int:
         return 80
 
 
-def run_jog(control: KeyboardControl, fd: int) -> list[str]:
+def run_jog(control: JogPrompt, fd: int, first_state_wait_s: float) -> list[str]:
     """Key jogging at the terminal on `fd` until Esc or q; returns the closing lines. At most one
     joint_cmd per joint_state received, so holding a key never queues commands ahead of the arm.
     The terminal is restored however this ends."""
     text = control.text
-    control.wait_for_state(FIRST_STATE_WAIT_S)
+    control.wait_for_state(first_state_wait_s)
     start_deg = control.latest_deg()
     if start_deg is None:
         return [text["jog_no_state"]]
