@@ -16,9 +16,8 @@ from so101.bodies.settings import (
     MuJoCoSettings,
     NodeSettings,
     PyBulletSettings,
-    Setting,
-    declared,
 )
+from so101.runtime.settings import Setting, declared
 from tests.dataflow_helpers import ROOT
 
 # Each body node's table of environment variables in the README: the heading of the section it is in.

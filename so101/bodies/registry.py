@@ -13,7 +13,8 @@ from pathlib import Path
 from typing import Any
 
 from so101.bodies.protocol import BodyName
-from so101.bodies.settings import ArmSettings, EnvironSettings, MuJoCoSettings, PyBulletSettings
+from so101.bodies.settings import ArmSettings, MuJoCoSettings, PyBulletSettings
+from so101.runtime.settings import EnvironSettings
 from so101.runtime.dataflow import ROOT
 
 

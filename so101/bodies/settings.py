@@ -1,8 +1,6 @@
-"""The body nodes' settings: environment variables, each declared once, as a field of a frozen dataclass.
-
-A field's metadata holds its variable's name, the value an unset variable has, one line of
-meaning and how the value is read; `from_environ` reads every field from it, and the
-README's tables of the body nodes are held to these declarations (tests/test_settings.py).
+"""The body nodes' settings: environment variables, each declared once, as a field of a frozen
+dataclass (so101/runtime/settings.py says how). The README's tables of the body nodes are held
+to these declarations (tests/test_settings.py).
 `NodeSettings` is what the shared loop reads for every body; each body adds its own
 (so101.bodies.registry names which). A bad value is a ValueError in one line, which the
 node prints and exits 2 on (node_loop.cannot_start).
@@ -12,19 +10,20 @@ Light on purpose: no physics engine and no serial port is imported here.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Mapping, Self
+from typing import Mapping, Self
 
 from so101.assets import ASSETS_ENV_VAR
 from so101.bodies.pd_servo import DEFAULT_DAMPING_RATIO
 from so101.feetech.calibration import parse_joint_signs
 from so101.gui.display import MODE_ENV_VAR
 from so101.lang import DEFAULT_LANGUAGE, ENV_VAR as LANG_ENV_VAR, language_from_environ
+from so101.runtime.settings import (
+    EnvironSettings, Setting, parse_number, read_number, read_optional_number, read_optional_path, read_file_path,
+    read_stripped_text, read_text, read_whole_number, setting,
+)
 from so101.runtime.versions import spawning_daemon_version_problem
-
-# The key of a field's Setting in its metadata.
-SETTING = "so101.setting"
 
 # "position": the course's POSITION_CONTROL motor. "servo": a PD torque servo, in
 # which the damping ratio decides whether a step overshoots (exercise 2).
@@ -33,103 +32,6 @@ CONTROL_MODES = ("position", "servo")
 DEFAULT_MAX_SPEED_DEG_S = 90.0
 DEFAULT_BUS_RETRIES = 5
 CALIBRATE_HINT = "make one with `so101 calibrate --port {port} --out FILE`, or use LeRobot's so101_follower calibration"
-
-
-@dataclass(frozen=True)
-class Setting:
-    """One environment variable: its name, the value an unset one has, its meaning, and its reader."""
-
-    env_var: str
-    default: str
-    meaning: str  # one line, as the README's table of the node gives it
-    # (environment, this setting) -> the value; ValueError in one line for a bad one.
-    read: Callable[[Mapping[str, str], "Setting"], Any]
-    # Where to set it, for a variable that may not be empty ("" = empty is allowed). It may
-    # name the values of the fields declared before it, as {field_name}.
-    required: str = ""
-
-    def raw(self, environ: Mapping[str, str]) -> str:
-        return environ.get(self.env_var, self.default)
-
-
-def setting(env_var: str, default: str, meaning: str, read: Callable[[Mapping[str, str], Setting], Any],
-            required: str = "") -> Any:
-    """A dataclass field that is read from `env_var` (Any: the field's own annotation gives its type)."""
-    return field(metadata={SETTING: Setting(env_var, default, meaning, read, required)})
-
-
-def declared(settings_class: type[EnvironSettings]) -> tuple[Setting, ...]:
-    """The settings a class declares, in field order."""
-    return tuple(each.metadata[SETTING] for each in fields(settings_class))
-
-
-@dataclass(frozen=True)
-class EnvironSettings:
-    """A frozen dataclass whose every field is a `setting(...)`."""
-
-    @classmethod
-    def from_environ(cls, environ: Mapping[str, str]) -> Self:
-        """Every field from its variable, in declaration order; ValueError naming the first bad value
-        and what is accepted."""
-        values: dict[str, Any] = {}
-        for each in fields(cls):
-            declared_setting: Setting = each.metadata[SETTING]
-            if declared_setting.required and not declared_setting.raw(environ).strip():
-                where = declared_setting.required.format(**values)
-                raise ValueError(f"{declared_setting.env_var} is empty: set it {where}")
-            values[each.name] = declared_setting.read(environ, declared_setting)
-        return cls(**values)
-
-
-# -- readers: (environment, setting) -> the field's value --------------------------------------------------
-
-
-def read_text(environ: Mapping[str, str], declared_setting: Setting) -> str:
-    return declared_setting.raw(environ)
-
-
-def read_stripped_text(environ: Mapping[str, str], declared_setting: Setting) -> str:
-    return declared_setting.raw(environ).strip()
-
-
-def read_file_path(environ: Mapping[str, str], declared_setting: Setting) -> Path:
-    return Path(declared_setting.raw(environ).strip()).expanduser()
-
-
-def read_optional_path(environ: Mapping[str, str], declared_setting: Setting) -> Path | None:
-    raw = declared_setting.raw(environ).strip()
-    return Path(raw).expanduser() if raw else None
-
-
-def parse_number(env_var: str, raw: str, minimum: float) -> float:
-    try:
-        value = float(raw)
-    except ValueError:
-        value = float("nan")
-    if not value >= minimum:  # also rejects NaN
-        raise ValueError(f"{env_var}={raw!r} is not a number >= {minimum:g}")
-    return value
-
-
-def read_number(minimum: float) -> Callable[[Mapping[str, str], Setting], float]:
-    def read(environ: Mapping[str, str], declared_setting: Setting) -> float:
-        return parse_number(declared_setting.env_var, declared_setting.raw(environ), minimum)
-    return read
-
-
-def read_optional_number(minimum: float) -> Callable[[Mapping[str, str], Setting], float | None]:
-    """A number, or None for an empty value."""
-    def read(environ: Mapping[str, str], declared_setting: Setting) -> float | None:
-        raw = declared_setting.raw(environ)
-        return parse_number(declared_setting.env_var, raw, minimum) if raw.strip() else None
-    return read
-
-
-def read_whole_number(environ: Mapping[str, str], declared_setting: Setting) -> int:
-    raw = declared_setting.raw(environ)
-    if not raw.strip().isdigit():
-        raise ValueError(f"{declared_setting.env_var}={raw!r} is not a whole number >= 0")
-    return int(raw)
 
 
 def read_language(environ: Mapping[str, str], declared_setting: Setting) -> str:
