@@ -20,13 +20,12 @@ from array import array
 from pathlib import Path
 
 from so101.bodies.registry import BODIES
-from so101.runtime.dataflow import dataflow_copy, write_dataflow
+from so101.runtime.dataflow import ROOT, dataflow_copy, write_dataflow
 from so101.runtime.processes import processes_with_env, stop_process
 from so101.runtime.venv import dora_executable, env_with_bin_first
 from so101.gui.viewer import WINDOW_SHOWING
 from so101.stats import summary
 
-ROOT = Path(__file__).resolve().parents[1]  # the checkout: nodes/, dataflow.yml, bench/
 PROBER = ROOT / "bench" / "nodes" / "prober.py"
 FIRST_STATE_MARK = "bench: first joint_state"
 # A probe moves a joint by 8° (4° in its first move); the first step after it moves

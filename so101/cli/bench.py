@@ -9,9 +9,9 @@ from __future__ import annotations
 import argparse
 import importlib
 import sys
-from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[2]  # the checkout: bench/, nodes/, dataflow.yml
+from so101.runtime.dataflow import ROOT
+
 BENCH_SCRIPT = ROOT / "bench" / "run_bench.py"
 
 
