@@ -38,13 +38,13 @@ if __package__ in (None, ""):  # run as a script (python bench/run_bench.py): th
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench.common import (  # noqa: E402
-    PACED_PROBE_ENV, ROOT, WARMUP_S, machine_facts, machine_line, realtime_figures, run_dataflow,
+    PACED_PROBE_ENV, WARMUP_S, machine_facts, machine_line, realtime_figures, run_dataflow,
     target_lines, target_row, tick_figures, tick_records,
 )
 from so101.bodies.registry import BODIES  # noqa: E402
 from so101.cli.argtypes import number  # noqa: E402
 from so101.gui.display import DisplayError, display_available, virtual_display  # noqa: E402
-from so101.runtime.dataflow import TICK_PERIOD_S  # noqa: E402
+from so101.runtime.dataflow import ROOT, TICK_PERIOD_S  # noqa: E402
 from so101.stats import summary  # noqa: E402
 
 DEFAULT_OUT = {"pybullet": ROOT / "bench" / "results" / "latest.json", "mujoco": ROOT / "bench" / "results" / "latest-mujoco.json",
