@@ -14,8 +14,8 @@ from typing import Any
 
 from so101.bodies.protocol import BodyName
 from so101.bodies.settings import ArmSettings, MuJoCoSettings, PyBulletSettings
-from so101.runtime.settings import EnvironSettings
 from so101.runtime.dataflow import ROOT
+from so101.runtime.settings import EnvironSettings
 
 
 @dataclass(frozen=True)
@@ -40,12 +40,12 @@ class BodyKind:
 BODIES = {
     # The course's choice, and the default.
     "pybullet": BodyKind("pybullet", ROOT / "nodes" / "simulation_node.py", ROOT / "dataflow.yml",
-                     "so101.bodies.pybullet_sim:SO101Sim", PyBulletSettings),
+                         "so101.bodies.pybullet_sim:SO101Sim", PyBulletSettings),
     "mujoco": BodyKind("mujoco", ROOT / "nodes" / "simulation_mujoco.py", ROOT / "dataflow_mujoco.yml",
-                   "so101.bodies.mujoco_sim:SO101MuJoCo", MuJoCoSettings),
+                       "so101.bodies.mujoco_sim:SO101MuJoCo", MuJoCoSettings),
     # The course's next section: the same contract on a real SO-101 follower (or `so101 fake-arm`).
-    "real": BodyKind("real", ROOT / "nodes" / "arm_node.py", ROOT / "dataflow_real.yml", "so101.bodies.real_arm:SO101Real",
-                 ArmSettings, node_id="arm", simulated=False),
+    "real": BodyKind("real", ROOT / "nodes" / "arm_node.py", ROOT / "dataflow_real.yml",
+                     "so101.bodies.real_arm:SO101Real", ArmSettings, node_id="arm", simulated=False),
 }
 SIMULATED_BODIES = [name for name, body in BODIES.items() if body.simulated]
 DEFAULT_BODY = "pybullet"
