@@ -424,7 +424,9 @@ def test_the_port_survives_the_client_closing_and_reopening_it(arm):
 def test_sweep_moves_torque_off_joints_to_both_stops_and_back(arm, bus):
     port, packets = bus
     assert packets.write1ByteTxRx(port, 2, TORQUE_ENABLE, 1)[0] == scs.COMM_SUCCESS  # held
-    assert arm.sweep(duration_s=0.6) == (1, 3, 4, 5, 6)
+    # Long enough that the sampling below sees wrist_roll inside 100 steps of its seam: at 0.6 s the
+    # hand crossed those 200 steps in about 12 ms, and one slow round of reads missed them.
+    assert arm.sweep(duration_s=1.5) == (1, 3, 4, 5, 6)
     seen: dict[int, set[int]] = {i: set() for i in IDS}
     moving = set()
     while arm.hand_busy():
