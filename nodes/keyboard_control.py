@@ -28,6 +28,7 @@ if str(ROOT) not in sys.path:  # run as a script from anywhere: the so101 packag
 from so101.prompt.control import KeyboardControl  # noqa: E402
 from so101.prompt.join import join_dataflow  # noqa: E402
 from so101.prompt.poses import PoseStore  # noqa: E402
+from so101.prompt.recorder_link import RecorderLink  # noqa: E402
 from so101.prompt.settings import PromptSettings, environment_help  # noqa: E402
 from so101.prompt.terminal import dora_logs_aside, line_editing  # noqa: E402
 from so101.runtime.logs import send_diagnostics_to  # noqa: E402
@@ -49,6 +50,30 @@ def joint_cmd_sender(node) -> Callable[[Sequence[float]], None]:
         node.send_output("joint_cmd", pa.array([float(angle) for angle in angles_deg], type=pa.float64()))
 
     return send
+
+
+def recorder_link(node, interactive: bool) -> RecorderLink | None:
+    """The line to the recorder, where the dataflow has one (`so101 teleop --record`)."""
+    if "record_cmd" not in (node.node_config() or {}).get("outputs", []):
+        return None
+    import pyarrow as pa
+
+    def send(record_cmd: str, request: str) -> None:
+        node.send_output("record_cmd", pa.array([record_cmd]), {"request": request})
+
+    def show(line: str) -> None:  # news while the person types: on a line of its own, then the prompt again
+        if interactive:
+            print(f"\r\x1b[K{line}", flush=True)
+            try:
+                import readline
+
+                readline.redisplay()
+            except (ImportError, AttributeError):
+                pass
+        else:
+            say(line)
+
+    return RecorderLink(send, show)
 
 
 class EventPump(threading.Thread):
@@ -131,7 +156,8 @@ def main(argv: list[str] | None = None) -> int:
         # process now and then on its way out (SIGSEGV, or glibc's "invalid stdio handle" abort).
         _KEPT_TO_EXIT.append(node)
         control = KeyboardControl(joint_cmd_sender(node), poses, settings.lang,
-                                  keys_fd=sys.stdin.fileno() if interactive else None)  # `jog` reads keys there
+                                  keys_fd=sys.stdin.fileno() if interactive else None,  # `jog` reads keys there
+                                  recorder=recorder_link(node, interactive))
         # On STOP, wake the main thread from input() or readline(): only a signal can.
         pump = EventPump(node, control, on_stop=lambda: os.kill(os.getpid(), signal.SIGINT))
         pump.start()

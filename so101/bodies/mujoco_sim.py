@@ -149,6 +149,11 @@ class SO101MuJoCo:
         return self.steps * self.time_step_s
 
     # -- pictures --------------------------------------------------------------------
+    def show_pose_deg(self, angles_deg: Sequence[float]) -> None:
+        """Put the joints at these six angles at once, without physics: a pose to draw (the camera node)."""
+        self.data.qpos[self._qpos] = np.radians(goal_deg(angles_deg))
+        mujoco.mj_kinematics(self.model, self.data)
+
     def render_rgb(self, width: int = 640, height: int = 480, camera: Camera = DEFAULT_CAMERA) -> RgbImage:
         """The scene as an RGB image, uint8 of shape (height, width, 3), drawn offscreen."""
         check_picture(self.renders, width, height)

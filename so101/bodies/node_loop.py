@@ -4,7 +4,10 @@ A body is what so101.bodies.protocol.Body describes. This loop turns one into th
 dataflow.yml declares: each `tick` advances the physics by the tick's period (and the
 periods of ticks dora dropped while the node was late) and publishes `joint_state` and
 `gripper_state`; a `joint_cmd` is decoded, clamped to the joint limits and logged, and only
-updates the targets, which the next tick applies; bad ones are logged and ignored; STOP or
+updates the targets, which the next tick applies; bad ones are logged and ignored. Where the
+dataflow declares a `joint_target` output (`so101 teleop --record` does, for the recorder), the
+targets the body applies go out on it at the first tick, whenever they change, and once a second
+for a node that joined late. STOP or
 Ctrl-C closes the body and ends with 0. The real arm differs only where hardware must: it
 starts from where it stands (`start_targets_deg`), a tick whose read failed publishes
 nothing (`joint_angles_deg` is None), and a bus past saving ends the node with one line and
@@ -37,6 +40,8 @@ if TYPE_CHECKING:
 Event = dict[str, Any]
 
 IMAGE_SIZE = (320, 240)
+# `joint_target` goes out again this often even when unchanged, for a node that joined late.
+TARGET_REFRESH_S = 1.0
 
 # Each body node's log tag: the simulation's, or the real arm's (node id `arm`).
 TAGS = {
@@ -139,6 +144,9 @@ def run_body_node(body: Body, node: Node, settings: NodeSettings, identity: str,
     # Counted in physics steps, so fast mode (several steps per tick) keeps the simulated rate.
     steps_per_image = max(1, round(1.0 / (image_hz * tick_s))) if image_hz > 0 else 0
     next_image_step = steps_per_image
+    sends_targets = "joint_target" in (node.node_config() or {}).get("outputs", [])
+    targets_sent_at_step: int | None = None  # body.steps when joint_target last went out; None: to send
+    target_refresh_steps = max(1, round(TARGET_REFRESH_S / tick_s))
     try:
         for event in events:
             if event["type"] == "INPUT":
@@ -154,6 +162,10 @@ def run_body_node(body: Body, node: Node, settings: NodeSettings, identity: str,
                     if angles_deg is not None:
                         node.send_output("joint_state", pa.array(angles_deg[:NUM_ARM_JOINTS], type=pa.float64()))
                         node.send_output("gripper_state", pa.array(angles_deg[NUM_ARM_JOINTS:], type=pa.float64()))
+                    if sends_targets and (targets_sent_at_step is None
+                                          or body.steps - targets_sent_at_step >= target_refresh_steps):
+                        node.send_output("joint_target", pa.array(joint_targets_deg, type=pa.float64()))
+                        targets_sent_at_step = body.steps
                     if tick_log is not None:
                         tick_log.extend((time.monotonic_ns(), body.steps))
                     if steps_per_image and body.steps >= next_image_step:
@@ -174,6 +186,7 @@ def run_body_node(body: Body, node: Node, settings: NodeSettings, identity: str,
                     previous_gripper_deg = joint_targets_deg[GRIPPER_COMMAND_INDEX]
                     joint_targets_deg = decoded.targets_deg
                     body.set_targets_deg(joint_targets_deg)
+                    targets_sent_at_step = None
                     if decoded.joint_index is not None:
                         logger.info(text["one"].format(index=decoded.joint_index, angle=joint_targets_deg[decoded.joint_index]))
                     else:

@@ -295,6 +295,11 @@ class SO101Sim:
         return self.steps * self.time_step_s
 
     # -- pictures --------------------------------------------------------------------
+    def show_pose_deg(self, angles_deg: Sequence[float]) -> None:
+        """Put the joints at these six angles at once, without physics: a pose to draw (the camera node)."""
+        for joint_index, angle_rad in zip(self._indices, np.radians(goal_deg(angles_deg)).tolist()):
+            p.resetJointState(self.robot_id, joint_index, angle_rad, physicsClientId=self.client)
+
     def render_rgb(self, width: int = 640, height: int = 480, camera: Camera = DEFAULT_CAMERA) -> RgbImage:
         """The scene as an RGB image, uint8 of shape (height, width, 3).
 

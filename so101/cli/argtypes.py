@@ -40,3 +40,14 @@ def add_language_option(parser: argparse.ArgumentParser, what: str) -> None:
         "--lang", type=_checked_language, metavar="{zh,en}", default=os.environ.get(lang.ENV_VAR, ""),
         help=f"language of {what} (default: ${lang.ENV_VAR}, else zh as in the course)",
     )
+
+
+def whole_number(lowest: int, highest: int) -> Callable[[str], int]:
+    """An argparse `type` for a whole number from `lowest` to `highest`."""
+
+    def parse(text: str) -> int:
+        if not text.strip().isdigit() or not lowest <= int(text) <= highest:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a whole number from {lowest} to {highest}")
+        return int(text)
+
+    return parse

@@ -9,6 +9,10 @@ dora gives a node the `env:` of dataflow.yml over the environment it was started
 with, so `--mode` and `--lang` cannot reach the simulation as inherited variables:
 teleop runs a copy of dataflow.yml (in a temporary folder, removed at exit) with
 those two values set and the node paths made absolute. The file itself stays as the course has it.
+
+`--record DIR` adds the recorder node (and, for a simulation, the camera node that draws its
+pictures) to that copy: the prompt's `record`, `stop`, `discard` and `episodes` then keep
+episodes in DIR as a LeRobot dataset.
 """
 
 from __future__ import annotations
@@ -20,13 +24,16 @@ import subprocess
 import sys
 import tempfile
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
-from so101.bodies.registry import BODIES, DEFAULT_BODY, body_node_env
-from so101.runtime.dataflow import LOADED_MARKS, PROMPT_NODE_FILE, ROOT, dataflow_copy, write_dataflow
+from so101.bodies.node_loop import IMAGE_SIZE
+from so101.bodies.registry import BODIES, DEFAULT_BODY, BodyKind, body_node_env
+from so101.dataset.features import DEFAULT_FPS
+from so101.runtime.dataflow import LOADED_MARKS, PROMPT_NODE_FILE, ROOT, dataflow_copy, with_recorder, write_dataflow
 from so101.gui.display import MODES, resolve_mode
 from so101.runtime.processes import alive, descendants, kill_until_gone, stop_process
-from so101.cli.argtypes import add_language_option
+from so101.cli.argtypes import add_language_option, whole_number
 from so101.runtime.venv import dora_executable, env_with_bin_first
 from so101.runtime.versions import dora_version_problem
 
@@ -62,6 +69,29 @@ TEXT = {
 
 
 def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
+    add_body_arguments(parser)
+    add_language_option(parser, "the prompt and the logs")
+    parser.add_argument(
+        "--record", type=Path, metavar="DIR", default=None,
+        help="keep episodes in DIR as a LeRobot dataset (v3.0): made if missing, appended to if it is one; "
+        "at the prompt: record TASK TEXT, stop, discard, episodes (jog: E)",
+    )
+    parser.add_argument(
+        "--fps", type=whole_number(1, 1000), default=DEFAULT_FPS, metavar="N",
+        help=f"--record: frames per second (default {DEFAULT_FPS}, LeRobot's)",
+    )
+    add_log_option(parser)
+
+
+def add_log_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--log", type=Path, default=DEFAULT_LOG, metavar="FILE",
+        help=f"where the dataflow's log goes (default: {DEFAULT_LOG})",
+    )
+
+
+def add_body_arguments(parser: argparse.ArgumentParser) -> None:
+    """--body, --port, --calibration, --mode: which body runs the dataflow, and how."""
     parser.add_argument(
         "--body", choices=list(BODIES), default=DEFAULT_BODY,
         help=f"what moves: pybullet (the course's simulation, default), mujoco, or real (an SO-101 follower arm, "
@@ -81,11 +111,6 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
         "--mode", choices=MODES, default=os.environ.get("SO101_MODE", "auto"),
         help="simulation window: gui, direct (headless) or auto (gui where a display exists; default $SO101_MODE, "
         "else auto); passed to the simulation as SO101_MODE",
-    )
-    add_language_option(parser, "the prompt and the logs")
-    parser.add_argument(
-        "--log", type=Path, default=DEFAULT_LOG, metavar="FILE",
-        help=f"where the dataflow's log goes (default: {DEFAULT_LOG})",
     )
 
 
@@ -130,43 +155,90 @@ class Dataflow:
         self._log_stream.close()
 
 
-def run(args: argparse.Namespace) -> int:
-    text = TEXT[args.lang]
+@dataclass(frozen=True)
+class Launch:
+    """What the options chose: the body, its display mode, its node's settings, the environment
+    of `dora run` and the nodes it starts, and the log file."""
+
+    body: BodyKind
+    mode: str
+    node_env: dict[str, str]
+    env: dict[str, str]
+    log: Path
+
+
+def prepare(args: argparse.Namespace, command: str, node_file: Path = PROMPT_NODE_FILE) -> Launch | None:
+    """The launch the options ask for (add_body_arguments', --lang's, --log's); None once one line
+    on stderr said what is wrong."""
     body = BODIES[args.body]
     try:
         # A GUI without a display fails here, in one line. The real arm has no window to choose.
         resolved_mode, notice = resolve_mode(args.mode) if body.simulated else ("real", None)
     except ValueError as error:  # a bad $SO101_MODE: argparse does not check defaults against choices
-        print(f"so101 teleop: {error} (from --mode or $SO101_MODE)", file=sys.stderr)
-        return 2
+        print(f"so101 {command}: {error} (from --mode or $SO101_MODE)", file=sys.stderr)
+        return None
     if notice:
         print(notice, flush=True)
-    dataflow_file = body.dataflow_file
-    if not dataflow_file.exists() or not PROMPT_NODE_FILE.exists():
-        print(f"so101 teleop: {dataflow_file} or {PROMPT_NODE_FILE} is missing: run it from a checkout of the project", file=sys.stderr)
-        return 2
+    if not body.dataflow_file.exists() or not node_file.exists():
+        print(f"so101 {command}: {body.dataflow_file} or {node_file} is missing: run it from a checkout of the project",
+              file=sys.stderr)
+        return None
     # A CLI and library of different versions fail deep in the daemon; say it here, in one line.
     version_problem = dora_version_problem(dora_executable())
     if version_problem:
-        print(f"so101 teleop: {version_problem}", file=sys.stderr)
-        return 2
+        print(f"so101 {command}: {version_problem}", file=sys.stderr)
+        return None
     try:
         calibration = args.calibration and str(args.calibration.expanduser().resolve())
         node_env = {"SO101_MODE": resolved_mode, "SO101_LANG": args.lang,
                     **body_node_env(body, args.port, calibration)}
     except ValueError as error:
-        print(f"so101 teleop: {error}", file=sys.stderr)
-        return 2
-    log = args.log.expanduser().resolve()
+        print(f"so101 {command}: {error}", file=sys.stderr)
+        return None
     env = env_with_bin_first(dict(os.environ, SO101_MODE=resolved_mode, SO101_LANG=args.lang))
+    return Launch(body, resolved_mode, node_env, env, args.log.expanduser().resolve())
 
-    print(text["starting"].format(mode=resolved_mode, log=log), flush=True)
+
+def run(args: argparse.Namespace) -> int:
+    text = TEXT[args.lang]
+    launch = prepare(args, "teleop")
+    if launch is None:
+        return 2
+    descriptor = dataflow_copy(launch.node_env, launch.body.dataflow_file)
+    if args.record is not None:
+        problem = add_recorder(descriptor, launch.body, args.record.expanduser().resolve(), args.fps, args.lang)
+        if problem:
+            print(f"so101 teleop: {problem}", file=sys.stderr)
+            return 2
+    print(text["starting"].format(mode=launch.mode, log=launch.log), flush=True)
+    return run_beside(launch, descriptor, PROMPT_NODE_FILE, text)
+
+
+def run_beside(launch: Launch, descriptor: dict, node_file: Path, text: dict[str, str]) -> int:
+    """`dora run` of `descriptor` in the background, then `node_file` (a dynamic node) in the
+    foreground once the body is up; the dataflow stops when that node exits. Returns its exit code."""
     with tempfile.TemporaryDirectory(prefix="so101-teleop-") as work_dir:
-        copy = write_dataflow(
-            dataflow_copy(node_env, dataflow_file), Path(work_dir) / "dataflow.yml",
-        )
-        dataflow = Dataflow(copy, log, env)
-        return _run_prompt(dataflow, env, text, log, body.simulated)
+        copy = write_dataflow(descriptor, Path(work_dir) / "dataflow.yml")
+        dataflow = Dataflow(copy, launch.log, launch.env)
+        return _run_node(dataflow, node_file, launch.env, text, launch.log, launch.body.simulated)
+
+
+def add_recorder(descriptor: dict, body: BodyKind, dataset_dir: Path, fps: int, lang: str) -> str | None:
+    """The recorder (and a simulation's camera) added to `descriptor`; or why DIR cannot take
+    these episodes, in one line, before anything starts."""
+    from so101.dataset.lerobot_v3 import DatasetError, DatasetWriter
+
+    image_size = IMAGE_SIZE if body.simulated else None  # the real arm has no camera of its own
+    try:
+        DatasetWriter.open(dataset_dir, fps, image_size)
+    except DatasetError as error:
+        return str(error)
+    size_text = f"{image_size[0]}x{image_size[1]}" if image_size else ""
+    recorder_env = {"SO101_RECORD_DIR": str(dataset_dir), "SO101_RECORD_FPS": str(fps),
+                    "SO101_RECORD_IMAGE_SIZE": size_text, "SO101_LANG": lang}
+    camera_env = {"SO101_CAMERA_BODY": body.name, "SO101_RECORD_IMAGE_SIZE": size_text} if image_size else None
+    with_recorder(descriptor, body.node_id, recorder_env, camera_env, picture_hz=fps)
+    return None
 
 
 class _HungUp(Exception):
@@ -178,13 +250,15 @@ def _hang_up(signum, frame):
 
 
 def _show(line: str) -> None:
+    if not line:  # a text left empty on purpose (so101 replay keeps its last line last)
+        return
     try:
         print(line, flush=True)
     except OSError:  # the terminal is gone: the clean-up must go on
         pass
 
 
-def _run_prompt(dataflow: Dataflow, env: dict[str, str], text: dict, log: Path, simulated: bool) -> int:
+def _run_node(dataflow: Dataflow, node_file: Path, env: dict[str, str], text: dict, log: Path, simulated: bool) -> int:
     # dora runs in a session of its own and gets no hang-up from the terminal: teleop must stop it.
     signal.signal(signal.SIGHUP, _hang_up)
     signal.signal(signal.SIGTERM, _hang_up)
@@ -197,7 +271,7 @@ def _run_prompt(dataflow: Dataflow, env: dict[str, str], text: dict, log: Path, 
             print(f"so101 teleop: {message}\n{_log_tail(log)}", file=sys.stderr, flush=True)
             return 1
         _show(text["ready" if simulated else "ready_real"])
-        prompt = subprocess.Popen([sys.executable, str(PROMPT_NODE_FILE)], env=env)
+        prompt = subprocess.Popen([sys.executable, str(node_file)], env=env)
         # Ctrl-C at the terminal goes to the whole foreground group: the prompt quits on it,
         # teleop must outlive it to stop the dataflow.
         previous = signal.signal(signal.SIGINT, signal.SIG_IGN)

@@ -9,6 +9,8 @@ Beyond the course (its mini project 7, and Cartesian targets):
   xyz X Y Z                the gripper tip to that point: millimetres, in the arm's base frame
   where                    where the tip is now (forward kinematics of joint_state)
   jog                      key jogging (so101/prompt/jog.py)
+Episodes, with `so101 teleop --record DIR` (the recorder node answers):
+  record TASK TEXT | stop | discard | episodes
 
 Out-of-limit angles are refused, not clamped: at a keyboard a value beyond the
 URDF limits is far more likely a typo (900 for 90) than a wish for the limit.
@@ -102,6 +104,14 @@ class JogKeys:
 
 
 @dataclass(frozen=True)
+class Episodes:
+    """A recorder command: `record TASK TEXT`, `stop`, `discard` or `episodes` (so101.dataset.recording)."""
+
+    command: str
+    task: str = ""
+
+
+@dataclass(frozen=True)
 class Help:
     pass
 
@@ -123,7 +133,7 @@ class ParseError:
 
 Command = (
     SetJoint | Batch | Home | ListJoints | ShowState | SavePose | GoPose | ListPoses | Snapshot | MoveTip | Where | JogKeys
-    | Help | Quit | Empty
+    | Episodes | Help | Quit | Empty
 )
 
 
@@ -152,7 +162,7 @@ TEXT = {
         "none": "无",
         "bye": "  再见",
         "unknown": "  无法识别 '{text}':可用 '关节号 角度'(如 '0 45')、batch、grip、open、close、home、list、"
-        "state、save、go、poses、snapshot、xyz、where、jog、help、quit(输入 help 查看)",
+        "state、save、go、poses、snapshot、xyz、where、jog、record、stop、discard、episodes、help、quit(输入 help 查看)",
         "joint_form": "  格式错误:关节号 角度(如 '0 45'),关节号 0-5(5 = 夹爪)",
         "joint_range": "  关节号范围 0-5(0-4 手臂,5 夹爪),收到 '{text}';格式:关节号 角度(如 '0 45')",
         "bad_angle": "  '{text}' 不是角度:角度是十进制数字,单位度(如 45、-30.5)",
@@ -177,6 +187,9 @@ TEXT = {
         "jog_needs_terminal": "  jog 需要终端(键盘),标准输入不是终端",
         "jog_no_state": "  还没有收到 joint_state(仿真节点在运行吗?),无法点动",
         "jog_left": "  已退出点动模式",
+        "record_form": "  record 命令格式:record 任务描述(如 'record 把方块放进盒子')",
+        "record_off": "  录制未开启:用 so101 teleop --record 文件夹 启动",
+        "recorder_silent": "  录制节点 {seconds:g} 秒内没有回答",
         "body_silent": "  {seconds:.0f} 秒没有收到 joint_state:仿真(或机械臂驱动)、它所在的机器或网络已断开,命令未发送",
         "help": [
             "  命令格式:",
@@ -192,7 +205,10 @@ TEXT = {
             "    snapshot [文件]          把当前姿态画成 PNG(无需窗口,默认 out/snapshot.png)",
             "    xyz X Y Z               末端移到该点(毫米,基座坐标系:x 向前,y 向左,z 向上)",
             "    where                   显示末端当前位置(毫米)",
-            "    jog                     键盘点动(W/S 抬起/放下,A/D 左/右转,Esc 返回)",
+            "    jog                     键盘点动(W/S 抬起/放下,A/D 左/右转,E 开始/结束录制,Esc 返回)",
+            "    record 任务描述          开始录制一段(需 so101 teleop --record 文件夹)",
+            "    stop / discard          结束并保存这一段 / 放弃这一段",
+            "    episodes                显示已保存的片段",
             "    help                    显示本帮助",
             "    quit / exit             退出(也可 Ctrl-D、Ctrl-C)",
             "  超出关节限位的角度不会发送(会提示范围)。",
@@ -222,7 +238,7 @@ TEXT = {
         "none": "none",
         "bye": "  bye",
         "unknown": "  cannot read '{text}': use 'JOINT ANGLE' (e.g. '0 45'), batch, grip, open, close, home, list, "
-        "state, save, go, poses, snapshot, xyz, where, jog, help, quit (type help)",
+        "state, save, go, poses, snapshot, xyz, where, jog, record, stop, discard, episodes, help, quit (type help)",
         "joint_form": "  format: JOINT ANGLE (e.g. '0 45'), JOINT 0-5 (5 = gripper)",
         "joint_range": "  joints are 0-5 (0-4 arm, 5 gripper), got '{text}'; format: JOINT ANGLE (e.g. '0 45')",
         "bad_angle": "  '{text}' is not an angle: angles are decimal numbers in degrees (e.g. 45, -30.5)",
@@ -249,6 +265,9 @@ TEXT = {
         "jog_needs_terminal": "  jog needs a terminal (a keyboard): stdin is not one",
         "jog_no_state": "  no joint_state received yet (is the simulation running?): cannot jog",
         "jog_left": "  left jog mode",
+        "record_form": "  record format: record TASK TEXT (e.g. 'record put the cube in the box')",
+        "record_off": "  recording is off: start with so101 teleop --record DIR",
+        "recorder_silent": "  the recorder did not answer within {seconds:g} s",
         "body_silent": "  no joint_state for {seconds:.0f} s: the simulation (or the arm's driver), its machine or the network "
         "is gone; not sent",
         "help": [
@@ -265,7 +284,10 @@ TEXT = {
             "    snapshot [FILE]         draw the arm as it is now to a PNG (no window needed; default out/snapshot.png)",
             "    xyz X Y Z               move the gripper tip there (millimetres, base frame: x forward, y left, z up)",
             "    where                   where the gripper tip is now (millimetres)",
-            "    jog                     jog with keys (W/S raise/lower, A/D turn, Esc back)",
+            "    jog                     jog with keys (W/S raise/lower, A/D turn, E starts/stops an episode, Esc back)",
+            "    record TASK TEXT        start recording an episode (with so101 teleop --record DIR)",
+            "    stop / discard          end the episode and save it / drop it",
+            "    episodes                list the saved episodes",
             "    help                    this help",
             "    quit / exit             quit (Ctrl-D and Ctrl-C quit too)",
             "  Angles beyond a joint's limits are not sent (the reply gives the range).",
@@ -330,6 +352,7 @@ def _pose_name(command: str, words: list[str], text: dict) -> str | ParseError:
 NO_ARGUMENT_COMMANDS: dict[str, Command] = {
     "home": Home(), "list": ListJoints(), "state": ShowState(), "poses": ListPoses(), "help": Help(), "?": Help(),
     "quit": Quit(), "exit": Quit(), "where": Where(), "jog": JogKeys(),
+    "stop": Episodes("stop"), "discard": Episodes("discard"), "episodes": Episodes("episodes"),
     "open": SetJoint(GRIPPER_COMMAND_INDEX, GRIPPER_OPEN_DEG),
     "close": SetJoint(GRIPPER_COMMAND_INDEX, GRIPPER_CLOSED_DEG),
 }
@@ -349,6 +372,11 @@ def parse_command(line: str, lang: str = "zh") -> Command | ParseError:
         if len(words) > 1:
             return ParseError(text["no_args"].format(command=keyword, text=shown))
         return NO_ARGUMENT_COMMANDS[keyword]
+
+    if keyword == "record":
+        # The task is the rest of the line as typed (commas and spacing are part of a sentence).
+        task = " ".join(line.strip()[len(words[0]):].split())
+        return Episodes("record", task) if task else ParseError(text["record_form"])
 
     if keyword == "batch":
         values = words[1:]

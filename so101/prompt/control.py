@@ -15,10 +15,11 @@ import time
 from typing import Callable, Sequence
 
 from so101.prompt.commands import (
-    Batch, Empty, GoPose, Help, Home, JogKeys, ListJoints, ListPoses, MoveTip, ParseError, Quit, SavePose, SetJoint,
+    Batch, Empty, Episodes, GoPose, Help, Home, JogKeys, ListJoints, ListPoses, MoveTip, ParseError, Quit, SavePose, SetJoint,
     ShowState, Snapshot, Where, format_angle, format_angles, help_lines, joint_lines, parse_command, texts,
 )
 from so101.prompt.poses import Pose, PoseStore
+from so101.prompt.recorder_link import REPLY_WAIT_S, RecorderLink
 from so101.robot import ACTUATED_JOINTS, NUM_ARM_JOINTS
 from so101.runtime.dataflow import ROOT
 
@@ -34,11 +35,12 @@ class KeyboardControl:
 
     `send_joint_cmd` receives the angles in degrees ([idx, angle] or a batch);
     `on_event` takes the node's events (from any thread) to track the latest state;
-    `keys_fd` is the terminal `jog` reads keys from (None: stdin is no terminal).
+    `keys_fd` is the terminal `jog` reads keys from (None: stdin is no terminal);
+    `recorder` the line to the recorder node (None: the dataflow records nothing).
     """
 
     def __init__(self, send_joint_cmd: Callable[[Sequence[float]], None], poses: PoseStore, lang: str = "zh",
-                 keys_fd: int | None = None):
+                 keys_fd: int | None = None, recorder: RecorderLink | None = None):
         self.send_joint_cmd = send_joint_cmd
         self.poses = poses
         self.lang = lang
@@ -51,6 +53,7 @@ class KeyboardControl:
         self.stopped = False
         self._kinematics = None
         self.keys_fd = keys_fd
+        self.recorder = recorder
 
     # -- events, from the pump thread ----------------------------------------------------
     def on_event(self, event: dict) -> None:
@@ -58,6 +61,10 @@ class KeyboardControl:
             with self._state_changed:
                 self.stopped = True
                 self._state_changed.notify_all()
+        elif event["type"] == "INPUT" and event["id"] == "record_status" and self.recorder is not None:
+            status = event["value"].to_pylist()
+            reply_to = str((event.get("metadata") or {}).get("reply_to", ""))
+            self.recorder.on_status(str(status[0]) if status else "", reply_to)
         elif event["type"] == "INPUT" and event["id"] in ("joint_state", "gripper_state"):
             values = [float(angle) for angle in event["value"].to_pylist()]
             with self._state_changed:
@@ -131,6 +138,8 @@ class KeyboardControl:
             return help_lines(self.lang), False
         if isinstance(command, ListJoints):
             return joint_lines(self.lang), False
+        if isinstance(command, Episodes):  # the recorder answers for itself, the body alive or not
+            return self.ask_recorder(command.command, command.task), False
         silent_s = self.silent_for_s()
         if silent_s is not None:  # every other command moves the arm or reads its state: neither works now
             return [text["body_silent"].format(seconds=silent_s)], False
@@ -170,6 +179,15 @@ class KeyboardControl:
 
             return run_jog(self, self.keys_fd, FIRST_STATE_WAIT_S), False
         raise AssertionError(f"unhandled command {command!r}")
+
+    def ask_recorder(self, command: str, task: str = "") -> list[str]:
+        """The recorder's answer to `record`, `stop`, `discard`, `episodes` or `toggle` (jog's key)."""
+        if self.recorder is None:
+            return [self.text["record_off"]]
+        answer = self.recorder.ask(command, task)
+        if answer is None:
+            return [self.text["recorder_silent"].format(seconds=REPLY_WAIT_S)]
+        return [f"  {line}" for line in answer]
 
     def _batch_line(self, angles_deg: Sequence[float]) -> str:
         arm = format_angles(angles_deg[:NUM_ARM_JOINTS])

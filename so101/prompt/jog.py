@@ -34,6 +34,8 @@ DEFAULT_STEP = 2  # 2° or 5 mm
 # a jump to another branch of the solution, not a step.
 MAX_IK_SWING_DEG = 20.0
 EXIT_KEYS = ("esc", "q")
+# Starts an episode (the last `record` task) or stops and saves it, with `so101 teleop --record`.
+EPISODE_KEY = "e"
 
 # Each language's texts: one format string per key, and the key map as a list of lines.
 TEXT: dict[str, dict[str, Any]] = {
@@ -44,6 +46,7 @@ TEXT: dict[str, dict[str, Any]] = {
             "    Z/X 手腕旋转        O/C 夹爪张开/闭合",
             "    笛卡尔模式(Tab 切换):W/S 末端上/下  A/D 左/右  R/F 前/后(毫米,基座坐标系)",
             "    - / + 步长变细/变粗   H 回零   空格 停在当前位置   M 或 ? 显示按键   Esc 或 q 返回命令行",
+            "    E 开始/结束录制一段(so101 teleop --record;任务用上次 record 的描述)",
         ],
         "joint_mode": "关节",
         "cartesian_mode": "笛卡尔",
@@ -64,6 +67,7 @@ TEXT: dict[str, dict[str, Any]] = {
             "    Z/X wrist roll            O/C open/close the gripper",
             "    Cartesian (Tab switches): W/S tip up/down  A/D left/right  R/F forward/back (mm, base frame)",
             "    -/+ finer/coarser step   H home   Space hold here   M or ? this map   Esc or q back to the prompt",
+            "    E start/stop an episode (so101 teleop --record; the task of the last `record`)",
         ],
         "joint_mode": "joint",
         "cartesian_mode": "cartesian",

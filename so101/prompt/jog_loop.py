@@ -10,7 +10,9 @@ import os
 import sys
 from typing import Any, Callable, Protocol, Sequence
 
-from so101.prompt.jog import TEXT, Jog, press, status_line
+from dataclasses import replace
+
+from so101.prompt.jog import EPISODE_KEY, TEXT, Jog, press, status_line
 from so101.prompt.terminal import single_keys
 from so101.robot import NUM_ARM_JOINTS
 
@@ -32,6 +34,8 @@ class JogPrompt(Protocol):
     def latest_deg(self) -> tuple[float, ...] | None: ...
 
     def kinematics(self) -> Any: ...
+
+    def ask_recorder(self, command: str, task: str = "") -> list[str]: ...
 
 
 def _columns(fd: int) -> int:
@@ -60,7 +64,9 @@ def run_jog(control: JogPrompt, fd: int, first_state_wait_s: float) -> list[str]
         with single_keys(fd) as keys:
             while True:
                 key = keys.read(JOG_POLL_S)
-                if key is not None:
+                if key is not None and key.lower() == EPISODE_KEY:  # the recorder's answer, on the status line
+                    jog = replace(jog, note=control.ask_recorder("toggle")[0].strip())
+                elif key is not None:
                     if key == "tab" and kinematics is None:
                         kinematics = control.kinematics()
                     pressed = press(jog, key, control.latest_deg(), kinematics, control.lang)

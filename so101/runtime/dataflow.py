@@ -9,6 +9,14 @@ ROOT = Path(__file__).resolve().parents[2]
 DATAFLOW_FILE = ROOT / "dataflow.yml"
 # The keyboard prompt, a dynamic node: `so101 teleop` and `so101 cluster-demo` start it themselves.
 PROMPT_NODE_FILE = ROOT / "nodes" / "keyboard_control.py"
+PROMPT_NODE_ID = "keyboard_control"
+# `so101 teleop --record` adds these two; `so101 replay` starts the replay node as the prompt is started.
+RECORDER_NODE_FILE = ROOT / "nodes" / "recorder.py"
+CAMERA_NODE_FILE = ROOT / "nodes" / "camera.py"
+REPLAY_NODE_FILE = ROOT / "nodes" / "replay.py"
+REPLAY_NODE_ID = "replay"
+# The recorder samples at its frame rate by its own clock, woken this often (the frame's jitter).
+RECORDER_TICK = "dora/timer/millis/5"
 # The period of dataflow.yml's `dora/timer/millis/4` tick, and so of the physics step
 # (tests/test_dataflow_file.py holds the two equal). Tools that simulate without the
 # dataflow (plot-step, snapshot, bench) step with it too.
@@ -95,3 +103,62 @@ def dataflow_text(descriptor: dict, source: str = DATAFLOW_FILE.name) -> str:
 def write_dataflow(descriptor: dict, path: Path) -> Path:
     path.write_text(dataflow_text(descriptor), encoding="utf-8")
     return path
+
+
+def _node(descriptor: dict, node_id: str) -> dict:
+    return next(node for node in descriptor["nodes"] if node["id"] == node_id)
+
+
+def _latest(source: str) -> dict:
+    """An input of which only the newest message matters."""
+    return {"source": source, "queue_size": 1}
+
+
+def with_recorder(descriptor: dict, body_node_id: str, recorder_env: dict[str, str], camera_env: dict[str, str] | None,
+                  picture_hz: float, root: PurePath = ROOT) -> dict:
+    """A dataflow (dataflow_copy's dict) with the recorder added, and the camera node when
+    `camera_env` is given: the body also publishes `joint_target`, the prompt sends `record_cmd`
+    and hears `record_status`."""
+    body = _node(descriptor, body_node_id)
+    body["outputs"] = [*body["outputs"], "joint_target"]
+    prompt = _node(descriptor, PROMPT_NODE_ID)
+    prompt["outputs"] = [*prompt["outputs"], "record_cmd"]
+    prompt["inputs"] = {**prompt["inputs"], "record_status": {"source": "recorder/record_status", "queue_size": 100}}
+    recorder_inputs = {
+        "tick": _latest(RECORDER_TICK),
+        "joint_state": _latest(f"{body_node_id}/joint_state"),
+        "gripper_state": _latest(f"{body_node_id}/gripper_state"),
+        "joint_target": _latest(f"{body_node_id}/joint_target"),
+        # Every command must arrive: the default queue keeps 10.
+        "record_cmd": {"source": f"{PROMPT_NODE_ID}/record_cmd", "queue_size": 100},
+    }
+    if camera_env is not None:
+        recorder_inputs["image"] = _latest("camera/image")
+        descriptor["nodes"].append({
+            "id": "camera", "path": str(root / CAMERA_NODE_FILE.relative_to(ROOT)), "restart_policy": "never",
+            "inputs": {
+                "tick": _latest(f"dora/timer/millis/{max(1, round(1000 / picture_hz))}"),
+                "joint_state": _latest(f"{body_node_id}/joint_state"),
+                "gripper_state": _latest(f"{body_node_id}/gripper_state"),
+            },
+            "outputs": ["image"], "env": camera_env,
+        })
+    descriptor["nodes"].append({
+        "id": "recorder", "path": str(root / RECORDER_NODE_FILE.relative_to(ROOT)), "restart_policy": "never",
+        "inputs": recorder_inputs, "outputs": ["record_status"], "env": recorder_env,
+    })
+    return descriptor
+
+
+def with_replay(descriptor: dict, body_node_id: str) -> dict:
+    """A dataflow (dataflow_copy's dict) whose body takes `joint_cmd` from the replay node (dynamic,
+    started by `so101 replay`) instead of the prompt."""
+    prompt = _node(descriptor, PROMPT_NODE_ID)
+    prompt["id"] = REPLAY_NODE_ID
+    body = _node(descriptor, body_node_id)
+    command_input = body["inputs"]["joint_cmd"]
+    if isinstance(command_input, dict):
+        body["inputs"]["joint_cmd"] = {**command_input, "source": f"{REPLAY_NODE_ID}/joint_cmd"}
+    else:
+        body["inputs"]["joint_cmd"] = f"{REPLAY_NODE_ID}/joint_cmd"
+    return descriptor

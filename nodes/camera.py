@@ -1,0 +1,91 @@
+"""camera: pictures of a simulated arm, drawn in a process of its own.
+
+Each `tick` (the picture rate's timer) draws the latest `joint_state` + `gripper_state` with the
+body's own renderer (PyBullet's or MuJoCo's, SO101_CAMERA_BODY) and publishes it on `image`
+(uint8 RGB, metadata width, height, encoding "rgb8"), when the arm moved since the last one.
+A picture of this arm takes a CPU renderer tens of milliseconds (`so101 bench` measures it):
+drawn inside the body's physics loop it would hold the loop back, so it is drawn here, below the
+body's priority. The recorder takes the latest picture at each of its frames.
+Settings: so101.dataset.settings.CameraSettings.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+# One rendering thread for Mesa's software renderer (MuJoCo's EGL): two cores here, one is the physics'.
+os.environ.setdefault("LP_NUM_THREADS", "1")
+
+import numpy as np  # noqa: E402
+import pyarrow as pa  # noqa: E402
+from dora import Node  # noqa: E402
+
+from so101.assets import ModelFilesError  # noqa: E402
+from so101.bodies.node_loop import cannot_start  # noqa: E402
+from so101.dataset.settings import CameraSettings  # noqa: E402
+from so101.gui.display import DisplayError  # noqa: E402
+from so101.robot import NUM_ARM_JOINTS  # noqa: E402
+from so101.runtime.dataflow import TICK_PERIOD_S  # noqa: E402
+from so101.runtime.logs import send_diagnostics_to  # noqa: E402
+
+NODE_ID = "camera"
+NICENESS = 10
+# A pose that moved less than this on every joint since the last picture is not drawn again.
+REDRAW_DEG = 0.05
+
+
+def main() -> int:
+    send_diagnostics_to("stdout")
+    try:
+        settings = CameraSettings.from_environ(os.environ)
+        if settings.simulator == "mujoco":
+            from so101.bodies.mujoco_sim import SO101MuJoCo as Simulator
+        else:
+            from so101.bodies.pybullet_sim import SO101Sim as Simulator  # type: ignore[assignment]
+        sim = Simulator(mode="direct", time_step_s=TICK_PERIOD_S, assets_dir=settings.assets_dir,
+                        log=lambda line: None)
+        width, height = settings.image_size or (0, 0)
+        sim.render_rgb(width, height)  # a renderer that cannot work says so now, in one line
+    except (ValueError, ModelFilesError, DisplayError, RuntimeError) as error:
+        return cannot_start(error, NODE_ID)
+    os.nice(NICENESS)
+    arm_deg: list[float] | None = None
+    gripper_deg = 0.0
+    drawn_deg: np.ndarray | None = None
+    node = Node()
+    try:
+        for event in node:
+            if event["type"] == "INPUT":
+                if event["id"] == "joint_state":
+                    values = event["value"].to_pylist()
+                    if len(values) == NUM_ARM_JOINTS:
+                        arm_deg = values
+                elif event["id"] == "gripper_state":
+                    values = event["value"].to_pylist()
+                    if len(values) == 1:
+                        gripper_deg = values[0]
+                elif event["id"] == "tick" and arm_deg is not None:
+                    pose_deg = np.array(arm_deg + [gripper_deg])
+                    if drawn_deg is not None and np.all(np.abs(pose_deg - drawn_deg) < REDRAW_DEG):
+                        continue
+                    sim.show_pose_deg(pose_deg)
+                    rgb = sim.render_rgb(width, height)
+                    drawn_deg = pose_deg
+                    node.send_output("image", pa.array(rgb.ravel()), {"width": width, "height": height, "encoding": "rgb8"})
+            elif event["type"] == "STOP":
+                break
+    except KeyboardInterrupt:
+        pass
+    finally:
+        sim.close()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

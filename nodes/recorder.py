@@ -1,0 +1,111 @@
+"""recorder: keeps episodes of the arm as a LeRobot dataset (LeRobotDataset v3.0).
+
+`so101 teleop --record DIR` adds this node. Each `tick` (a 5 ms timer) adds the frames due at
+the dataset's rate, each with the latest `joint_state` + `gripper_state` (observation.state),
+`joint_target` (action: what the body was told) and `image` (the camera node's picture, stored
+as video); `record_cmd` messages from the prompt start, stop, discard and list episodes, and
+each gets its reply on `record_status`. Saving runs in the background. STOP saves an episode
+still recording. What it does is so101/dataset/recording.py; the files, lerobot_v3.py there.
+Settings: so101.dataset.settings.RecorderSettings (SO101_RECORD_DIR, SO101_RECORD_FPS,
+SO101_RECORD_IMAGE_SIZE, SO101_LANG).
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import queue
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:  # run as a script from anywhere: the so101 package sits beside nodes/
+    sys.path.insert(0, str(ROOT))
+
+import numpy as np  # noqa: E402
+import pyarrow as pa  # noqa: E402
+from dora import Node  # noqa: E402
+
+from so101.bodies.node_loop import cannot_start  # noqa: E402
+from so101.dataset.lerobot_v3 import DatasetError, DatasetWriter  # noqa: E402
+from so101.dataset.recording import Recording, decode_record_cmd  # noqa: E402
+from so101.dataset.settings import RecorderSettings  # noqa: E402
+from so101.runtime.logs import send_diagnostics_to  # noqa: E402
+
+NODE_ID = "recorder"
+# Below the body's priority: a recorder that encodes video must never take the physics loop's CPU.
+NICENESS = 10
+logger = logging.getLogger("so101.recorder")
+
+
+def picture(event: dict, image_size: tuple[int, int]) -> np.ndarray | None:
+    """The `image` input as (height, width, 3) uint8, or None (logged) for one of another size."""
+    width, height = image_size
+    pixels = event["value"].to_numpy(zero_copy_only=False)
+    if pixels.size != width * height * 3:
+        metadata = event.get("metadata") or {}
+        logger.warning("[recorder] ignored an image of %sx%s: the dataset's video is %dx%d",
+                       metadata.get("width", "?"), metadata.get("height", "?"), width, height)
+        return None
+    return pixels.astype(np.uint8, copy=False).reshape(height, width, 3)
+
+
+def main() -> int:
+    send_diagnostics_to("stdout")
+    try:
+        settings = RecorderSettings.from_environ(os.environ)
+        # Opened before joining: a folder that is not this dataset stops the node in one line.
+        writer = DatasetWriter.open(settings.root, settings.fps, settings.image_size)
+    except (ValueError, DatasetError) as error:
+        return cannot_start(error, NODE_ID)
+    os.nice(NICENESS)
+    node = Node()
+    if settings.image_size and "image" not in (node.node_config() or {}).get("inputs", {}):
+        return cannot_start(ValueError("SO101_RECORD_IMAGE_SIZE is set but no `image` input is connected "
+                                       "(empty it to record without video)"), NODE_ID)
+    reports: queue.Queue[str] = queue.Queue()  # lines from the save thread, sent from this one
+    recording = Recording(writer, str(settings.root), settings.fps, settings.lang,
+                          needs_image=settings.image_size is not None, say=reports.put)
+
+    def send_status(lines: list[str], reply_to: str | None = None) -> None:
+        for line in lines:
+            logger.info("[recorder] %s", line)
+        node.send_output("record_status", pa.array(["\n".join(lines)]), {"reply_to": reply_to or ""})
+
+    logger.info("[recorder] %s: %d episodes, %d fps, %s", settings.root, len(writer.episodes), settings.fps,
+                f"video {settings.image_size[0]}x{settings.image_size[1]}" if settings.image_size else "no video")
+    try:
+        for event in node:
+            if event["type"] == "INPUT":
+                name = event["id"]
+                if name == "tick":
+                    recording.tick()
+                elif name == "joint_state":
+                    recording.on_joint_state(event["value"].to_pylist())
+                elif name == "gripper_state":
+                    recording.on_gripper_state(event["value"].to_pylist())
+                elif name == "joint_target":
+                    recording.on_joint_target(event["value"].to_pylist())
+                elif name == "image" and settings.image_size:
+                    rgb = picture(event, settings.image_size)
+                    if rgb is not None:
+                        recording.on_image(rgb)
+                elif name == "record_cmd":
+                    texts = event["value"].to_pylist()
+                    reply_to = (event.get("metadata") or {}).get("request", "")
+                    send_status(recording.command(decode_record_cmd(str(texts[0]) if texts else "")), reply_to)
+                while not reports.empty():
+                    send_status([reports.get()])
+            elif event["type"] == "STOP":
+                break
+    except KeyboardInterrupt:
+        pass
+    finally:
+        recording.close()  # an episode still recording is saved, and every save waited for
+        while not reports.empty():
+            logger.info("[recorder] %s", reports.get())
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

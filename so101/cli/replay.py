@@ -1,0 +1,53 @@
+"""`so101 replay DIR --episode N`: an episode of a LeRobot dataset played onto any body.
+
+Runs the body's dataflow (as `so101 teleop` does, with the same --body, --port, --calibration and
+--mode) with the replay node (nodes/replay.py) in the prompt's place, in the foreground: it moves
+the arm slowly to the episode's first frame, plays every frame at the dataset's rate, and ends
+with the tracking error. The dataset is checked before anything starts.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+from so101.cli.argtypes import add_language_option, whole_number
+from so101.cli.teleop import TEXT as TELEOP_TEXT, add_body_arguments, add_log_option, prepare, run_beside
+from so101.runtime.dataflow import REPLAY_NODE_FILE, dataflow_copy, with_replay
+
+TEXT = {
+    lang: {**lines, "ready": "", "ready_real": "", "stopping": "", "stopped": "",
+           "starting": "回放:启动数据流(dora run,{mode} 模式),日志写入 {log}" if lang == "zh"
+           else "replay: starting the dataflow (dora run, {mode} mode), log in {log}"}
+    for lang, lines in TELEOP_TEXT.items()
+}
+
+
+def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
+    parser.add_argument("dataset", type=Path, metavar="DIR", help="the dataset's folder (LeRobotDataset v3.0)")
+    parser.add_argument("--episode", type=whole_number(0, 10**9), default=0, metavar="N",
+                        help="the episode to play (default 0; `so101 dataset DIR` lists them)")
+    add_body_arguments(parser)
+    add_language_option(parser, "the messages")
+    add_log_option(parser)
+
+
+def run(args: argparse.Namespace) -> int:
+    from so101.dataset.lerobot_v3 import Dataset, DatasetError
+
+    dataset_dir = args.dataset.expanduser().resolve()
+    try:  # a wrong folder or episode is said here, before a dataflow starts
+        Dataset.open(dataset_dir).episode_frames(args.episode)
+    except DatasetError as error:
+        print(f"so101 replay: {error}", file=sys.stderr)
+        return 2
+    launch = prepare(args, "replay", REPLAY_NODE_FILE)
+    if launch is None:
+        return 2
+    text = TEXT[args.lang]
+    descriptor = with_replay(dataflow_copy(launch.node_env, launch.body.dataflow_file), launch.body.node_id)
+    env = dict(launch.env, SO101_REPLAY_DIR=str(dataset_dir), SO101_REPLAY_EPISODE=str(args.episode))
+    print(text["starting"].format(mode=launch.mode, log=launch.log), flush=True)
+    return run_beside(replace(launch, env=env), descriptor, REPLAY_NODE_FILE, text)

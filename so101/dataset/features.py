@@ -1,0 +1,52 @@
+"""What a frame of an SO-101 episode holds, as LeRobot's `so101_follower` records it.
+
+LeRobot names each motor's position `<joint>.pos`, in the order of the servo IDs 1-6, which is
+this project's `so101.robot.ACTUATED_JOINTS`. The five arm joints are in degrees in both
+(LeRobot's `use_degrees`); the gripper is 0-100 in LeRobot (its RANGE_0_100 norm mode) and
+−10…100° in the URDF: `to_lerobot` and `from_lerobot` are the one place that maps it.
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+import numpy.typing as npt
+
+from so101.robot import ACTUATED_JOINTS, GRIPPER_COMMAND_INDEX
+
+DEFAULT_FPS = 30
+ROBOT_TYPE = "so101_follower"
+MOTOR_NAMES: tuple[str, ...] = tuple(f"{joint.name}.pos" for joint in ACTUATED_JOINTS)
+STATE_KEY = "observation.state"
+ACTION_KEY = "action"
+IMAGE_KEY = "observation.images.front"
+# LeRobot's gripper range, and the URDF's in degrees: its limits, -0.174533 and 1.74533 rad, are
+# these to within 0.00002°; mapped on the round values, fully open (100°) is exactly 100.
+GRIPPER_RANGE = (0.0, 100.0)
+GRIPPER_DEG_RANGE = (-10.0, 100.0)
+
+Float32Array = npt.NDArray[np.float32]
+Float64Array = npt.NDArray[np.float64]
+
+
+def _gripper_scale() -> float:
+    return (GRIPPER_RANGE[1] - GRIPPER_RANGE[0]) / (GRIPPER_DEG_RANGE[1] - GRIPPER_DEG_RANGE[0])
+
+
+def to_lerobot(angles_deg: Sequence[float]) -> Float32Array:
+    """Six angles in this project's degrees -> LeRobot's values (float32; the gripper 0-100)."""
+    values = np.array(angles_deg, dtype=np.float64)
+    if values.shape != (len(ACTUATED_JOINTS),):
+        raise ValueError(f"expected {len(ACTUATED_JOINTS)} angles, got shape {values.shape}")
+    values[GRIPPER_COMMAND_INDEX] = GRIPPER_RANGE[0] + (values[GRIPPER_COMMAND_INDEX] - GRIPPER_DEG_RANGE[0]) * _gripper_scale()
+    return values.astype(np.float32)
+
+
+def from_lerobot(values: Sequence[float] | npt.NDArray[np.floating]) -> Float64Array:
+    """LeRobot's six values (one frame, or an (N, 6) array of them) -> this project's degrees (float64)."""
+    angles = np.array(values, dtype=np.float64)
+    if angles.shape[-1:] != (len(ACTUATED_JOINTS),):
+        raise ValueError(f"expected {len(ACTUATED_JOINTS)} values per frame, got shape {angles.shape}")
+    angles[..., GRIPPER_COMMAND_INDEX] = GRIPPER_DEG_RANGE[0] + (angles[..., GRIPPER_COMMAND_INDEX] - GRIPPER_RANGE[0]) / _gripper_scale()
+    return angles

@@ -1,0 +1,295 @@
+"""What the recorder node does, without dora: sample frames at the dataset's rate, answer the
+prompt's commands, and save episodes in the background.
+
+The node (nodes/recorder.py) hands `Recording` the body's latest `joint_state`, `gripper_state`
+and `joint_target`, the camera's latest `image`, the prompt's `record_cmd` messages and the
+time at each of its ticks; `Recording` says what to reply. Each frame samples the latest state
+and target at the frame's tick; its timestamp is frame_index / fps (LeRobot's rule), so a
+recorder that fell behind adds the frames it owes, each with the latest sample, and the episode
+keeps the wall clock's length. Saving runs in a thread: the recorder goes on answering and
+sampling while an episode is written.
+"""
+
+from __future__ import annotations
+
+import json
+import threading
+import time
+from dataclasses import dataclass
+from typing import Callable, Protocol, Sequence
+
+import numpy as np
+import numpy.typing as npt
+
+from so101.dataset.features import to_lerobot
+from so101.robot import ACTUATED_JOINTS, NUM_ARM_JOINTS
+
+# A recorder that stalled longer than this many frames (a suspended laptop) starts counting
+# afresh rather than fill the gap with copies of one sample.
+MAX_FRAMES_OWED = 30
+
+COMMANDS = ("record", "stop", "discard", "episodes", "toggle")
+
+TEXT = {
+    "zh": {
+        "started": "● 录制第 {episode} 段:任务 '{task}'(停止: stop,放弃: discard)",
+        "already": "正在录制第 {episode} 段:先 stop 或 discard",
+        "not_recording": "没有正在录制的片段(开始: record 任务描述)",
+        "no_state": "还没有收到 joint_state,无法开始录制",
+        "no_task": "record 需要任务描述,例如: record 把方块放进盒子",
+        "saving": "■ 第 {episode} 段:{frames} 帧({seconds:.1f} 秒),保存中…",
+        "empty": "第 {episode} 段没有帧,未保存",
+        "saved": "✓ 第 {episode} 段已保存:{frames} 帧,{seconds:.1f} 秒(用时 {save_s:.1f} 秒)→ {root}",
+        "save_failed": "✗ 第 {episode} 段未保存: {error}",
+        "discarded": "第 {episode} 段已放弃({frames} 帧)",
+        "episodes_none": "{root}:还没有片段",
+        "episodes_head": "{root}:{count} 段,{fps} 帧/秒",
+        "episode_line": "  {index:>3}: {frames:>5} 帧 {seconds:>6.1f} 秒  {tasks}",
+        "pending": "  (保存中: {pending})",
+        "unknown": "录制器不认识这条指令: {command!r}(可用: {accepted})",
+        "stopping_save": "数据流停止:保存未结束的第 {episode} 段",
+        "waiting_picture": "(等待第一张画面,之后开始计帧)",
+    },
+    "en": {
+        "started": "● recording episode {episode}: task '{task}' (stop: stop, drop: discard)",
+        "already": "episode {episode} is recording: stop or discard it first",
+        "not_recording": "no episode is recording (start one: record TASK TEXT)",
+        "no_state": "no joint_state has come yet: cannot record",
+        "no_task": "record needs a task text, e.g.: record put the cube in the box",
+        "saving": "■ episode {episode}: {frames} frames ({seconds:.1f} s), saving...",
+        "empty": "episode {episode} has no frames: not saved",
+        "saved": "✓ episode {episode} saved: {frames} frames, {seconds:.1f} s (took {save_s:.1f} s) -> {root}",
+        "save_failed": "✗ episode {episode} not saved: {error}",
+        "discarded": "episode {episode} discarded ({frames} frames)",
+        "episodes_none": "{root}: no episodes yet",
+        "episodes_head": "{root}: {count} episodes, {fps} fps",
+        "episode_line": "  {index:>3}: {frames:>5} frames {seconds:>6.1f} s  {tasks}",
+        "pending": "  (saving: {pending})",
+        "unknown": "the recorder does not know {command!r} (accepted: {accepted})",
+        "stopping_save": "the dataflow stops: saving the unfinished episode {episode}",
+        "waiting_picture": "(waiting for the first picture; frames count from then)",
+    },
+}
+
+
+class Episode(Protocol):
+    """An episode being written (so101.dataset.lerobot_v3.EpisodeRecorder)."""
+
+    frames: int
+
+    def add_frame(self, state: np.ndarray, action: np.ndarray, image: np.ndarray | None = None) -> None: ...
+
+    def save(self) -> object: ...
+
+    def discard(self) -> None: ...
+
+
+class Writer(Protocol):
+    """A dataset open for appending (so101.dataset.lerobot_v3.DatasetWriter)."""
+
+    episodes: list  # of EpisodeSummary: index, length, tasks, duration_s
+
+    def start_episode(self, task: str) -> Episode: ...
+
+
+class FrameClock:
+    """Frames due at the dataset's rate, counted from the episode's first frame (so rounding
+    never adds up)."""
+
+    def __init__(self, fps: float, start_s: float):
+        self.period_s = 1.0 / fps
+        self._origin_s = start_s
+        self.frames = 0
+
+    def due(self, now_s: float) -> int:
+        """How many frames to add now (each with the latest sample); 0 until the next one is due."""
+        owed = int((now_s - self._origin_s) / self.period_s) + 1 - self.frames
+        if owed > MAX_FRAMES_OWED:  # a stall: one frame now, and count from here
+            self._origin_s, owed = now_s - self.frames * self.period_s, 1
+        owed = max(owed, 0)
+        self.frames += owed
+        return owed
+
+
+@dataclass
+class RecordCommand:
+    """A `record_cmd` message: {"command": one of COMMANDS, "task": text for record/toggle}."""
+
+    command: str
+    task: str = ""
+
+
+def decode_record_cmd(text: str) -> RecordCommand | str:
+    """A record_cmd's JSON text -> the command, or the reason it is not one (one line)."""
+    try:
+        message = json.loads(text)
+        command = message["command"]
+        task = str(message.get("task", "")).strip()
+    except (ValueError, TypeError, KeyError):
+        return f"not a record_cmd: {text[:80]!r}"
+    return RecordCommand(command, task)
+
+
+def encode_record_cmd(command: str, task: str = "") -> str:
+    return json.dumps({"command": command, "task": task}, ensure_ascii=False)
+
+
+class Recording:
+    """The recorder's state: the latest inputs, the episode in progress, the saves under way.
+
+    `say(line)` reports what happens later (a save that ended); commands return their replies.
+    `needs_image`: the dataset has video, so a frame waits for the first picture.
+    """
+
+    def __init__(self, writer: Writer, root: str, fps: int, lang: str, needs_image: bool,
+                 say: Callable[[str], None], clock: Callable[[], float] = time.monotonic):
+        self.writer, self.root, self.fps = writer, root, fps
+        self.text = TEXT[lang]
+        self.needs_image = needs_image
+        self.say = say
+        self.clock = clock
+        self.arm_deg: tuple[float, ...] | None = None
+        self.gripper_deg: float | None = None
+        self.targets_deg: tuple[float, ...] | None = None
+        self.image: npt.NDArray[np.uint8] | None = None
+        self.episode: Episode | None = None
+        self.episode_index = len(writer.episodes)  # the next episode's index
+        self._frame_clock: FrameClock | None = None
+        self._lock = threading.Lock()  # one save at a time, in episode order
+        self._saves: list[threading.Thread] = []
+        self._pending: dict[int, int] = {}  # episode index -> frames, while it saves
+        self.last_task = ""
+
+    # -- inputs --------------------------------------------------------------------------
+    def on_joint_state(self, arm_deg: Sequence[float]) -> None:
+        if len(arm_deg) == NUM_ARM_JOINTS:
+            self.arm_deg = tuple(float(angle) for angle in arm_deg)
+
+    def on_gripper_state(self, gripper_deg: Sequence[float]) -> None:
+        if len(gripper_deg) == 1:
+            self.gripper_deg = float(gripper_deg[0])
+
+    def on_joint_target(self, targets_deg: Sequence[float]) -> None:
+        if len(targets_deg) == len(ACTUATED_JOINTS):
+            self.targets_deg = tuple(float(angle) for angle in targets_deg)
+
+    def on_image(self, rgb: npt.NDArray[np.uint8]) -> None:
+        self.image = rgb
+
+    def state_deg(self) -> tuple[float, ...] | None:
+        if self.arm_deg is None or self.gripper_deg is None:
+            return None
+        return self.arm_deg + (self.gripper_deg,)
+
+    # -- the frame clock -----------------------------------------------------------------
+    def tick(self) -> int:
+        """Add the frames due now; returns how many were added."""
+        if self.episode is None:
+            return 0
+        state = self.state_deg()
+        if state is None or (self.needs_image and self.image is None):
+            return 0
+        now_s = self.clock()
+        if self._frame_clock is None:  # the first frame: everything it needs has come
+            self._frame_clock = FrameClock(self.fps, now_s)
+        due = self._frame_clock.due(now_s)
+        if due:
+            # `action` is what the body was told to reach; until the body has said, where it stands.
+            action = to_lerobot(self.targets_deg if self.targets_deg is not None else state)
+            observation = to_lerobot(state)
+            for _ in range(due):
+                self.episode.add_frame(observation, action, self.image if self.needs_image else None)
+        return due
+
+    # -- commands ------------------------------------------------------------------------
+    def command(self, message: RecordCommand | str) -> list[str]:
+        if isinstance(message, str):  # what came could not be decoded
+            return [self.text["unknown"].format(command=message, accepted=", ".join(COMMANDS))]
+        name = message.command
+        if name == "toggle":
+            name = "stop" if self.episode is not None else "record"
+        if name == "record":
+            return [self.start(message.task or self.last_task)]
+        if name == "stop":
+            return [self.stop()]
+        if name == "discard":
+            return [self.discard()]
+        if name == "episodes":
+            return self.episode_lines()
+        return [self.text["unknown"].format(command=name, accepted=", ".join(COMMANDS))]
+
+    def start(self, task: str) -> str:
+        if self.episode is not None:
+            return self.text["already"].format(episode=self.episode_index)
+        if not task:
+            return self.text["no_task"]
+        if self.state_deg() is None:
+            return self.text["no_state"]
+        self.episode = self.writer.start_episode(task)
+        self._frame_clock = None
+        self.last_task = task
+        line = self.text["started"].format(episode=self.episode_index, task=task)
+        if self.needs_image and self.image is None:
+            line += " " + self.text["waiting_picture"]
+        return line
+
+    def stop(self) -> str:
+        """End the episode in progress and save it in the background."""
+        episode = self.episode
+        if episode is None:
+            return self.text["not_recording"]
+        index, frames = self.episode_index, episode.frames
+        self.episode, self._frame_clock = None, None
+        if frames == 0:
+            episode.discard()
+            return self.text["empty"].format(episode=index)
+        self.episode_index += 1
+        self._pending[index] = frames
+        saving = threading.Thread(target=self._save, args=(episode, index, frames), name=f"save-{index}")
+        self._saves.append(saving)
+        saving.start()
+        return self.text["saving"].format(episode=index, frames=frames, seconds=frames / self.fps)
+
+    def _save(self, episode: Episode, index: int, frames: int) -> None:
+        started = time.monotonic()
+        with self._lock:
+            try:
+                episode.save()
+            except Exception as error:  # noqa: BLE001 - a failed save is reported; the recorder goes on
+                reason = " ".join(str(error).split()) or type(error).__name__
+                self.say(self.text["save_failed"].format(episode=index, error=reason))
+            else:
+                self.say(self.text["saved"].format(episode=index, frames=frames, seconds=frames / self.fps,
+                                                   save_s=time.monotonic() - started, root=self.root))
+            finally:
+                self._pending.pop(index, None)
+
+    def discard(self) -> str:
+        episode = self.episode
+        if episode is None:
+            return self.text["not_recording"]
+        frames = episode.frames
+        self.episode, self._frame_clock = None, None
+        episode.discard()
+        return self.text["discarded"].format(episode=self.episode_index, frames=frames)
+
+    def episode_lines(self) -> list[str]:
+        episodes = list(self.writer.episodes)
+        if not episodes:
+            lines = [self.text["episodes_none"].format(root=self.root)]
+        else:
+            lines = [self.text["episodes_head"].format(root=self.root, count=len(episodes), fps=self.fps)]
+            lines += [self.text["episode_line"].format(index=each.index, frames=each.length, seconds=each.duration_s,
+                                                       tasks=" | ".join(each.tasks)) for each in episodes]
+        if self._pending:
+            lines.append(self.text["pending"].format(pending=", ".join(str(index) for index in sorted(self._pending))))
+        return lines
+
+    # -- the end -------------------------------------------------------------------------
+    def close(self) -> None:
+        """The dataflow stops: save the unfinished episode (it is whole up to now), and wait for every save."""
+        if self.episode is not None:
+            self.say(self.text["stopping_save"].format(episode=self.episode_index))
+            self.say(self.stop())
+        for saving in self._saves:
+            saving.join()

@@ -1,0 +1,86 @@
+"""The recorder's, the camera's and replay's settings: environment variables, each declared once
+(so101/runtime/settings.py says how). `so101 teleop --record` and `so101 replay` set them."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Mapping
+
+from so101.assets import ASSETS_ENV_VAR
+from so101.bodies.settings import read_language
+from so101.dataset.features import DEFAULT_FPS
+from so101.lang import DEFAULT_LANGUAGE, ENV_VAR as LANG_ENV_VAR
+from so101.runtime.settings import EnvironSettings, Setting, read_file_path, read_optional_path, read_whole_number, setting
+
+SIMULATORS = ("pybullet", "mujoco")
+DEFAULT_IMAGE_SIZE = "320x240"
+
+
+def read_fps(environ: Mapping[str, str], declared_setting: Setting) -> int:
+    fps = read_whole_number(environ, declared_setting)
+    if not 1 <= fps <= 1000:
+        raise ValueError(f"{declared_setting.env_var}={fps} is not a frame rate from 1 to 1000 per second")
+    return fps
+
+
+def parse_image_size(text: str, env_var: str = "image size") -> tuple[int, int] | None:
+    """"WIDTHxHEIGHT" -> (width, height); "" -> None (no pictures)."""
+    raw = text.strip().lower()
+    if not raw:
+        return None
+    width, _, height = raw.partition("x")
+    if not (width.isdigit() and height.isdigit() and 16 <= int(width) <= 4096 and 16 <= int(height) <= 4096
+            and int(width) % 2 == 0 and int(height) % 2 == 0):
+        raise ValueError(f"{env_var}={text!r} is not WIDTHxHEIGHT in even pixels from 16 to 4096 (e.g. 320x240), "
+                         "or empty for no video")
+    return int(width), int(height)
+
+
+def read_image_size(environ: Mapping[str, str], declared_setting: Setting) -> tuple[int, int] | None:
+    return parse_image_size(declared_setting.raw(environ), declared_setting.env_var)
+
+
+def read_simulator(environ: Mapping[str, str], declared_setting: Setting) -> str:
+    raw = declared_setting.raw(environ).strip()
+    if raw not in SIMULATORS:
+        raise ValueError(f"{declared_setting.env_var}={raw!r} is not one of: {', '.join(SIMULATORS)}")
+    return raw
+
+
+@dataclass(frozen=True)
+class RecorderSettings(EnvironSettings):
+    """nodes/recorder.py."""
+
+    root: Path = setting(
+        "SO101_RECORD_DIR", "", "the dataset's folder: made if missing, appended to if it is one", read_file_path,
+        required="(so101 teleop --record DIR, or the dataflow's env:) to the dataset's folder")
+    fps: int = setting("SO101_RECORD_FPS", str(DEFAULT_FPS), "frames per second", read_fps)
+    image_size: tuple[int, int] | None = setting(
+        "SO101_RECORD_IMAGE_SIZE", DEFAULT_IMAGE_SIZE,
+        "WIDTHxHEIGHT of the `image` input's pictures, stored as video; empty = no video (the `image` input unconnected)",
+        read_image_size)
+    lang: str = setting(LANG_ENV_VAR, DEFAULT_LANGUAGE, "reply language, `zh` or `en`", read_language)
+
+
+@dataclass(frozen=True)
+class CameraSettings(EnvironSettings):
+    """nodes/camera.py."""
+
+    simulator: str = setting("SO101_CAMERA_BODY", "pybullet", "whose renderer draws the arm: `pybullet` or `mujoco`",
+                             read_simulator)
+    image_size: tuple[int, int] | None = setting(
+        "SO101_RECORD_IMAGE_SIZE", DEFAULT_IMAGE_SIZE, "WIDTHxHEIGHT of the pictures", read_image_size,
+        required="to WIDTHxHEIGHT (e.g. 320x240)")
+    assets_dir: Path | None = setting(
+        ASSETS_ENV_VAR, "", "where the model is; empty = where `so101 assets` puts it", read_optional_path)
+
+
+@dataclass(frozen=True)
+class ReplaySettings(EnvironSettings):
+    """nodes/replay.py."""
+
+    root: Path = setting("SO101_REPLAY_DIR", "", "the dataset's folder", read_file_path,
+                         required="(so101 replay DIR) to the dataset's folder")
+    episode: int = setting("SO101_REPLAY_EPISODE", "0", "the episode to play", read_whole_number)
+    lang: str = setting(LANG_ENV_VAR, DEFAULT_LANGUAGE, "message language, `zh` or `en`", read_language)

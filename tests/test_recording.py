@@ -1,0 +1,328 @@
+"""The recorder's logic without dora (so101/dataset/recording.py), the prompt's side of it, replay's
+maths (so101/dataset/replay.py), the gripper's mapping, and the dataflows `--record` and
+`so101 replay` run."""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+import pyarrow as pa
+import pytest
+
+from so101.dataset.features import MOTOR_NAMES, from_lerobot, to_lerobot
+from so101.dataset.recording import FrameClock, Recording, RecordCommand, decode_record_cmd, encode_record_cmd
+from so101.dataset.replay import ramp_deg, tracking_errors_deg, tracking_line
+from so101.prompt.commands import Episodes, ParseError, parse_command
+from so101.prompt.recorder_link import RecorderLink
+from so101.runtime.dataflow import DATAFLOW_FILE, dataflow_copy, with_recorder, with_replay
+from tests.dataflow_helpers import TICK, TICK_TIMER_CONFIG, run_simulation_node
+
+
+# -- the gripper in LeRobot's 0-100 ---------------------------------------------------------------
+
+@pytest.mark.parametrize("gripper_deg, lerobot", [(-10.0, 0.0), (100.0, 100.0), (45.0, 50.0), (0.0, 100 / 11)])
+def test_the_gripper_maps_the_urdf_range_onto_lerobots(gripper_deg, lerobot):
+    values = to_lerobot([1.0, -2.0, 3.5, 4.0, -5.0, gripper_deg])
+    assert values.dtype == np.float32
+    assert values[:5].tolist() == [1.0, -2.0, 3.5, 4.0, -5.0]  # arm joints: degrees in both
+    assert values[5] == pytest.approx(lerobot, abs=1e-4)
+    assert from_lerobot(values)[5] == pytest.approx(gripper_deg, abs=1e-4)
+
+
+def test_motor_names_are_so101_followers():
+    assert MOTOR_NAMES == ("shoulder_pan.pos", "shoulder_lift.pos", "elbow_flex.pos", "wrist_flex.pos",
+                           "wrist_roll.pos", "gripper.pos")
+
+
+def test_from_lerobot_takes_a_whole_episode():
+    frames = np.array([to_lerobot([0, 0, 0, 0, 0, g]) for g in (-10, 45, 100)])
+    assert from_lerobot(frames)[:, 5] == pytest.approx([-10, 45, 100], abs=1e-4)
+
+
+# -- the frame clock --------------------------------------------------------------------------------
+
+def test_frames_come_at_the_rate_counted_from_the_first():
+    clock = FrameClock(30, start_s=100.0)
+    due = [clock.due(100.0 + k * 0.005) for k in range(200)]  # 1 s of 5 ms ticks
+    assert sum(due) == 30 and due[0] == 1 and max(due) == 1
+
+
+def test_a_late_tick_adds_the_frames_it_owes_and_a_stall_starts_afresh():
+    clock = FrameClock(10, start_s=0.0)
+    assert clock.due(0.0) == 1
+    assert clock.due(0.35) == 3  # frames 1, 2 and 3 were due
+    assert clock.due(100.0) == 1  # a stall: one frame, no flood
+    assert clock.due(100.1) == 1
+
+
+# -- the recorder's commands ------------------------------------------------------------------------
+
+class FakeEpisode:
+    def __init__(self, task, saved, fail=None):
+        self.task, self.saved, self.fail = task, saved, fail
+        self.rows: list[tuple] = []
+        self.discarded = False
+        self.release = threading.Event()
+        self.release.set()
+
+    @property
+    def frames(self):
+        return len(self.rows)
+
+    def add_frame(self, state, action, image=None):
+        self.rows.append((state.copy(), action.copy(), image))
+
+    def save(self):
+        self.release.wait(5)
+        if self.fail:
+            raise self.fail
+        self.saved.append(self)
+
+    def discard(self):
+        self.discarded = True
+
+
+class FakeWriter:
+    def __init__(self):
+        self.saved: list[FakeEpisode] = []
+        self.episodes: list = []
+        self.fail = None
+
+    def start_episode(self, task):
+        return FakeEpisode(task, self.saved, self.fail)
+
+
+class Clock:
+    def __init__(self):
+        self.now_s = 0.0
+
+    def __call__(self):
+        return self.now_s
+
+
+def recording(needs_image=False, lang="en"):
+    said: list[str] = []
+    clock = Clock()
+    writer = FakeWriter()
+    return Recording(writer, "/data/set", 30, lang, needs_image, said.append, clock), writer, clock, said
+
+
+def feed(rec, clock, seconds, arm=(10.0, 20.0, 30.0, 40.0, 50.0), gripper=45.0):
+    rec.on_joint_state(arm)
+    rec.on_gripper_state([gripper])
+    for _ in range(round(seconds / 0.005)):
+        clock.now_s += 0.005
+        rec.tick()
+
+
+def test_an_episode_samples_state_and_target_at_each_frame():
+    rec, writer, clock, said = recording()
+    rec.on_joint_state([10, 20, 30, 40, 50])
+    rec.on_gripper_state([45.0])
+    rec.on_joint_target([11, 21, 31, 41, 51, 100.0])
+    assert rec.command(RecordCommand("record", "pick the cube")) == [
+        "● recording episode 0: task 'pick the cube' (stop: stop, drop: discard)"]
+    feed(rec, clock, 1.0)
+    episode = rec.episode
+    assert 30 <= episode.frames <= 31
+    state, action, image = episode.rows[0]
+    assert state.tolist() == pytest.approx([10, 20, 30, 40, 50, 50.0])  # gripper 45° -> 50
+    assert action.tolist() == pytest.approx([11, 21, 31, 41, 51, 100.0])
+    assert image is None
+    reply = rec.command(RecordCommand("stop"))
+    assert reply[0].startswith(f"■ episode 0: {episode.frames} frames (") and reply[0].endswith("saving...")
+    rec.close()
+    assert writer.saved == [episode] and episode.task == "pick the cube"
+    assert said[-1].startswith(f"✓ episode 0 saved: {episode.frames} frames")
+
+
+def test_without_a_target_the_action_is_where_the_arm_stands():
+    rec, writer, clock, said = recording()
+    rec.on_joint_state([1, 2, 3, 4, 5])
+    rec.on_gripper_state([-10.0])
+    rec.command(RecordCommand("record", "t"))
+    feed(rec, clock, 0.1, arm=(1, 2, 3, 4, 5), gripper=-10.0)
+    state, action, _ = rec.episode.rows[0]
+    assert action.tolist() == state.tolist() == pytest.approx([1, 2, 3, 4, 5, 0.0])
+
+
+def test_with_video_frames_wait_for_the_first_picture():
+    rec, writer, clock, said = recording(needs_image=True)
+    rec.on_joint_state([0] * 5)
+    rec.on_gripper_state([0.0])
+    assert rec.command(RecordCommand("record", "t"))[0].endswith("(waiting for the first picture; frames count from then)")
+    feed(rec, clock, 0.5, arm=(0,) * 5, gripper=0.0)
+    assert rec.episode.frames == 0
+    picture = np.zeros((240, 320, 3), np.uint8)
+    rec.on_image(picture)
+    feed(rec, clock, 0.5, arm=(0,) * 5, gripper=0.0)
+    assert 15 <= rec.episode.frames <= 16 and rec.episode.rows[0][2] is picture
+
+
+@pytest.mark.parametrize("lang", ["en", "zh"])
+def test_refusals_are_one_line_and_change_nothing(lang):
+    rec, writer, clock, said = recording(lang=lang)
+    for command in (RecordCommand("stop"), RecordCommand("discard"), RecordCommand("record", "t"),
+                    RecordCommand("record", ""), RecordCommand("jump"), decode_record_cmd("{not json")):
+        reply = rec.command(command)
+        assert len(reply) == 1 and "\n" not in reply[0]
+    assert rec.episode is None and writer.saved == []
+    rec.on_joint_state([0] * 5)
+    rec.on_gripper_state([0.0])
+    rec.command(RecordCommand("record", "t"))
+    assert len(rec.command(RecordCommand("record", "again"))) == 1 and rec.episode.task == "t"
+
+
+def test_discard_drops_the_episode_and_keeps_its_index():
+    rec, writer, clock, said = recording()
+    feed(rec, clock, 0.01)
+    rec.command(RecordCommand("record", "t"))
+    feed(rec, clock, 0.3)
+    first = rec.episode
+    assert rec.command(RecordCommand("discard"))[0].startswith("episode 0 discarded (")
+    assert first.discarded and rec.episode is None
+    assert rec.command(RecordCommand("record", "u"))[0].startswith("● recording episode 0:")
+
+
+def test_toggle_starts_with_the_last_task_and_stops():
+    rec, writer, clock, said = recording()
+    feed(rec, clock, 0.01)
+    assert rec.command(RecordCommand("toggle"))[0].startswith("record needs a task text")
+    rec.command(RecordCommand("record", "wave"))
+    feed(rec, clock, 0.2)
+    assert "saving" in rec.command(RecordCommand("toggle"))[0]
+    assert rec.command(RecordCommand("toggle"))[0] == "● recording episode 1: task 'wave' (stop: stop, drop: discard)"
+    rec.close()
+
+
+def test_commands_are_answered_while_an_episode_saves_and_a_failed_save_says_why():
+    rec, writer, clock, said = recording()
+    writer.fail = OSError(28, "No space left on device")
+    feed(rec, clock, 0.01)
+    rec.command(RecordCommand("record", "t"))
+    feed(rec, clock, 0.2)
+    episode = rec.episode
+    episode.release.clear()  # the save blocks until released
+    rec.command(RecordCommand("stop"))
+    assert rec.command(RecordCommand("episodes")) == ["/data/set: no episodes yet", "  (saving: 0)"]
+    episode.release.set()
+    rec.close()
+    assert said[-1] == "✗ episode 0 not saved: [Errno 28] No space left on device"
+
+
+def test_stop_saves_an_episode_still_recording():
+    rec, writer, clock, said = recording()
+    feed(rec, clock, 0.01)
+    rec.command(RecordCommand("record", "t"))
+    feed(rec, clock, 0.2)
+    rec.close()
+    assert len(writer.saved) == 1 and said[0] == "the dataflow stops: saving the unfinished episode 0"
+
+
+def test_record_cmd_text_round_trips():
+    assert decode_record_cmd(encode_record_cmd("record", "put 方块 in")) == RecordCommand("record", "put 方块 in")
+    assert isinstance(decode_record_cmd('{"task": 1}'), str)
+
+
+# -- the prompt's side --------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("line, command", [
+    ("record put the cube, in the box", Episodes("record", "put the cube, in the box")),
+    ("RECORD   wave  twice", Episodes("record", "wave twice")),
+    ("stop", Episodes("stop")), ("discard", Episodes("discard")), ("episodes", Episodes("episodes")),
+])
+def test_the_prompt_reads_the_recorder_commands(line, command):
+    assert parse_command(line, "en") == command
+
+
+@pytest.mark.parametrize("line", ["record", "stop now", "episodes 3"])
+def test_malformed_recorder_commands_say_the_form(line):
+    assert isinstance(parse_command(line, "en"), ParseError)
+
+
+def test_the_link_matches_answers_and_shows_news():
+    sent: list[tuple[str, str]] = []
+    shown: list[str] = []
+    link = RecorderLink(lambda text, request: sent.append((text, request)), shown.append)
+
+    def answer():
+        while not sent:
+            pass
+        link.on_status("news first", "")
+        link.on_status("line one\nline two", sent[0][1])
+
+    threading.Thread(target=answer).start()
+    assert link.ask("episodes") == ["line one", "line two"]
+    assert shown == ["  news first"]
+    assert decode_record_cmd(sent[0][0]) == RecordCommand("episodes")
+    assert link.ask("stop", timeout_s=0.05) is None
+
+
+def test_without_a_recorder_the_prompt_says_how_to_get_one(tmp_path):
+    from so101.prompt.control import KeyboardControl
+    from so101.prompt.poses import PoseStore
+
+    control = KeyboardControl(lambda angles: None, PoseStore(tmp_path / "poses.json"), "en")
+    assert control.handle_line("record x") == (["  recording is off: start with so101 teleop --record DIR"], False)
+
+
+# -- replay's maths ---------------------------------------------------------------------------------
+
+def test_the_ramp_keeps_every_joint_under_the_speed_and_ends_on_the_goal():
+    start, goal = [0, 0, 0, 0, 0, 0], [90, -30, 10, 0, 5, 50]
+    waypoints = ramp_deg(start, goal, fps=30, speed_deg_s=30)
+    steps = np.abs(np.diff(np.vstack([start, waypoints]), axis=0))
+    assert steps.max() <= 30 / 30 + 1e-9
+    assert waypoints[-1].tolist() == goal and len(waypoints) == 90
+    assert len(ramp_deg(goal, goal, fps=30)) == 1
+
+
+def test_tracking_error_line():
+    actions = np.zeros((100, 6))
+    reached = np.zeros((100, 6))
+    reached[:, 0] = np.linspace(0, 9.9, 100)
+    errors = tracking_errors_deg(actions, reached)
+    assert tracking_line(errors) == "tracking error (deg): p50 0.00, p99 9.30, max 9.90"  # 600 values, 501 of them 0
+    with pytest.raises(ValueError):
+        tracking_errors_deg(actions, reached[:, :5])
+
+
+# -- the dataflows ----------------------------------------------------------------------------------
+
+def test_record_adds_the_recorder_and_the_camera_and_wires_the_prompt():
+    descriptor = with_recorder(dataflow_copy({}), "simulation", {"SO101_RECORD_DIR": "/d"}, {"SO101_CAMERA_BODY": "pybullet"}, 30)
+    nodes = {node["id"]: node for node in descriptor["nodes"]}
+    assert "joint_target" in nodes["simulation"]["outputs"]
+    assert nodes["keyboard_control"]["outputs"] == ["joint_cmd", "record_cmd"]
+    assert nodes["keyboard_control"]["inputs"]["record_status"]["source"] == "recorder/record_status"
+    assert nodes["recorder"]["inputs"]["image"]["source"] == "camera/image"
+    assert nodes["recorder"]["inputs"]["joint_target"]["source"] == "simulation/joint_target"
+    assert nodes["camera"]["inputs"]["tick"]["source"] == "dora/timer/millis/33"
+    assert nodes["recorder"]["path"].endswith("nodes/recorder.py") and nodes["recorder"]["env"] == {"SO101_RECORD_DIR": "/d"}
+
+
+def test_record_without_a_camera_has_no_image_input():
+    descriptor = with_recorder(dataflow_copy({}), "simulation", {}, None, 30)
+    nodes = {node["id"]: node for node in descriptor["nodes"]}
+    assert "camera" not in nodes and "image" not in nodes["recorder"]["inputs"]
+
+
+def test_replay_takes_the_prompts_place():
+    descriptor = with_replay(dataflow_copy({}), "simulation")
+    nodes = {node["id"]: node for node in descriptor["nodes"]}
+    assert "keyboard_control" not in nodes and nodes["replay"]["path"] == "dynamic"
+    assert nodes["simulation"]["inputs"]["joint_cmd"]["source"] == "replay/joint_cmd"
+    assert DATAFLOW_FILE.read_text().count("keyboard_control/joint_cmd") == 1  # the course's file is untouched
+
+
+# -- the body's joint_target ----------------------------------------------------------------------
+
+def test_a_body_publishes_its_targets_only_where_the_dataflow_declares_them(monkeypatch):
+    events = [TICK, ("joint_cmd", pa.array([0, 45])), TICK, TICK]
+    code, node = run_simulation_node(monkeypatch, events)
+    assert code == 0 and "joint_target" not in node.outputs
+    config = dict(TICK_TIMER_CONFIG, outputs=["joint_state", "gripper_state", "image", "joint_target"])
+    code, node = run_simulation_node(monkeypatch, events, node_config=config)
+    targets = [message.to_pylist() for message in node.outputs["joint_target"]]
+    assert targets == [[0.0] * 6, [45.0, 0, 0, 0, 0, 0]]  # the first tick's, then the change's; not the third tick's
