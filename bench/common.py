@@ -18,6 +18,7 @@ import subprocess
 import time
 from array import array
 from pathlib import Path
+from typing import Callable
 
 from so101.bodies.registry import BODIES
 from so101.runtime.dataflow import ROOT, dataflow_copy, write_dataflow
@@ -185,10 +186,13 @@ def target_lines(rows: list[dict]) -> list[str]:
 
 
 # -- dora run -------------------------------------------------------------------------
-def bench_dataflow(path: Path, sim_env: dict, probe_env: dict, body: str = "pybullet") -> None:
+def bench_dataflow(path: Path, sim_env: dict, probe_env: dict, body: str = "pybullet",
+                   extend: Callable[[dict], None] | None = None) -> None:
     """The body's dataflow file as it is, with absolute paths, the simulation headless unless sim_env
-    says otherwise, and the prober as keyboard_control."""
+    says otherwise, `extend` applied (nodes added: the recorder), and the prober as keyboard_control."""
     descriptor = dataflow_copy({"SO101_MODE": "direct", "SO101_LANG": "en", **sim_env}, BODIES[body].dataflow_file)
+    if extend is not None:
+        extend(descriptor)
     put_prober(descriptor, probe_env)
     write_dataflow(descriptor, path)
 
@@ -214,7 +218,7 @@ def peak_rss_mb(pid: int | None) -> float | None:
 
 
 def run_dataflow(run_dir: Path, duration_s: float, sim_env: dict, probe_env: dict, display: str | None = None,
-                 body: str = "pybullet") -> dict:
+                 body: str = "pybullet", extend: Callable[[dict], None] | None = None) -> dict:
     """`dora run` for duration_s after the first joint_state, then Ctrl-C; the raw records.
 
     With `display` the nodes get that DISPLAY, and the measured time starts once the
@@ -224,7 +228,8 @@ def run_dataflow(run_dir: Path, duration_s: float, sim_env: dict, probe_env: dic
     tick_log = run_dir / "ticks.bin"
     probe_log = run_dir / "probe.json"
     dataflow = run_dir / "dataflow.yml"
-    bench_dataflow(dataflow, {**sim_env, "SO101_TICK_LOG": str(tick_log)}, {**probe_env, "PROBE_LOG": str(probe_log)}, body)
+    bench_dataflow(dataflow, {**sim_env, "SO101_TICK_LOG": str(tick_log)}, {**probe_env, "PROBE_LOG": str(probe_log)}, body,
+                   extend)
     env = env_with_bin_first()
     env.pop("DISPLAY", None)
     if display:

@@ -16,7 +16,9 @@ One run on one machine measures:
      display is reachable): joint_state/s, simulated over wall time, latency;
   9. the node's fast mode (SO101_FAST_STEPS): steps per second against the raw rate;
   10. where the node's memory goes: peak RSS after each loading stage, in fresh processes,
-     for the course's plain loading and for the node's.
+     for the course's plain loading and for the node's;
+  11. recording (bench/record_bench.py): a picture's cost, pictures drawn inside the loop, the
+     body while `so101 teleop --record`'s dataflow records an episode with video, and saving one.
 It prints a table and writes the figures, the targets and the machine to a JSON file.
 Timings are wall-clock on a shared machine: the load average is recorded with them.
 """
@@ -63,6 +65,7 @@ TARGETS = {
     "startup_s": 3.0,  # at most
     "peak_rss_mb": 250.0,  # at most
     "fast_ratio": 0.70,  # fast-mode steps/s over raw steps/s, at least
+    "save_60s_episode_s": 10.0,  # saving a 60 s episode with video, at most
 }
 
 
@@ -96,6 +99,17 @@ def target_rows(figures: dict) -> list[dict]:
             abs(gui["sim_over_wall"] - 1) <= TARGETS["sim_over_wall_error"])
     rss = dataflow["peak_rss_mb"]
     row("peak RSS of the simulation node (MB)", rss, f"<= {TARGETS['peak_rss_mb']}", rss is not None and rss <= TARGETS["peak_rss_mb"])
+    recording = figures.get("recording")
+    if recording:
+        while_recording = recording["recording"]
+        row("joint_state per s while recording with video", while_recording["joint_state_per_s"],
+            f">= {TARGETS['joint_state_per_s']}", while_recording["joint_state_per_s"] >= TARGETS["joint_state_per_s"])
+        row("simulated / wall time while recording", while_recording["sim_over_wall"], f"1 ± {TARGETS['sim_over_wall_error']}",
+            abs(while_recording["sim_over_wall"] - 1) <= TARGETS["sim_over_wall_error"])
+        saving = recording["saving"]
+        if saving["episode_s"] == 60:
+            row("saving a 60 s episode with video (s)", saving["save_s"], f"<= {TARGETS['save_60s_episode_s']}",
+                saving["save_s"] <= TARGETS["save_60s_episode_s"])
     best = max(figures["fast_mode"]["runs"], key=lambda run: run["ratio_to_raw"])
     row(f"fast mode steps/s / raw (SO101_FAST_STEPS={best['steps_per_state']})", best["ratio_to_raw"],
         f">= {TARGETS['fast_ratio']}", best["ratio_to_raw"] >= TARGETS["fast_ratio"])
@@ -259,7 +273,7 @@ def measure_gui(run_dir: Path, duration_s: float, probe_env: dict, body: str = "
 
 # -- the run --------------------------------------------------------------------------
 def run_benchmark(duration_s: float, fast_s: float, fast_steps: list[int], raw_steps: int, node_ticks: int,
-                  after_sleep_steps: int, body: str = "pybullet") -> dict:
+                  after_sleep_steps: int, body: str = "pybullet", saved_episode_s: float = 60.0) -> dict:
     load_start = os.getloadavg()
     with tempfile.TemporaryDirectory(prefix="so101-bench-") as tmp:
         work_dir = Path(tmp)
@@ -288,6 +302,9 @@ def run_benchmark(duration_s: float, fast_s: float, fast_steps: list[int], raw_s
                 "measured_s": ticks["span_s"],
             })
         figures["fast_mode"] = {"runs": runs}
+        from bench import record_bench
+
+        figures["recording"] = record_bench.run_recording_benchmark(work_dir, duration_s, body, saved_episode_s)
         if body == "pybullet":  # where PyBullet's loading spends memory; MuJoCo's node peaks far lower
             print("memory, stage by stage ...", flush=True)
             figures["memory_stages_mb"] = measure_memory_stages()
@@ -298,7 +315,7 @@ def run_benchmark(duration_s: float, fast_s: float, fast_steps: list[int], raw_s
         "load_average_1_5_15min": {"start": list(load_start), "end": list(os.getloadavg())},
         "settings": {"tick_ms": TICK_PERIOD_S * 1e3, "duration_s": duration_s, "fast_mode_s": fast_s,
                      "raw_steps": raw_steps, "in_process_ticks": node_ticks, "warmup_s": WARMUP_S,
-                     "fast_steps_per_state": fast_steps},
+                     "fast_steps_per_state": fast_steps, "saved_episode_s": saved_episode_s},
         **figures,
     }
 
@@ -344,6 +361,10 @@ def table(result: dict) -> str:
     for run in result["fast_mode"]["runs"]:
         label = f"fast mode, SO101_FAST_STEPS={run['steps_per_state']} (steps/s, x raw)"
         lines.append(f"{label:<52} {run['steps_per_s']:>10.0f} | {run['ratio_to_raw']:<9.2f}")
+    if "recording" in result:
+        from bench import record_bench
+
+        lines += record_bench.table_lines(result["recording"])
     stages = result.get("memory_stages_mb")
     if stages:
         lines += ["", f"{'memory, peak | current RSS (MB)':<52} " + " ".join(f"{way:>17}" for way in stages)]
@@ -404,7 +425,8 @@ def run(args: argparse.Namespace) -> int:
             return 2
         return 0
     if args.quick:
-        settings = dict(duration_s=3.0, fast_s=2.0, fast_steps=[1, 100], raw_steps=5000, node_ticks=1500, after_sleep_steps=100)
+        settings = dict(duration_s=3.0, fast_s=2.0, fast_steps=[1, 100], raw_steps=5000, node_ticks=1500, after_sleep_steps=100,
+                        saved_episode_s=5.0)
     else:
         settings = dict(duration_s=args.duration, fast_s=5.0, fast_steps=[1, 10, 100], raw_steps=40000, node_ticks=10000, after_sleep_steps=1000)
     kind = "cluster" if args.cluster else args.body

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import os
 import sys
+from datetime import datetime, timezone
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -36,8 +37,17 @@ from so101.runtime.logs import send_diagnostics_to  # noqa: E402
 
 NODE_ID = "camera"
 NICENESS = 10
+PICTURE_PERIOD_S = 1 / 30  # the tick's period, as `so101 teleop --record` wires it
 # A pose that moved less than this on every joint since the last picture is not drawn again.
 REDRAW_DEG = 0.05
+
+
+def stale(stamp: object) -> bool:
+    """A tick older than a period waited while a picture was drawn: drawing for it would draw an
+    old pose and fall further behind."""
+    if not isinstance(stamp, datetime) or stamp.tzinfo is None:
+        return False
+    return (datetime.now(timezone.utc) - stamp).total_seconds() > PICTURE_PERIOD_S
 
 
 def main() -> int:
@@ -71,6 +81,8 @@ def main() -> int:
                     if len(values) == 1:
                         gripper_deg = values[0]
                 elif event["id"] == "tick" and arm_deg is not None:
+                    if stale(event["metadata"].get("timestamp")):  # queued while drawing: the newest state is further on
+                        continue
                     pose_deg = np.array(arm_deg + [gripper_deg])
                     if drawn_deg is not None and np.all(np.abs(pose_deg - drawn_deg) < REDRAW_DEG):
                         continue

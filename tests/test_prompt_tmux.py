@@ -73,15 +73,18 @@ def _alive(pid: int) -> bool:
     return state != "Z"
 
 
-def start_teleop(tmp_path: Path, lang: str, mode: str = "direct", body: str = "pybullet", **env: str) -> tuple[Terminal, Path, Path]:
-    """`so101 teleop` (headless by default) in a new terminal; returns it, the poses file and the dataflow's log."""
+def start_teleop(tmp_path: Path, lang: str, mode: str = "direct", body: str = "pybullet", extra: str = "",
+                 **env: str) -> tuple[Terminal, Path, Path]:
+    """`so101 teleop` (headless by default; `extra`: more options) in a new terminal; returns it, the poses
+    file and the dataflow's log."""
     poses_file = tmp_path / "poses.json"
     log_file = tmp_path / "dora.log"
     env = {
         "SO101_POSES_FILE": str(poses_file), "SO101_HISTORY_FILE": str(tmp_path / "history"),
         "SO101_PROMPT_LOG": str(tmp_path / "prompt.log"), "SO101_LANG": lang, "PATH": os.environ["PATH"], **env,
     }
-    return Terminal(f"{SO101} teleop --body {body} --mode {mode} --lang {lang} --log {log_file}", env), poses_file, log_file
+    command = f"{SO101} teleop --body {body} --mode {mode} --lang {lang} --log {log_file} {extra}".rstrip()
+    return Terminal(command, env), poses_file, log_file
 
 
 def test_a_person_drives_the_arm_from_the_prompt(tmp_path):

@@ -6,7 +6,9 @@ so the wait for the next tick is sampled fairly. It records when each joint_stat
 (time.monotonic_ns, the clock `so101 bench` and the simulation node's tick log use) with the
 angles of joints 0 and 4, and writes everything to $PROBE_LOG (JSON) at STOP.
 With $PROBE_COUNT_ONLY=1 it only counts states and keeps the first and last arrival:
-the fast mode publishes far too many to keep.
+the fast mode publishes far too many to keep. With $PROBE_RECORD_TASK set (and the recorder in
+the dataflow) it starts an episode of that task at the first joint_state, as `record TASK`
+would; the recorder saves it at STOP.
 """
 
 import json
@@ -18,6 +20,7 @@ import pyarrow as pa
 from dora import Node
 
 PROBED_JOINTS = (0, 4)
+RECORD_AT_STATE = 10
 
 
 def main() -> None:
@@ -26,6 +29,7 @@ def main() -> None:
     step_deg = float(os.environ.get("PROBE_STEP_DEG", "2"))
     count_only = os.environ.get("PROBE_COUNT_ONLY", "0") == "1"
     phase_ns = int(float(os.environ.get("PROBE_PHASE_S", "0.004")) * 1e9)
+    record_task = os.environ.get("PROBE_RECORD_TASK", "")
     states = []  # [arrival ns, angle of joint 0, angle of joint 4]
     commands = []  # [send ns, joint, target deg]
     state_count, first_ns, last_ns = 0, None, None
@@ -44,6 +48,9 @@ def main() -> None:
                 if first_ns is None:
                     first_ns = now_ns
                     print("bench: first joint_state", flush=True)  # so101 bench waits for this line
+                if record_task and state_count == RECORD_AT_STATE:  # the recorder has had states too by now
+                    node.send_output("record_cmd", pa.array([json.dumps({"command": "record", "task": record_task})]),
+                                     {"request": "bench"})
                 last_ns = now_ns
                 if not count_only:
                     angles = event["value"].to_pylist()

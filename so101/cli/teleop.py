@@ -229,8 +229,8 @@ def add_recorder(descriptor: dict, body: BodyKind, dataset_dir: Path, fps: int, 
     from so101.dataset.lerobot_v3 import DatasetError, DatasetWriter
 
     image_size = IMAGE_SIZE if body.simulated else None  # the real arm has no camera of its own
-    try:
-        DatasetWriter.open(dataset_dir, fps, image_size)
+    try:  # checked now, and let go: the recorder node opens it again
+        DatasetWriter.open(dataset_dir, fps, image_size).close()
     except DatasetError as error:
         return str(error)
     size_text = f"{image_size[0]}x{image_size[1]}" if image_size else ""

@@ -109,9 +109,15 @@ def _node(descriptor: dict, node_id: str) -> dict:
     return next(node for node in descriptor["nodes"] if node["id"] == node_id)
 
 
-def _latest(source: str) -> dict:
-    """An input of which only the newest message matters."""
-    return {"source": source, "queue_size": 1}
+# The recorder and the camera only use the newest state and tick, but each drop out of a full queue
+# is a warning line in dora's log: their queues hold what comes while they encode a frame (a few ms)
+# or draw a picture (up to a few hundred ms), so they read everything and nothing is dropped.
+STATE_QUEUE = 500  # 2 s of the body's 250 states a second
+TICK_QUEUE = 100
+
+
+def _queued(source: str, queue_size: int) -> dict:
+    return {"source": source, "queue_size": queue_size}
 
 
 def with_recorder(descriptor: dict, body_node_id: str, recorder_env: dict[str, str], camera_env: dict[str, str] | None,
@@ -125,21 +131,21 @@ def with_recorder(descriptor: dict, body_node_id: str, recorder_env: dict[str, s
     prompt["outputs"] = [*prompt["outputs"], "record_cmd"]
     prompt["inputs"] = {**prompt["inputs"], "record_status": {"source": "recorder/record_status", "queue_size": 100}}
     recorder_inputs = {
-        "tick": _latest(RECORDER_TICK),
-        "joint_state": _latest(f"{body_node_id}/joint_state"),
-        "gripper_state": _latest(f"{body_node_id}/gripper_state"),
-        "joint_target": _latest(f"{body_node_id}/joint_target"),
+        "tick": _queued(RECORDER_TICK, TICK_QUEUE),
+        "joint_state": _queued(f"{body_node_id}/joint_state", STATE_QUEUE),
+        "gripper_state": _queued(f"{body_node_id}/gripper_state", STATE_QUEUE),
+        "joint_target": _queued(f"{body_node_id}/joint_target", TICK_QUEUE),
         # Every command must arrive: the default queue keeps 10.
         "record_cmd": {"source": f"{PROMPT_NODE_ID}/record_cmd", "queue_size": 100},
     }
     if camera_env is not None:
-        recorder_inputs["image"] = _latest("camera/image")
+        recorder_inputs["image"] = _queued("camera/image", TICK_QUEUE)
         descriptor["nodes"].append({
             "id": "camera", "path": str(root / CAMERA_NODE_FILE.relative_to(ROOT)), "restart_policy": "never",
             "inputs": {
-                "tick": _latest(f"dora/timer/millis/{max(1, round(1000 / picture_hz))}"),
-                "joint_state": _latest(f"{body_node_id}/joint_state"),
-                "gripper_state": _latest(f"{body_node_id}/gripper_state"),
+                "tick": _queued(f"dora/timer/millis/{max(1, round(1000 / picture_hz))}", TICK_QUEUE),
+                "joint_state": _queued(f"{body_node_id}/joint_state", STATE_QUEUE),
+                "gripper_state": _queued(f"{body_node_id}/gripper_state", STATE_QUEUE),
             },
             "outputs": ["image"], "env": camera_env,
         })

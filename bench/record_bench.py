@@ -1,0 +1,142 @@
+"""Recording's cost to the body (issue 20): `so101 bench` runs these for a simulated body.
+
+  1. a picture of the arm (320x240, the body's own CPU renderer), ms: what drawing it inside the
+     physics loop would cost each time;
+  2. the body drawing its pictures inside its loop at 30 Hz (SO101_IMAGE_HZ=30): joint_state/s and
+     simulated/wall time, measured, not assumed;
+  3. the dataflow of `so101 teleop --record`: the camera node drawing, the recorder taking an
+     episode with video for the whole run: joint_state/s, simulated/wall time, the frames kept per
+     second and how many distinct pictures they hold;
+  4. saving a 60 s episode (1800 frames with video) in process: add_frame per frame, and save().
+"""
+
+from __future__ import annotations
+
+import shutil
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from bench.common import PACED_PROBE_ENV, WARMUP_S, run_dataflow, realtime_figures
+from so101.bodies.node_loop import IMAGE_SIZE
+from so101.bodies.registry import BODIES
+from so101.dataset.features import DEFAULT_FPS, to_lerobot
+from so101.runtime.dataflow import TICK_PERIOD_S, with_recorder
+from so101.stats import summary
+
+SAVED_EPISODE_S = 60.0
+PICTURES = 20  # the in-process picture timing, and the distinct poses of the saved episode
+
+
+def measure_picture_ms(body: str) -> dict:
+    """Pictures of the arm at IMAGE_SIZE, drawn by `body`'s renderer, ms each."""
+    with BODIES[body].body_class()(mode="direct", time_step_s=TICK_PERIOD_S, log=lambda message: None) as sim:
+        sim.render_rgb(*IMAGE_SIZE)
+        each_ms = []
+        for index in range(PICTURES):
+            sim.show_pose_deg([3.0 * index, -2.0 * index, 2.0 * index, 0, 4.0 * index, 10])
+            start = time.perf_counter()
+            sim.render_rgb(*IMAGE_SIZE)
+            each_ms.append((time.perf_counter() - start) * 1e3)
+    return summary(each_ms)
+
+
+def measure_in_loop(run_dir: Path, duration_s: float, body: str) -> dict:
+    """The body draws a picture every 1/30 s inside its own loop."""
+    record = run_dataflow(run_dir, duration_s + WARMUP_S, {"SO101_FAST_STEPS": "0", "SO101_IMAGE_HZ": str(DEFAULT_FPS)},
+                          PACED_PROBE_ENV, body=body)
+    flow = realtime_figures(record, TICK_PERIOD_S)["dataflow"]
+    return {"joint_state_per_s": flow["joint_state_per_s"], "sim_over_wall": flow["sim_over_wall"],
+            "ticks_missed": flow["ticks_missed"]}
+
+
+def measure_recording(run_dir: Path, duration_s: float, body: str) -> dict:
+    """The body, the camera and the recorder, an episode with video recorded throughout."""
+    from so101.dataset.lerobot_v3 import Dataset
+
+    dataset_dir = run_dir / "dataset"
+    size = f"{IMAGE_SIZE[0]}x{IMAGE_SIZE[1]}"
+
+    def add_recorder(descriptor: dict) -> None:
+        with_recorder(descriptor, BODIES[body].node_id,
+                      {"SO101_RECORD_DIR": str(dataset_dir), "SO101_RECORD_FPS": str(DEFAULT_FPS),
+                       "SO101_RECORD_IMAGE_SIZE": size, "SO101_LANG": "en"},
+                      {"SO101_CAMERA_BODY": body, "SO101_RECORD_IMAGE_SIZE": size}, picture_hz=DEFAULT_FPS)
+
+    record = run_dataflow(run_dir, duration_s + WARMUP_S, {"SO101_FAST_STEPS": "0"},
+                          {**PACED_PROBE_ENV, "PROBE_RECORD_TASK": "so101 bench"}, body=body, extend=add_recorder)
+    flow = realtime_figures(record, TICK_PERIOD_S)["dataflow"]
+    states = record["probe"]["states"]
+    # The episode starts at the prober's RECORD_AT_STATE-th state and ends at STOP, just after the last.
+    episode_wall_s = (states[-1][0] - states[min(9, len(states) - 1)][0]) / 1e9
+    dataset = Dataset.open(dataset_dir)
+    if not dataset.episodes:
+        raise RuntimeError(f"the recorder saved no episode (see {run_dir / 'dora.log'})")
+    episode = dataset.episodes[-1]
+    pictures = [frame.tobytes() for frame in dataset.episode_images(episode.index, dataset.video_keys[0])]
+    changes = sum(1 for before, after in zip(pictures, pictures[1:]) if before != after)
+    recorded_s = episode.length / dataset.fps
+    return {"joint_state_per_s": flow["joint_state_per_s"], "sim_over_wall": flow["sim_over_wall"],
+            "ticks_missed": flow["ticks_missed"], "frames": episode.length, "recorded_s": recorded_s,
+            "frames_per_wall_s": episode.length / episode_wall_s if episode_wall_s > 0 else 0.0,
+            "new_pictures_per_s": changes / recorded_s if recorded_s else 0.0}
+
+
+def measure_saving(body: str, seconds: float = SAVED_EPISODE_S) -> dict:
+    """A `seconds` episode at 30 fps with video, frames added as the recorder adds them, then saved."""
+    from so101.dataset.lerobot_v3 import DatasetWriter
+
+    with BODIES[body].body_class()(mode="direct", time_step_s=TICK_PERIOD_S, log=lambda message: None) as sim:
+        poses = [[40 * np.sin(index / 3), -20 + index, 30 - 2 * index, 10, 5 * index, 20 + 3 * index]
+                 for index in range(PICTURES)]
+        pictures = []
+        for pose in poses:
+            sim.show_pose_deg(pose)
+            pictures.append(sim.render_rgb(*IMAGE_SIZE))
+    work = Path(tempfile.mkdtemp(prefix="so101-bench-save-"))
+    try:
+        writer = DatasetWriter.open(work / "dataset", DEFAULT_FPS, IMAGE_SIZE)
+        episode = writer.start_episode("so101 bench")
+        frames = round(seconds * DEFAULT_FPS)
+        add_ms = []
+        for index in range(frames):
+            pose = poses[(index // 3) % PICTURES]  # a new picture every 3 frames, as the camera's rate gives
+            start = time.perf_counter()
+            episode.add_frame(to_lerobot(pose), to_lerobot(pose), pictures[(index // 3) % PICTURES])
+            add_ms.append((time.perf_counter() - start) * 1e3)
+        start = time.perf_counter()
+        episode.save()
+        save_s = time.perf_counter() - start
+        writer.close()
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    return {"episode_s": seconds, "frames": frames, "save_s": save_s, "add_frame_ms": summary(add_ms)}
+
+
+def run_recording_benchmark(work_dir: Path, duration_s: float, body: str, saved_episode_s: float = SAVED_EPISODE_S) -> dict:
+    print(f"recording: a picture's cost, {PICTURES} pictures ...", flush=True)
+    figures = {"picture_ms": measure_picture_ms(body)}
+    print(f"recording: pictures drawn inside the physics loop at {DEFAULT_FPS} Hz, {duration_s:g} s ...", flush=True)
+    figures["pictures_in_loop"] = measure_in_loop(work_dir / "in_loop", duration_s, body)
+    print(f"recording: so101 teleop --record's dataflow with video, {duration_s:g} s ...", flush=True)
+    figures["recording"] = measure_recording(work_dir / "recording", duration_s, body)
+    print(f"recording: saving a {saved_episode_s:g} s episode ...", flush=True)
+    figures["saving"] = measure_saving(body, saved_episode_s)
+    return figures
+
+
+def table_lines(figures: dict) -> list[str]:
+    picture, in_loop, recording, saving = (figures[key] for key in ("picture_ms", "pictures_in_loop", "recording", "saving"))
+    return [
+        f"{'a picture, ' + 'x'.join(map(str, IMAGE_SIZE)) + ' (ms, p50 | p99)':<52} {picture['p50']:>10.1f} | {picture['p99']:<9.1f}",
+        f"{'pictures inside the loop at 30 Hz: joint_state per s':<52} {in_loop['joint_state_per_s']:>10.2f}",
+        f"{'  simulated / wall time':<52} {in_loop['sim_over_wall']:>10.4f}",
+        f"{'recording with video: joint_state per s':<52} {recording['joint_state_per_s']:>10.2f}",
+        f"{'  simulated / wall time':<52} {recording['sim_over_wall']:>10.4f}",
+        f"{'  frames per wall-clock s (30 expected) | new pictures':<52} "
+        f"{recording['frames_per_wall_s']:>10.2f} | {recording['new_pictures_per_s']:<9.2f}",
+        f"{'saving a ' + format(saving['episode_s'], 'g') + ' s episode with video (s)':<52} {saving['save_s']:>10.2f}",
+        f"{'  add_frame, with video encoding (ms, p50 | p99)':<52} {saving['add_frame_ms']['p50']:>10.2f} | {saving['add_frame_ms']['p99']:<9.2f}",
+    ]

@@ -1,0 +1,122 @@
+"""`so101 dataset DIR`: what a LeRobot v3.0 dataset holds; `--plot N` draws episode N's joints.
+
+Reads any LeRobot v3.0 dataset (ours or LeRobot's own) with so101.dataset.lerobot_v3. The plot
+shows, per joint, the action (what the arm was told) against observation.state (where it was),
+in LeRobot's units: degrees for the five arm joints, 0-100 for the gripper.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from so101.cli import argtypes
+from so101.dataset.features import ACTION_KEY, GRIPPER_RANGE, STATE_KEY
+from so101.dataset.lerobot_v3 import Dataset, DatasetError
+
+PLOT_SIZE_IN = (12.0, 8.0)
+PLOT_DPI = 100  # 1200 x 800 pixels
+
+
+def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
+    parser.add_argument("root", type=Path, metavar="DIR", help="the dataset's folder (LeRobot v3.0)")
+    parser.add_argument("--plot", type=argtypes.whole_number(0, 10**9), metavar="N", default=None,
+                        help="also draw episode N's six joints, action against observation.state over time (PNG)")
+    parser.add_argument("--out", type=Path, default=None, metavar="FILE",
+                        help="the PNG --plot writes (default out/episode-N.png)")
+
+
+def _shape_text(shape: list[int]) -> str:
+    return "(" + ", ".join(str(size) for size in shape) + ("," if len(shape) == 1 else "") + ")"
+
+
+def summary_lines(dataset: Dataset) -> list[str]:
+    """The dataset in lines: its episodes, totals, tasks and features."""
+    total_s = dataset.total_frames / dataset.fps
+    lines = [f"{dataset.root}: LeRobot {dataset.info.get('codebase_version', '?')} dataset, "
+             f"robot {dataset.robot_type or 'unknown'}, {dataset.fps} fps"]
+    if dataset.episodes:
+        lines.append(f"{len(dataset.episodes)} episodes:")
+        lines.append(f"  {'episode':>7}  {'frames':>6}  {'duration':>9}  task")
+        for episode in dataset.episodes:
+            lines.append(f"  {episode.index:>7}  {episode.length:>6}  {episode.duration_s:>7.1f} s  "
+                         f"{' | '.join(episode.tasks)}")
+    else:
+        lines.append("no episodes yet")
+    lines.append(f"total: {dataset.total_frames} frames, {total_s:.1f} s at {dataset.fps} fps")
+    lines.append(f"{len(dataset.tasks)} tasks:")
+    lines += [f"  {index:>3}: {task}" for index, task in enumerate(dataset.tasks)]
+    lines.append("features:")
+    width = max(len(key) for key in dataset.features)
+    for key, feature in dataset.features.items():
+        line = f"  {key:<{width}}  {feature['dtype']:<8} {_shape_text(list(feature['shape']))}"
+        video = feature.get("info") or {}
+        if feature["dtype"] == "video" and video:
+            line += f"  {video.get('video.codec', '?')} {video.get('video.width', '?')}x{video.get('video.height', '?')}"
+        lines.append(line)
+    return lines
+
+
+def write_plot(dataset: Dataset, index: int, out: Path) -> None:
+    """Episode `index`'s joints over time: action and observation.state, one panel per joint."""
+    frames = dataset.episode_frames(index)
+    missing = [key for key in (ACTION_KEY, STATE_KEY) if key not in frames]
+    if missing:
+        raise DatasetError(f"{dataset.root} has no {' or '.join(missing)}: --plot draws action against "
+                           "observation.state")
+    actions, states = frames[ACTION_KEY], frames[STATE_KEY]
+    times_s = frames["frame_index"] / dataset.fps if "frame_index" in frames else np.arange(len(actions)) / dataset.fps
+    names = dataset.features[ACTION_KEY].get("names") or [f"joint {i}" for i in range(actions.shape[1])]
+    episode = next(e for e in dataset.episodes if e.index == index)
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = (actions.shape[1] + 1) // 2
+    figure, axes = plt.subplots(rows, 2, figsize=PLOT_SIZE_IN, dpi=PLOT_DPI, sharex=True, squeeze=False)
+    for joint, name in enumerate(names):
+        panel = axes[joint // 2][joint % 2]
+        panel.plot(times_s, actions[:, joint], linewidth=1.6, label="action (told)")
+        panel.plot(times_s, states[:, joint], linewidth=1.6, linestyle="--", label="observation.state (measured)")
+        is_gripper = str(name).startswith("gripper")
+        unit = f"{GRIPPER_RANGE[0]:g}-{GRIPPER_RANGE[1]:g} (LeRobot's range)" if is_gripper else "degrees"
+        panel.set_title(str(name), fontsize=10)
+        panel.set_ylabel(unit)
+        panel.grid(True, alpha=0.3)
+        if joint == 0:
+            panel.legend(loc="best", fontsize=8)
+    for panel in axes[-1]:
+        panel.set_xlabel("time in the episode (s)")
+    for extra in range(len(names), rows * 2):
+        axes[extra // 2][extra % 2].set_visible(False)
+    figure.suptitle(f"{dataset.root.name}: episode {index}, {episode.length} frames ({episode.duration_s:.1f} s), "
+                    f"task: {' | '.join(episode.tasks)}", fontsize=11)
+    figure.tight_layout()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    figure.savefig(out)
+    plt.close(figure)
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        dataset = Dataset.open(args.root)
+        if args.plot is not None:
+            dataset.episode_frames(args.plot)  # an episode that does not exist: say so before drawing
+    except DatasetError as error:
+        print(f"so101 dataset: {error}", file=sys.stderr)
+        return 2
+    print("\n".join(summary_lines(dataset)))
+    if args.plot is not None:
+        out = args.out if args.out is not None else Path(f"out/episode-{args.plot}.png")
+        try:
+            write_plot(dataset, args.plot, out)
+        except DatasetError as error:
+            print(f"so101 dataset: {error}", file=sys.stderr)
+            return 2
+        print(f"wrote {out}")
+    return 0
