@@ -86,7 +86,7 @@ def main() -> int:
                     pose_deg = np.array(arm_deg + [gripper_deg])
                     if drawn_deg is not None and np.all(np.abs(pose_deg - drawn_deg) < REDRAW_DEG):
                         continue
-                    sim.show_pose_deg(pose_deg)
+                    sim.show_pose_deg(pose_deg.tolist())
                     rgb = sim.render_rgb(width, height)
                     drawn_deg = pose_deg
                     node.send_output("image", pa.array(rgb.ravel()), {"width": width, "height": height, "encoding": "rgb8"})

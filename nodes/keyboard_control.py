@@ -63,13 +63,15 @@ def recorder_link(node, interactive: bool) -> RecorderLink | None:
 
     def show(line: str) -> None:  # news while the person types: on a line of its own, then the prompt again
         if interactive:
-            print(f"\r\x1b[K{line}", flush=True)
             try:
                 import readline
 
-                readline.redisplay()
-            except (ImportError, AttributeError):
-                pass
+                typed = readline.get_line_buffer()
+            except ImportError:
+                typed = ""
+            # The prompt and what is typed so far, drawn again below the news: readline's own state is unchanged.
+            sys.stdout.write(f"\r\x1b[K{line}\n> {typed}")
+            sys.stdout.flush()
         else:
             say(line)
 

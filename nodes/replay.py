@@ -76,6 +76,13 @@ class Body:
             return None
         return np.array(self.arm_deg + [self.gripper_deg])
 
+    def reached_deg(self) -> np.ndarray:
+        """The latest six angles, once the first state has come."""
+        state = self.state_deg()
+        if state is None:
+            raise RuntimeError("no state yet")
+        return state
+
     def wait_until(self, deadline: float) -> None:
         """Take the node's events until the monotonic `deadline`."""
         while True:
@@ -105,7 +112,7 @@ def play(body: Body, actions_deg: np.ndarray, fps: int, text: dict) -> str:
         if time.monotonic() >= deadline:
             raise TimeoutError(text["no_state"].format(seconds=FIRST_STATE_WAIT_S))
         body.wait_until(min(deadline, time.monotonic() + 0.05))
-    waypoints = ramp_deg(body.state_deg(), actions_deg[0], fps)
+    waypoints = ramp_deg(body.reached_deg(), actions_deg[0], fps)
     print(text["ramp"].format(speed=RAMP_SPEED_DEG_S, seconds=len(waypoints) / fps), flush=True)
     period_s = 1.0 / fps
     start = time.monotonic()
@@ -113,7 +120,7 @@ def play(body: Body, actions_deg: np.ndarray, fps: int, text: dict) -> str:
         body.wait_until(start + index * period_s)
         body.send(waypoint)
     settle_deadline = time.monotonic() + SETTLE_TIMEOUT_S
-    while time.monotonic() < settle_deadline and not settled(body.state_deg(), actions_deg[0]):
+    while time.monotonic() < settle_deadline and not settled(body.reached_deg(), actions_deg[0]):
         body.wait_until(time.monotonic() + period_s)
     print(text["play"], flush=True)
     reached_deg = np.empty_like(actions_deg)
@@ -121,10 +128,10 @@ def play(body: Body, actions_deg: np.ndarray, fps: int, text: dict) -> str:
     for index, action in enumerate(actions_deg):
         body.wait_until(start + index * period_s)
         if index:
-            reached_deg[index - 1] = body.state_deg()
+            reached_deg[index - 1] = body.reached_deg()
         body.send(action)
     body.wait_until(start + len(actions_deg) * period_s)
-    reached_deg[-1] = body.state_deg()
+    reached_deg[-1] = body.reached_deg()
     return tracking_line(tracking_errors_deg(actions_deg, reached_deg))
 
 

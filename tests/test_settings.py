@@ -138,3 +138,25 @@ def test_a_bad_value_is_one_line_naming_it(settings_class, environ, message):
         settings_class.from_environ(environ)
     assert message in str(raised.value) and "\n" not in str(raised.value)
 
+
+
+# The recording and replay nodes' settings, each class against its node's table in the README.
+RECORDING_NODES = {
+    "### recorder (`nodes/recorder.py`)": "RecorderSettings",
+    "### camera (`nodes/camera.py`)": "CameraSettings",
+    "### replay (`nodes/replay.py`)": "ReplaySettings",
+}
+
+
+@pytest.mark.parametrize("heading, class_name", list(RECORDING_NODES.items()))
+def test_the_readme_documents_the_recording_nodes_settings(heading, class_name):
+    from so101.dataset import settings as recording_settings
+
+    declared_settings = declared(getattr(recording_settings, class_name))
+    rows = readme_table(heading)
+    assert sorted(name for names, _, _ in rows for name in names) == sorted(each.env_var for each in declared_settings)
+    by_name = {each.env_var: each for each in declared_settings}
+    for names, default_cell, meaning_cell in rows:
+        (name,) = names
+        assert (f"`{by_name[name].default}`" in default_cell) if by_name[name].default else default_cell.startswith("empty")
+        assert meaning_cell == by_name[name].meaning, name

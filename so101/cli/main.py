@@ -27,6 +27,7 @@ SUBCOMMANDS = {
     "cluster-demo": ("so101.cli.cluster", "the dataflow on a dora cluster: two daemons on this machine, the prompt on the second"),
     "cluster-dataflow": ("so101.cli.cluster", "write the dataflow for a dora cluster of two machines: the body on `arm`, the prompt on `desk`"),
     "teleop": ("so101.cli.teleop", "steps D + exercise 1: the dataflow and the keyboard prompt in one terminal"),
+    "dataset": ("so101.cli.dataset", "summarize a LeRobot dataset (episodes, frames, tasks, features); --plot N draws an episode"),
     "replay": ("so101.cli.replay", "play an episode of a LeRobot dataset onto any body, then print the tracking error"),
     "fake-arm": ("so101.cli.fake_arm", "an emulated SO-101 servo bus on a pseudo-terminal, for trying the real-arm driver without hardware"),
 }

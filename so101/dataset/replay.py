@@ -9,8 +9,6 @@ what the body made of that command in the time the recording gave it.
 from __future__ import annotations
 
 import math
-from typing import Sequence
-
 import numpy as np
 import numpy.typing as npt
 
@@ -28,7 +26,7 @@ SETTLE_TIMEOUT_S = 2.0
 FloatArray = npt.NDArray[np.float64]
 
 
-def ramp_deg(start_deg: Sequence[float], goal_deg: Sequence[float], fps: float,
+def ramp_deg(start_deg: npt.ArrayLike, goal_deg: npt.ArrayLike, fps: float,
              speed_deg_s: float = RAMP_SPEED_DEG_S) -> FloatArray:
     """Waypoints, one per frame, from `start_deg` to `goal_deg` in a straight line in joint space,
     no joint faster than `speed_deg_s`; the last is `goal_deg` (a single one when already there)."""
@@ -39,7 +37,7 @@ def ramp_deg(start_deg: Sequence[float], goal_deg: Sequence[float], fps: float,
     return start + fractions[:, None] * (goal - start)
 
 
-def settled(state_deg: Sequence[float], goal_deg: Sequence[float], within_deg: float = SETTLED_DEG) -> bool:
+def settled(state_deg: npt.ArrayLike, goal_deg: npt.ArrayLike, within_deg: float = SETTLED_DEG) -> bool:
     return bool(np.all(np.abs(np.asarray(state_deg) - np.asarray(goal_deg)) <= within_deg))
 
 
@@ -51,8 +49,8 @@ def tracking_errors_deg(actions_deg: npt.ArrayLike, reached_deg: npt.ArrayLike) 
     return np.abs(actions - reached).ravel()
 
 
-def tracking_line(errors_deg: Sequence[float]) -> str:
+def tracking_line(errors_deg: npt.ArrayLike) -> str:
     """The replay's last line."""
-    errors = [float(error) for error in errors_deg]
+    errors = [float(error) for error in np.ravel(errors_deg)]
     return (f"tracking error (deg): p50 {percentile(errors, 0.50):.2f}, p99 {percentile(errors, 0.99):.2f}, "
             f"max {max(errors):.2f}")
