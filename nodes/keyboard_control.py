@@ -52,7 +52,7 @@ def joint_cmd_sender(node) -> Callable[[Sequence[float]], None]:
     return send
 
 
-def recorder_link(node, interactive: bool) -> RecorderLink | None:
+def recorder_link(node, control: KeyboardControl, interactive: bool) -> RecorderLink | None:
     """The line to the recorder, where the dataflow has one (`so101 teleop --record`)."""
     if "record_cmd" not in (node.node_config() or {}).get("outputs", []):
         return None
@@ -61,19 +61,24 @@ def recorder_link(node, interactive: bool) -> RecorderLink | None:
     def send(record_cmd: str, request: str) -> None:
         node.send_output("record_cmd", pa.array([record_cmd]), {"request": request})
 
-    def show(line: str) -> None:  # news while the person types: on a line of its own, then the prompt again
-        if interactive:
+    def show(line: str) -> None:
+        """News while the person types or jogs: on a line of its own, then the prompt (or jog's
+        status line) drawn again below it."""
+        if not interactive:
+            say(line)
+            return
+        sys.stdout.write(f"\r\x1b[K{line}\n")
+        if control.jogging:
+            control.news_shown += 1  # the jog loop draws its status line again
+        else:
             try:
                 import readline
 
                 typed = readline.get_line_buffer()
             except ImportError:
                 typed = ""
-            # The prompt and what is typed so far, drawn again below the news: readline's own state is unchanged.
-            sys.stdout.write(f"\r\x1b[K{line}\n> {typed}")
-            sys.stdout.flush()
-        else:
-            say(line)
+            sys.stdout.write(f"> {typed}")  # readline's own state is unchanged
+        sys.stdout.flush()
 
     return RecorderLink(send, show)
 
@@ -158,8 +163,8 @@ def main(argv: list[str] | None = None) -> int:
         # process now and then on its way out (SIGSEGV, or glibc's "invalid stdio handle" abort).
         _KEPT_TO_EXIT.append(node)
         control = KeyboardControl(joint_cmd_sender(node), poses, settings.lang,
-                                  keys_fd=sys.stdin.fileno() if interactive else None,  # `jog` reads keys there
-                                  recorder=recorder_link(node, interactive))
+                                  keys_fd=sys.stdin.fileno() if interactive else None)  # `jog` reads keys there
+        control.recorder = recorder_link(node, control, interactive)
         # On STOP, wake the main thread from input() or readline(): only a signal can.
         pump = EventPump(node, control, on_stop=lambda: os.kill(os.getpid(), signal.SIGINT))
         pump.start()

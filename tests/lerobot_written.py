@@ -402,11 +402,15 @@ def write_lerobot_dataset(
 
     Each episode: {"task": str (or "frame_tasks": one str per frame, as LeRobot allows),
     "action": (L, 6) float32, "observation.state": (L, 6) float32, and, with video, optionally
-    "images": (L, H, W, 3) uint8 (else `structured_frames` of image_size = (width, height))}. A data file takes episodes until the next would bring it past
-    frames_per_data_file frames (None: no limit, as with LeRobot's 100 MB for small datasets);
-    likewise frames_per_video_file (default: frames_per_data_file) for the mp4 files and
-    episodes_per_meta_file for meta/episodes/. After chunks_size files a new chunk begins.
-    data_files_size_in_mb and video_files_size_in_mb are only recorded in info.json.
+    "images": (L, H, W, 3) uint8 (else `structured_frames` of image_size = (width, height))}.
+
+    A data file takes episodes until the next would bring it past frames_per_data_file frames
+    (None: no limit, as with LeRobot's 100 MB for small datasets); likewise
+    frames_per_video_file (default: frames_per_data_file) for the mp4 files and
+    episodes_per_meta_file for meta/episodes/, whose rows are written metadata_buffer_size at a
+    time (row groups). After chunks_size files a new chunk begins. data_files_size_in_mb and
+    video_files_size_in_mb are only recorded in info.json. vcodec: None for LeRobot's
+    libsvtav1 (h264 where this PyAV lacks it).
     """
     root = Path(root)
     root.mkdir(parents=True, exist_ok=False)
@@ -559,10 +563,11 @@ def write_lerobot_dataset(
 
             # meta/episodes/: buffered rows, a new file when the caller's limit is reached.
             m_chunk, m_file, m_new = meta_files.place(1)
-            if m_new and meta_writer is not None:
+            if m_new:  # the rows still buffered belong to the file before
                 flush_meta()
-                meta_writer.close()
-                meta_writer = None
+                if meta_writer is not None:
+                    meta_writer.close()
+                    meta_writer = None
             row["meta/episodes/chunk_index"] = m_chunk
             row["meta/episodes/file_index"] = m_file
             meta_buffer.append(row)

@@ -4,8 +4,10 @@ replay onto the emulated real arm: ramped, inside its limits, the tracking error
 
 from __future__ import annotations
 
+import os
 import re
 import shutil
+import signal
 import subprocess
 import threading
 import time
@@ -17,7 +19,8 @@ import pytest
 from so101.dataset.features import ACTION_KEY, STATE_KEY, from_lerobot, to_lerobot
 from so101.dataset.lerobot_v3 import Dataset, DatasetWriter
 from tests.dataflow_helpers import SO101, body_environment
-from tests.test_prompt_tmux import Terminal, start_teleop
+from so101.runtime.processes import processes_with_env
+from tests.test_prompt_tmux import _keys, start_teleop
 
 pytestmark = [pytest.mark.person]
 
@@ -53,15 +56,33 @@ def test_a_person_records_two_episodes_quits_and_replays_one_on_both_simulators(
         terminal.wait_for(r"^  ✓ episode 1 saved: \d+ frames", timeout_s=60, after=end)
         command("record dropped one", r"  ● recording episode 2: .*")
         command("discard", r"  episode 2 discarded \(\d+ frames\)")
-        listing = command("episodes", rf"  {re.escape(str(dataset_dir))}: 2 episodes, 30 fps\n(.*\n.*)")
-        assert "wave the arm" in listing.group(1) and "reach forward" in listing.group(1)
+        # jog's E: an episode of the last task typed (the discarded one's), started and stopped by one key.
+        terminal.type_line("jog")
+        end = terminal.wait_for(r"^  jog mode \(a press moves, holding repeats\):$", timeout_s=20, after=end).end()
+        _keys(terminal, "e")
+        terminal.wait_for(r"● recording episode 2: task 'dropped one'", timeout_s=20, after=end)
+        _keys(terminal, "a", "a")
+        time.sleep(1.0)
+        _keys(terminal, "e")
+        saved = terminal.wait_for(r"^  ✓ episode 2 saved: \d+ frames.*\n\[joint\] step", timeout_s=60, after=end)
+        _keys(terminal, "Escape")
+        end = terminal.wait_for(r"^  left jog mode$", timeout_s=20, after=saved.start()).end()
+        listing = command("episodes", rf"  {re.escape(str(dataset_dir))}: 3 episodes, 30 fps\n(.*\n.*\n.*)")
+        assert "wave the arm" in listing.group(1) and "dropped one" in listing.group(1)
+        # The recorder killed mid-episode: the prompt says it does not answer, the episodes stay.
+        command("record doomed", r"  ● recording episode 3: .*")
+        time.sleep(1.0)
+        (recorder,) = processes_with_env("SO101_RECORD_DIR", str(dataset_dir))
+        os.kill(recorder, signal.SIGKILL)
+        command("episodes", re.escape("  the recorder did not answer within 3 s"), timeout_s=30)
         terminal.type_line("quit")
-        terminal.wait_for(r"^TELEOP_EXIT=0$", timeout_s=60, after=end)
+        terminal.wait_for(r"^TELEOP_EXIT=\d+$", timeout_s=60, after=end)
     finally:
         terminal.close()
 
     dataset = Dataset.open(dataset_dir)
-    assert [episode.tasks for episode in dataset.episodes] == [("wave the arm",), ("reach forward",)]
+    assert [episode.tasks for episode in dataset.episodes] == [("wave the arm",), ("reach forward",), ("dropped one",)]
+    assert not list(dataset_dir.rglob("*.so101-new")) and not (dataset_dir / ".so101-work").exists()  # the killed one left nothing
     first = dataset.episode_frames(0)
     actions_deg = from_lerobot(first[ACTION_KEY])
     # What was typed is what was recorded as the action: pan to 40°, then to -40°.
@@ -87,9 +108,10 @@ def test_a_person_records_two_episodes_quits_and_replays_one_on_both_simulators(
         match = re.match(TRACKING_LINE, last)
         assert match, replay.stdout
         p50, p99, worst = (float(value) for value in match.groups())
-        # The recording and the replay both ran the arm through the same moves: the body follows
-        # the actions within a few degrees most of the time (the big moves lag a frame behind).
-        assert p50 < 3.0 and worst < 60.0, (body, last)
+        # The body follows the actions within a few degrees most of the time (half the episode is
+        # held at ±40°); the worst is a frame just after a step, no more than the step itself.
+        largest_step_deg = float(np.abs(np.diff(actions_deg, axis=0)).max())
+        assert p50 < 3.0 and worst <= largest_step_deg + 1.0, (body, last, largest_step_deg)
 
 
 def recorded_episode(dataset_dir: Path, actions_deg: np.ndarray) -> None:

@@ -5,6 +5,7 @@ maths (so101/dataset/replay.py), the gripper's mapping, and the dataflows `--rec
 from __future__ import annotations
 
 import threading
+from types import SimpleNamespace
 
 import numpy as np
 import pyarrow as pa
@@ -59,8 +60,8 @@ def test_a_late_tick_adds_the_frames_it_owes_and_a_stall_starts_afresh():
 # -- the recorder's commands ------------------------------------------------------------------------
 
 class FakeEpisode:
-    def __init__(self, task, saved, fail=None):
-        self.task, self.saved, self.fail = task, saved, fail
+    def __init__(self, task, writer, fail=None):
+        self.task, self.writer, self.fail = task, writer, fail
         self.rows: list[tuple] = []
         self.discarded = False
         self.release = threading.Event()
@@ -77,7 +78,9 @@ class FakeEpisode:
         self.release.wait(5)
         if self.fail:
             raise self.fail
-        self.saved.append(self)
+        self.writer.saved.append(self)
+        self.writer.episodes.append(SimpleNamespace(index=len(self.writer.episodes), length=self.frames,
+                                                    tasks=(self.task,), duration_s=self.frames / 30))
 
     def discard(self):
         self.discarded = True
@@ -90,7 +93,7 @@ class FakeWriter:
         self.fail = None
 
     def start_episode(self, task):
-        return FakeEpisode(task, self.saved, self.fail)
+        return FakeEpisode(task, self, self.fail)
 
 
 class Clock:
@@ -194,6 +197,23 @@ def test_toggle_starts_with_the_last_task_and_stops():
     assert "saving" in rec.command(RecordCommand("toggle"))[0]
     assert rec.command(RecordCommand("toggle"))[0] == "● recording episode 1: task 'wave' (stop: stop, drop: discard)"
     rec.close()
+
+
+def test_a_failed_save_gives_its_index_back():
+    rec, writer, clock, said = recording()
+    writer.fail = OSError(28, "No space left on device")
+    feed(rec, clock, 0.01)
+    rec.command(RecordCommand("record", "t"))
+    feed(rec, clock, 0.2)
+    rec.command(RecordCommand("stop"))
+    rec.close()
+    writer.fail = None
+    assert rec.command(RecordCommand("record", "u"))[0].startswith("● recording episode 0:")
+    feed(rec, clock, 0.2)
+    rec.command(RecordCommand("stop"))
+    rec.close()
+    listing = rec.command(RecordCommand("episodes"))
+    assert listing[0] == "/data/set: 1 episodes, 30 fps" and listing[1].startswith("    0: ") and listing[1].endswith("  u")
 
 
 def test_commands_are_answered_while_an_episode_saves_and_a_failed_save_says_why():

@@ -105,6 +105,12 @@ def test_the_layout_is_spread_as_asked(written):
         assert len(videos) == (3 if with_video else 0)
         assert pq.ParquetFile(root / meta[0]).metadata.num_row_groups == 2
     assert sum(pq.read_metadata(root / f).num_rows for f in data) == sum(LENGTHS)
+    # Every row points at the files it is in and that hold its episode.
+    for rel in meta:
+        for row in pq.read_table(root / rel, columns=["episode_index", "meta/episodes/chunk_index", "meta/episodes/file_index", "data/chunk_index", "data/file_index"]).to_pylist():
+            assert rel == lw.EPISODES_PATH.format(chunk_index=row["meta/episodes/chunk_index"], file_index=row["meta/episodes/file_index"])
+            data_file = root / lw.DATA_PATH.format(chunk_index=row["data/chunk_index"], file_index=row["data/file_index"])
+            assert row["episode_index"] in pq.read_table(data_file, columns=["episode_index"]).column(0).to_pylist()
 
 
 def test_reads_the_metadata(written):

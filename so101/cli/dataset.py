@@ -84,7 +84,7 @@ def write_plot(dataset: Dataset, index: int, out: Path) -> None:
         panel.plot(times_s, actions[:, joint], linewidth=1.6, label="action (told)")
         panel.plot(times_s, states[:, joint], linewidth=1.6, linestyle="--", label="observation.state (measured)")
         is_gripper = str(name).startswith("gripper")
-        unit = f"{GRIPPER_RANGE[0]:g}-{GRIPPER_RANGE[1]:g} (LeRobot's range)" if is_gripper else "degrees"
+        unit = f"opening, {GRIPPER_RANGE[0]:g}-{GRIPPER_RANGE[1]:g} (LeRobot)" if is_gripper else "angle (degrees)"
         panel.set_title(str(name), fontsize=10)
         panel.set_ylabel(unit)
         panel.grid(True, alpha=0.3)

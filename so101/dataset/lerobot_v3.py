@@ -30,7 +30,6 @@ import errno
 import fcntl
 import json
 import os
-import re
 import threading
 import time
 from contextlib import contextmanager
@@ -41,7 +40,7 @@ from typing import Any, Callable, Iterator
 import numpy as np
 import numpy.typing as npt
 import pyarrow as pa
-import pyarrow.parquet as pq  # type: ignore[import-untyped]  # pyproject names only `pyarrow`
+import pyarrow.parquet as pq
 
 from so101.dataset import video as videos
 from so101.dataset.features import ACTION_KEY, IMAGE_KEY, MOTOR_NAMES, ROBOT_TYPE, STATE_KEY
@@ -92,6 +91,10 @@ class DatasetError(ValueError):
 
     def __init__(self, message: str):
         super().__init__(" ".join(message.split()))
+
+
+class _CommitIncomplete(DatasetError):
+    """A save whose journal is whole but whose renames failed: the next open completes it."""
 
 
 @dataclass(frozen=True)
@@ -288,12 +291,10 @@ def _fsync_path(path: Path) -> None:
         os.close(fd)
 
 
-def _write_json_durably(path: Path, data: Any) -> None:
-    """json.dump as LeRobot's write_json (indent 4, UTF-8 as is), fsynced."""
+def _write_json(path: Path, data: Any) -> None:
+    """json.dump as LeRobot's write_json: indent 4, UTF-8 as is (the caller fsyncs)."""
     with open(path, "w", encoding="utf-8") as file:
         json.dump(data, file, indent=4, ensure_ascii=False)
-        file.flush()
-        os.fsync(file.fileno())
 
 
 @contextmanager
@@ -671,6 +672,10 @@ class DatasetWriter:
         self._commit_lock = threading.Lock()
         self._work_lock = threading.Lock()
         self._work_count = 0
+        self._live_episodes = 0  # started, neither saved nor discarded: the work folder stays while any is
+        # Set when a save's renames failed after its journal: the files are between two states until
+        # the next open completes them, so this writer saves nothing more.
+        self._incomplete: str | None = None
 
     # -- opening -----------------------------------------------------------------------------
     @classmethod
@@ -730,7 +735,8 @@ class DatasetWriter:
                 }
                 (root / "meta").mkdir(exist_ok=True)
                 temp = root / (INFO_PATH + TEMP_SUFFIX)
-                _write_json_durably(temp, info)
+                _write_json(temp, info)
+                _fsync_path(temp)
                 os.replace(temp, root / INFO_PATH)
                 _fsync_path(root / "meta")
                 _fsync_path(root)
@@ -767,7 +773,10 @@ class DatasetWriter:
         self.close()
 
     def __del__(self) -> None:
-        self.close()
+        try:
+            self.close()
+        except Exception:  # noqa: BLE001 - at interpreter exit `os` may be gone; the exit releases the lock
+            pass
 
     # -- episodes ----------------------------------------------------------------------------
     @property
@@ -787,22 +796,27 @@ class DatasetWriter:
         encoder = None
         if self.image_size is not None:
             with self._work_lock:
+                try:
+                    (self.root / WORK_DIR).mkdir(exist_ok=True)
+                except OSError as error:
+                    raise DatasetError(f"cannot record into {self.root}: {_one_line_os_error(error)}") from None
                 self._work_count += 1
+                self._live_episodes += 1
                 name = f"episode-{os.getpid()}-{self._work_count}.mp4"
-            try:
-                (self.root / WORK_DIR).mkdir(exist_ok=True)
-            except OSError as error:
-                raise DatasetError(f"cannot record into {self.root}: {_one_line_os_error(error)}") from None
             width, height = self.image_size
             encoder = videos.StreamingEncoder(self.root / WORK_DIR / name, self.fps, width, height,
                                               inspect=image_histogram)
         return EpisodeRecorder(self, task.strip(), encoder)
 
-    def _remove_work_dir_if_empty(self) -> None:
-        try:
-            (self.root / WORK_DIR).rmdir()
-        except OSError:
-            pass  # still holds an episode being recorded, or already gone
+    def _episode_ended(self) -> None:
+        """An episode with video was saved or dropped: the work folder goes when no other is recording."""
+        with self._work_lock:
+            self._live_episodes -= 1
+            if self._live_episodes == 0:
+                try:
+                    (self.root / WORK_DIR).rmdir()
+                except OSError:
+                    pass  # already gone
 
     # -- a commit ----------------------------------------------------------------------------
     def _commit(self, task: str, states: Float32Array, actions: Float32Array,
@@ -810,6 +824,9 @@ class DatasetWriter:
         with self._commit_lock:
             if self._lock_fd is None:
                 raise DatasetError(f"the writer of {self.root} is closed: the episode is not saved")
+            if self._incomplete is not None:
+                raise DatasetError(f"the episode is not saved: an earlier save is still to be completed "
+                                   f"({self._incomplete}); open {self.root} again")
             length = len(states)
             episode_index = len(self.episodes)
             first_frame = self.total_frames
@@ -882,8 +899,8 @@ class DatasetWriter:
             info["total_frames"] = first_frame + length
             info["total_tasks"] = len(tasks)
             info["splits"] = {"train": f"0:{episode_index + 1}"}
-            plan.writes.append((INFO_PATH, lambda path: _write_json_durably(path, info)))
-            plan.writes.append((STATS_PATH, lambda path: _write_json_durably(path, stats_to_json(new_stats))))
+            plan.writes.append((INFO_PATH, lambda path: _write_json(path, info)))
+            plan.writes.append((STATS_PATH, lambda path: _write_json(path, stats_to_json(new_stats))))
 
             self._apply(plan, episode_index)
 
@@ -896,6 +913,13 @@ class DatasetWriter:
             summary = EpisodeSummary(episode_index, length, (task,), length / self.fps)
             self.episodes = [*self.episodes, summary]  # a new list: readers in other threads see whole ones
             return summary
+
+    def _unused(self, template: str, chunk: int, file: int, chunks_size: int) -> tuple[int, int]:
+        """(chunk, file) or the first file after it that does not exist: a new file never replaces one
+        (a file no episode row names, left by a crashed LeRobot session, is kept)."""
+        while (self.root / template.format(chunk_index=chunk, file_index=file)).exists():
+            chunk, file = _next_file(chunk, file, chunks_size)
+        return chunk, file
 
     def _place_data(self, length: int, chunks_size: int, table: pa.Table) -> _SessionFile:
         """The data file the episode goes to, with its tables (LeRobot's _save_episode_data rules)."""
@@ -915,6 +939,7 @@ class DatasetWriter:
                                      chunks_size)
         else:
             chunk, file = 0, 0
+        chunk, file = self._unused(DATA_PATH, chunk, file, chunks_size)
         return _SessionFile(chunk, file, first_frame, tables=(table,))
 
     def _place_video(self, encoded: videos.EncodedVideo, chunks_size: int,
@@ -939,6 +964,7 @@ class DatasetWriter:
                                      int(self._last_row[f"{key}/file_index"]), chunks_size)
         else:
             chunk, file = 0, 0
+        chunk, file = self._unused(VIDEO_PATH.replace("{video_key}", IMAGE_KEY), chunk, file, chunks_size)
         plan.moves.append((encoded.path, VIDEO_PATH.format(video_key=IMAGE_KEY, chunk_index=chunk, file_index=file)))
         return _SessionFile(chunk, file, to_timestamp=encoded.duration_s), 0.0
 
@@ -961,6 +987,7 @@ class DatasetWriter:
                                      int(self._last_row["meta/episodes/file_index"]), chunks_size)
         else:
             chunk, file = 0, 0
+        chunk, file = self._unused(EPISODES_PATH, chunk, file, chunks_size)
         row.update({"meta/episodes/chunk_index": chunk, "meta/episodes/file_index": file})
         return _SessionFile(chunk, file, rows=(row,))
 
@@ -987,10 +1014,11 @@ class DatasetWriter:
             for folder in {(self.root / name).parent for name, _ in renames} | {p.parent for p in created}:
                 _fsync_path(folder)
             temps.append(journal_temp)
-            _write_json_durably(journal_temp, {"renames": renames})
+            _write_json(journal_temp, {"renames": renames})
+            _fsync_path(journal_temp)
             os.replace(journal_temp, journal)
             _fsync_path(journal.parent)
-        except (OSError, videos.VideoWriteError) as error:
+        except BaseException as error:
             # Not committed: remove every trace, the dataset stays exactly as it was.
             journal.unlink(missing_ok=True)
             for temp in temps:
@@ -1000,6 +1028,8 @@ class DatasetWriter:
                     folder.rmdir()
                 except OSError:
                     pass
+            if not isinstance(error, (OSError, videos.VideoWriteError)):
+                raise
             reason = _one_line_os_error(error) if isinstance(error, OSError) else str(error)
             raise DatasetError(f"episode {episode_index} is not saved: {reason}; "
                                f"the dataset in {self.root} is as it was") from None
@@ -1008,8 +1038,9 @@ class DatasetWriter:
                 _roll_forward(self.root, renames)
         except OSError as error:
             # The journal is whole: the next open completes these renames.
-            raise DatasetError(f"episode {episode_index} is saved but not yet in place ({_one_line_os_error(error)}): "
-                               f"it is completed when {self.root} is next opened") from None
+            self._incomplete = _one_line_os_error(error)
+            raise _CommitIncomplete(f"episode {episode_index} is saved but not yet in place ({self._incomplete}): "
+                                    f"it is completed when {self.root} is next opened") from None
 
 
 def _make_folders(folder: Path) -> list[Path]:
@@ -1103,11 +1134,16 @@ class EpisodeRecorder:
                 if self._encoded.frames != len(self._states):
                     raise DatasetError(f"the episode's video has {self._encoded.frames} frames for "
                                        f"{len(self._states)} rows: the episode is not saved")
-            self._saved = self._writer._commit(self.task, np.stack(self._states), np.stack(self._actions),
-                                               self._encoded)
+            try:
+                self._saved = self._writer._commit(self.task, np.stack(self._states), np.stack(self._actions),
+                                                   self._encoded)
+            except _CommitIncomplete:
+                # Its video may still be in the work folder, named by the journal: keep it for the next open.
+                self._discarded = True
+                raise
             if self._encoded is not None:
                 self._encoded.path.unlink(missing_ok=True)  # joined into the dataset's file, or moved there
-            self._writer._remove_work_dir_if_empty()
+                self._writer._episode_ended()
             self._states, self._actions = [], []  # the rows are in the dataset now
             return self._saved
 
@@ -1125,4 +1161,5 @@ class EpisodeRecorder:
             self._encoded.path.unlink(missing_ok=True)
         elif self._encoder is not None:
             self._encoder.cancel()
-        self._writer._remove_work_dir_if_empty()
+        if self._encoder is not None:
+            self._writer._episode_ended()

@@ -153,7 +153,7 @@ class Recording:
         self.targets_deg: tuple[float, ...] | None = None
         self.image: npt.NDArray[np.uint8] | None = None
         self.episode: Episode | None = None
-        self.episode_index = len(writer.episodes)  # the next episode's index
+        self.episode_index = 0  # the index of the episode recording (or of the next one)
         self._frame_clock: FrameClock | None = None
         self._lock = threading.Lock()  # one save at a time, in episode order
         self._saves: list[threading.Thread] = []
@@ -225,6 +225,9 @@ class Recording:
             return self.text["no_task"]
         if self.state_deg() is None:
             return self.text["no_state"]
+        # The writer numbers episodes as they are saved: after those saved and those saving (a
+        # save that fails gives its number back).
+        self.episode_index = len(self.writer.episodes) + len(self._pending)
         self.episode = self.writer.start_episode(task)
         self._frame_clock = None
         self.last_task = task
@@ -243,7 +246,6 @@ class Recording:
         if frames == 0:
             episode.discard()
             return self.text["empty"].format(episode=index)
-        self.episode_index += 1
         self._pending[index] = frames
         saving = threading.Thread(target=self._save, args=(episode, index, frames), name=f"save-{index}")
         self._saves.append(saving)

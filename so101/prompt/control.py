@@ -54,6 +54,8 @@ class KeyboardControl:
         self._kinematics = None
         self.keys_fd = keys_fd
         self.recorder = recorder
+        self.jogging = False  # `jog` has the terminal
+        self.news_shown = 0  # lines the recorder's news printed (jog draws its status line again)
 
     # -- events, from the pump thread ----------------------------------------------------
     def on_event(self, event: dict) -> None:
@@ -177,7 +179,11 @@ class KeyboardControl:
                 return [text["jog_needs_terminal"]], False
             from so101.prompt.jog_loop import run_jog
 
-            return run_jog(self, self.keys_fd, FIRST_STATE_WAIT_S), False
+            self.jogging = True
+            try:
+                return run_jog(self, self.keys_fd, FIRST_STATE_WAIT_S), False
+            finally:
+                self.jogging = False
         raise AssertionError(f"unhandled command {command!r}")
 
     def ask_recorder(self, command: str, task: str = "") -> list[str]:

@@ -27,6 +27,7 @@ class JogPrompt(Protocol):
     lang: str
     text: dict[str, str]
     states_seen: int
+    news_shown: int  # lines printed over the status line meanwhile (the recorder's news)
     send_joint_cmd: Callable[[Sequence[float]], None]
 
     def wait_for_state(self, timeout_s: float) -> tuple[tuple[float, ...] | None, float | None]: ...
@@ -60,6 +61,7 @@ def run_jog(control: JogPrompt, fd: int, first_state_wait_s: float) -> list[str]
     jog = Jog(targets_deg=start_deg)
     kinematics = None  # made when Cartesian mode is first asked for: it loads PyBullet
     waiting_deg, sent_at_state, shown = None, -1, ""
+    news_seen = control.news_shown
     try:
         with single_keys(fd) as keys:
             while True:
@@ -86,6 +88,8 @@ def run_jog(control: JogPrompt, fd: int, first_state_wait_s: float) -> list[str]
                 if jog.cartesian and kinematics is not None and state_deg:  # Tab has made the kinematics
                     tip_mm = kinematics.tip_mm(state_deg[:NUM_ARM_JOINTS])
                 line = status_line(jog, state_deg, tip_mm, control.lang)[: _columns(fd) - 1]
+                if control.news_shown != news_seen:  # a line was printed where the status line was
+                    news_seen, shown = control.news_shown, ""
                 if line != shown:
                     sys.stdout.write("\r\x1b[K" + line)
                     sys.stdout.flush()
