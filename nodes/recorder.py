@@ -28,7 +28,8 @@ from dora import Node  # noqa: E402
 
 from so101.bodies.node_loop import cannot_start  # noqa: E402
 from so101.dataset.lerobot_v3 import DatasetError, DatasetWriter  # noqa: E402
-from so101.dataset.recording import Recording, decode_record_cmd  # noqa: E402
+from so101.dataset.messages import decode_record_cmd  # noqa: E402
+from so101.dataset.recording import Recording  # noqa: E402
 from so101.dataset.settings import RecorderSettings  # noqa: E402
 from so101.runtime.logs import send_diagnostics_to  # noqa: E402
 

@@ -12,7 +12,8 @@ import pyarrow as pa
 import pytest
 
 from so101.dataset.features import MOTOR_NAMES, from_lerobot, to_lerobot
-from so101.dataset.recording import FrameClock, Recording, RecordCommand, decode_record_cmd, encode_record_cmd
+from so101.dataset.messages import RecordCommand, decode_record_cmd, encode_record_cmd
+from so101.dataset.recording import FrameClock, Recording
 from so101.dataset.replay import ramp_deg, tracking_errors_deg, tracking_line
 from so101.prompt.commands import Episodes, ParseError, parse_command
 from so101.prompt.recorder_link import RecorderLink

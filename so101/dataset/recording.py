@@ -12,23 +12,20 @@ sampling while an episode is written.
 
 from __future__ import annotations
 
-import json
 import threading
 import time
-from dataclasses import dataclass
 from typing import Callable, Protocol, Sequence
 
 import numpy as np
 import numpy.typing as npt
 
 from so101.dataset.features import to_lerobot
+from so101.dataset.messages import COMMANDS, RecordCommand
 from so101.robot import ACTUATED_JOINTS, NUM_ARM_JOINTS
 
 # A recorder that stalled longer than this many frames (a suspended laptop) starts counting
 # afresh rather than fill the gap with copies of one sample.
 MAX_FRAMES_OWED = 30
-
-COMMANDS = ("record", "stop", "discard", "episodes", "toggle")
 
 TEXT = {
     "zh": {
@@ -109,29 +106,6 @@ class FrameClock:
         owed = max(owed, 0)
         self.frames += owed
         return owed
-
-
-@dataclass
-class RecordCommand:
-    """A `record_cmd` message: {"command": one of COMMANDS, "task": text for record/toggle}."""
-
-    command: str
-    task: str = ""
-
-
-def decode_record_cmd(text: str) -> RecordCommand | str:
-    """A record_cmd's JSON text -> the command, or the reason it is not one (one line)."""
-    try:
-        message = json.loads(text)
-        command = message["command"]
-        task = str(message.get("task", "")).strip()
-    except (ValueError, TypeError, KeyError):
-        return f"not a record_cmd: {text[:80]!r}"
-    return RecordCommand(command, task)
-
-
-def encode_record_cmd(command: str, task: str = "") -> str:
-    return json.dumps({"command": command, "task": task}, ensure_ascii=False)
 
 
 class Recording:

@@ -8,7 +8,7 @@ import itertools
 import threading
 from typing import Callable
 
-from so101.dataset.recording import encode_record_cmd
+from so101.dataset.messages import encode_record_cmd
 
 # The recorder answers at its next event (a 5 ms tick); this allows for a loaded machine.
 REPLY_WAIT_S = 3.0

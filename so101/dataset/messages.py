@@ -1,0 +1,32 @@
+"""The `record_cmd` message between the prompt and the recorder: JSON text, so the prompt needs
+neither numpy nor the dataset code to send one."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+
+COMMANDS = ("record", "stop", "discard", "episodes", "toggle")
+
+
+@dataclass
+class RecordCommand:
+    """A `record_cmd` message: {"command": one of COMMANDS, "task": text for record/toggle}."""
+
+    command: str
+    task: str = ""
+
+
+def decode_record_cmd(text: str) -> RecordCommand | str:
+    """A record_cmd's JSON text -> the command, or the reason it is not one (one line)."""
+    try:
+        message = json.loads(text)
+        command = message["command"]
+        task = str(message.get("task", "")).strip()
+    except (ValueError, TypeError, KeyError):
+        return f"not a record_cmd: {text[:80]!r}"
+    return RecordCommand(command, task)
+
+
+def encode_record_cmd(command: str, task: str = "") -> str:
+    return json.dumps({"command": command, "task": task}, ensure_ascii=False)
