@@ -27,6 +27,7 @@ from so101.runtime.dataflow import TICK_PERIOD_S, with_recorder
 from so101.stats import summary
 
 SAVED_EPISODE_S = 60.0
+RECORD_AT_STATE = 250  # bench/nodes/prober.py's: when it sends `record`
 PICTURES = 20  # the in-process picture timing, and the distinct poses of the saved episode
 
 
@@ -70,7 +71,7 @@ def measure_recording(run_dir: Path, duration_s: float, body: str) -> dict:
     flow = realtime_figures(record, TICK_PERIOD_S)["dataflow"]
     states = record["probe"]["states"]
     # The episode starts at the prober's RECORD_AT_STATE-th state and ends at STOP, just after the last.
-    episode_wall_s = (states[-1][0] - states[min(9, len(states) - 1)][0]) / 1e9
+    episode_wall_s = (states[-1][0] - states[min(RECORD_AT_STATE, len(states)) - 1][0]) / 1e9
     dataset = Dataset.open(dataset_dir)
     if not dataset.episodes:
         raise RuntimeError(f"the recorder saved no episode (see {run_dir / 'dora.log'})")

@@ -213,9 +213,23 @@ def test_quick_bench_writes_every_figure(tmp_path, body):
     # Fewer publications per step can only help: 100 steps per state beat 1.
     assert runs[1]["steps_per_s"] > runs[0]["steps_per_s"]
 
+    recording = figures["recording"]
+    assert recording["picture_ms"]["p99"] >= recording["picture_ms"]["p50"] > 0
+    while_recording = recording["recording"]
+    assert 100 < while_recording["joint_state_per_s"] < 300 and 0.4 < while_recording["sim_over_wall"] < 1.2
+    # Why pictures are drawn by a node of their own: inside the physics loop they hold it back.
+    assert 0 < recording["pictures_in_loop"]["joint_state_per_s"] < while_recording["joint_state_per_s"]
+    # The episode recorded the whole run at 30 frames per wall-clock second, with new pictures in it.
+    assert while_recording["frames"] > 60 and 25 < while_recording["frames_per_wall_s"] < 35
+    assert while_recording["new_pictures_per_s"] > 0
+    saving = recording["saving"]
+    assert saving["episode_s"] == 5 and saving["frames"] == 150 and 0 < saving["save_s"] < 60
+    assert "recording with video: joint_state per s" in result.stdout
+    recording_rows = 2  # the 60 s save's target is judged in full runs only
+
     if body == "mujoco":
         assert "memory_stages_mb" not in figures and machine["mujoco"].startswith("4.")
-        assert len(figures["targets"]) == 8 + window_rows
+        assert len(figures["targets"]) == 8 + window_rows + recording_rows
         return
     stages = figures["memory_stages_mb"]
     assert list(stages) == ["course", "plugins", "node"]
@@ -226,7 +240,7 @@ def test_quick_bench_writes_every_figure(tmp_path, body):
     assert stages["plugins"]["the arm loaded"]["current"] < stages["course"]["the arm loaded"]["current"]
     assert "memory, peak | current RSS (MB)" in result.stdout
 
-    assert len(figures["targets"]) == 8 + window_rows
+    assert len(figures["targets"]) == 8 + window_rows + recording_rows
     assert all(isinstance(row["met"], bool) for row in figures["targets"])
     assert "targets:" in result.stdout and "joint_state per s" in result.stdout
 

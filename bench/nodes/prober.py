@@ -20,7 +20,8 @@ import pyarrow as pa
 from dora import Node
 
 PROBED_JOINTS = (0, 4)
-RECORD_AT_STATE = 10
+# A second in: the camera node has drawn its first picture by then (MuJoCo's renderer takes longest to start).
+RECORD_AT_STATE = 250
 
 
 def main() -> None:
