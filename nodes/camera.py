@@ -34,9 +34,9 @@ from so101.gui.display import DisplayError  # noqa: E402
 from so101.robot import NUM_ARM_JOINTS  # noqa: E402
 from so101.runtime.dataflow import TICK_PERIOD_S  # noqa: E402
 from so101.runtime.logs import send_diagnostics_to  # noqa: E402
+from so101.runtime.processes import yield_cpu_to_the_body  # noqa: E402
 
 NODE_ID = "camera"
-NICENESS = 10
 PICTURE_PERIOD_S = 1 / 30  # the tick's period, as `so101 teleop --record` wires it
 # A pose that moved less than this on every joint since the last picture is not drawn again.
 REDRAW_DEG = 0.05
@@ -64,7 +64,7 @@ def main() -> int:
         sim.render_rgb(width, height)  # a renderer that cannot work says so now, in one line
     except (ValueError, ModelFilesError, DisplayError, RuntimeError) as error:
         return cannot_start(error, NODE_ID)
-    os.nice(NICENESS)
+    yield_cpu_to_the_body()
     arm_deg: list[float] | None = None
     gripper_deg = 0.0
     drawn_deg: np.ndarray | None = None

@@ -32,10 +32,9 @@ from so101.dataset.messages import decode_record_cmd  # noqa: E402
 from so101.dataset.recording import Recording  # noqa: E402
 from so101.dataset.settings import RecorderSettings  # noqa: E402
 from so101.runtime.logs import send_diagnostics_to  # noqa: E402
+from so101.runtime.processes import yield_cpu_to_the_body  # noqa: E402
 
 NODE_ID = "recorder"
-# Below the body's priority: a recorder that encodes video must never take the physics loop's CPU.
-NICENESS = 10
 logger = logging.getLogger("so101.recorder")
 
 
@@ -59,7 +58,7 @@ def main() -> int:
         writer = DatasetWriter.open(settings.root, settings.fps, settings.image_size)
     except (ValueError, DatasetError) as error:
         return cannot_start(error, NODE_ID)
-    os.nice(NICENESS)
+    yield_cpu_to_the_body()
     node = Node()
     if settings.image_size and "image" not in (node.node_config() or {}).get("inputs", {}):
         return cannot_start(ValueError("SO101_RECORD_IMAGE_SIZE is set but no `image` input is connected "

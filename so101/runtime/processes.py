@@ -102,3 +102,14 @@ def descendants(pid: int) -> list[int]:
             found.append(child)
             queue.append(child)
     return found
+
+
+def yield_cpu_to_the_body() -> None:
+    """This process runs only on CPU time no other process wants (Linux's SCHED_IDLE), so it never
+    delays a body's tick: the recorder and the camera. Elsewhere, the lowest niceness dora's
+    nodes can take back from (`nice` 19)."""
+    try:
+        os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
+    except (AttributeError, OSError):
+        with contextlib.suppress(OSError):
+            os.nice(19)
