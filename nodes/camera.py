@@ -29,25 +29,25 @@ from dora import Node  # noqa: E402
 
 from so101.assets import ModelFilesError  # noqa: E402
 from so101.bodies.node_loop import cannot_start  # noqa: E402
+from so101.dataset.features import DEFAULT_FPS  # noqa: E402
 from so101.dataset.settings import CameraSettings  # noqa: E402
 from so101.gui.display import DisplayError  # noqa: E402
 from so101.robot import NUM_ARM_JOINTS  # noqa: E402
-from so101.runtime.dataflow import TICK_PERIOD_S  # noqa: E402
+from so101.runtime.dataflow import TICK_PERIOD_S, timer_period_s  # noqa: E402
 from so101.runtime.logs import send_diagnostics_to  # noqa: E402
 from so101.runtime.processes import yield_cpu_to_the_body  # noqa: E402
 
 NODE_ID = "camera"
-PICTURE_PERIOD_S = 1 / 30  # the tick's period, as `so101 teleop --record` wires it
 # A pose that moved less than this on every joint since the last picture is not drawn again.
 REDRAW_DEG = 0.05
 
 
-def stale(stamp: object) -> bool:
-    """A tick older than a period waited while a picture was drawn: drawing for it would draw an
+def stale(stamp: object, period_s: float) -> bool:
+    """A tick older than its period waited while a picture was drawn: drawing for it would draw an
     old pose and fall further behind."""
     if not isinstance(stamp, datetime) or stamp.tzinfo is None:
         return False
-    return (datetime.now(timezone.utc) - stamp).total_seconds() > PICTURE_PERIOD_S
+    return (datetime.now(timezone.utc) - stamp).total_seconds() > period_s
 
 
 def main() -> int:
@@ -69,6 +69,7 @@ def main() -> int:
     gripper_deg = 0.0
     drawn_deg: np.ndarray | None = None
     node = Node()
+    period_s = timer_period_s(node.node_config()) or 1.0 / DEFAULT_FPS  # a tick that is no timer: the usual rate
     try:
         for event in node:
             if event["type"] == "INPUT":
@@ -81,7 +82,7 @@ def main() -> int:
                     if len(values) == 1:
                         gripper_deg = values[0]
                 elif event["id"] == "tick" and arm_deg is not None:
-                    if stale(event["metadata"].get("timestamp")):  # queued while drawing: the newest state is further on
+                    if stale(event["metadata"].get("timestamp"), period_s):  # waited while drawing: newer states came
                         continue
                     pose_deg = np.array(arm_deg + [gripper_deg])
                     if drawn_deg is not None and np.all(np.abs(pose_deg - drawn_deg) < REDRAW_DEG):

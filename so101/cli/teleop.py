@@ -27,7 +27,6 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from so101.bodies.node_loop import IMAGE_SIZE
 from so101.bodies.registry import BODIES, DEFAULT_BODY, BodyKind, body_node_env
 from so101.dataset.features import DEFAULT_FPS
 from so101.runtime.dataflow import LOADED_MARKS, PROMPT_NODE_FILE, ROOT, dataflow_copy, with_recorder, write_dataflow
@@ -226,6 +225,7 @@ def run_beside(launch: Launch, descriptor: dict, node_file: Path, text: dict[str
 def add_recorder(descriptor: dict, body: BodyKind, dataset_dir: Path, fps: int, lang: str) -> str | None:
     """The recorder (and a simulation's camera) added to `descriptor`; or why DIR cannot take
     these episodes, in one line, before anything starts."""
+    from so101.bodies.node_loop import IMAGE_SIZE
     from so101.dataset.lerobot_v3 import DatasetError, DatasetWriter
 
     image_size = IMAGE_SIZE if body.simulated else None  # the real arm has no camera of its own
