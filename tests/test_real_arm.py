@@ -203,7 +203,7 @@ def test_a_silent_servo_is_named_retried_and_not_published_as_fresh(monkeypatch,
         return event
 
     monkeypatch.setattr(MockNode, "__next__", silent_for_three_ticks)
-    code, node = run_arm(monkeypatch, [TICK] * 20)
+    code, node = run_arm(monkeypatch, [TICK] * 20, SO101_BUS_RETRIES="5")  # the arm's default (the tests' is higher)
     out = capsys.readouterr().out
     assert code == 0
     assert len(node.outputs["joint_state"]) == 20 - 3  # ticks 6-8 published nothing

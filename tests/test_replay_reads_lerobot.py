@@ -335,3 +335,22 @@ def test_the_fixture_is_shaped_like_tmp_lerobot_made(tmp_path):
     assert {k: sorted(v) for k, v in ours["features"].items()} == {k: sorted(v) for k, v in theirs["features"].items()}
     ours_stats, theirs_stats = json.loads((root / "meta" / "stats.json").read_text()), json.loads((TMP_MADE / "meta" / "stats.json").read_text())
     assert {k: sorted(v) for k, v in ours_stats.items()} == {k: sorted(v) for k, v in theirs_stats.items()}
+
+
+def test_a_data_file_that_disagrees_with_the_metadata_is_one_line(tmp_path):
+    import pyarrow.parquet as pq
+
+    from so101.dataset.features import to_lerobot
+    from so101.dataset.lerobot_v3 import Dataset, DatasetError, DatasetWriter
+
+    with DatasetWriter.open(tmp_path / "set", 30, None) as writer:
+        episode = writer.start_episode("t")
+        for _ in range(5):
+            episode.add_frame(to_lerobot([0] * 6), to_lerobot([0] * 6))
+        episode.save()
+    data_file = tmp_path / "set" / "data" / "chunk-000" / "file-000.parquet"
+    pq.write_table(pq.read_table(data_file).slice(0, 3), data_file)
+    with pytest.raises(DatasetError) as refused:
+        Dataset.open(tmp_path / "set").episode_frames(0)
+    assert str(refused.value) == (f"episode 0 has 5 frames in its metadata but 3 rows in {data_file}: "
+                                  "the dataset's files disagree")

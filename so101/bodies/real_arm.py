@@ -43,6 +43,8 @@ PROBE_READS = 20
 # Reads of Torque_Enable after torque off before a servo that says "on" is believed, and the gap between.
 TORQUE_OFF_READS = 3
 TORQUE_OFF_READ_GAP_S = 0.02
+# Pings of each servo at start before it is called silent: one lost packet must not refuse the arm.
+START_PINGS = 3
 
 
 class ArmFailed(BodyFailed):
@@ -52,7 +54,11 @@ class ArmFailed(BodyFailed):
 def check_servos_answer(bus: FeetechBus) -> None:
     """Every servo of an SO-101 follower answers at its ID and is an STS3215; BusError names the first that is not."""
     for name, servo_id in zip(MOTOR_NAMES, MOTOR_IDS):
-        model = bus.ping(servo_id)
+        model = None
+        for _ in range(START_PINGS):
+            model = bus.ping(servo_id)
+            if model is not None:
+                break
         if model is None:
             raise BusError(f"servo {servo_id} ({name}) does not answer on {bus.port_name}: "
                            f"check its power and cable, and that it has ID {servo_id}")

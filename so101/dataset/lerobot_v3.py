@@ -523,6 +523,9 @@ class Dataset:
             table = pq.read_table(path, columns=columns, filters=[("episode_index", "=", index)])
         except (OSError, pa.ArrowException) as error:
             raise DatasetError(f"episode {index}'s data cannot be read from {path}: {error}") from None
+        if table.num_rows != int(row["length"]):  # a data file that does not hold what the metadata says
+            raise DatasetError(f"episode {index} has {int(row['length'])} frames in its metadata but {table.num_rows} "
+                               f"rows in {path}: the dataset's files disagree")
         frames = {key: _column_to_numpy(table.column(key), wanted[key]) for key in columns}
         if "frame_index" in frames and np.any(np.diff(frames["frame_index"]) < 0):
             order = np.argsort(frames["frame_index"], kind="stable")
