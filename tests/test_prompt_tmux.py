@@ -36,6 +36,7 @@ class Terminal:
              f"env {exports} {command}; echo TELEOP_EXIT=$?; sleep 600"],
             check=True,
         )
+        self.seen = 0  # screen text up to here is answered: `command` looks for replies past it
 
     def screen(self) -> str:
         result = subprocess.run(
@@ -60,6 +61,13 @@ class Terminal:
             if time.monotonic() > deadline:
                 raise AssertionError(f"{pattern!r} not on the screen within {timeout_s}s:\n{screen}")
             time.sleep(0.2)
+
+    def command(self, text: str, reply: str, timeout_s: float = 20) -> re.Match:
+        """Type `text` at the prompt and wait for `reply` (a pattern) right below it, past `seen`."""
+        self.type_line(text)
+        match = self.wait_for(rf"^> {re.escape(text)}\n{reply}$", timeout_s, after=self.seen)
+        self.seen = match.end()
+        return match
 
     def close(self) -> None:
         subprocess.run(["tmux", "kill-session", "-t", self.name], capture_output=True)
@@ -90,21 +98,14 @@ def start_teleop(tmp_path: Path, lang: str, mode: str = "direct", body: str = "p
 def test_a_person_drives_the_arm_from_the_prompt(tmp_path):
     terminal, poses_file, log_file = start_teleop(tmp_path, "zh")
     try:
-        end = terminal.wait_for(r"^=+\n>$", timeout_s=120).start()
+        terminal.seen = terminal.wait_for(r"^=+\n>$", timeout_s=120).start()
 
-        def command(text: str, reply: str, timeout_s: float = 20) -> re.Match:
-            nonlocal end
-            terminal.type_line(text)
-            match = terminal.wait_for(rf"^> {re.escape(text)}\n{reply}$", timeout_s, after=end)
-            end = match.end()
-            return match
-
-        command("0 90", re.escape("  → 关节 0 (shoulder_pan) → 90°"))
-        command("batch -30 45 -60 30 0", re.escape("  → 全关节 → [-30.0, 45.0, -60.0, 30.0, 0.0]°"))
+        terminal.command("0 90", re.escape("  → 关节 0 (shoulder_pan) → 90°"))
+        terminal.command("batch -30 45 -60 30 0", re.escape("  → 全关节 → [-30.0, 45.0, -60.0, 30.0, 0.0]°"))
         def state_reaches(target_deg: list[float]) -> None:
             # the arm needs about half a second to get there: `state` until it has (30 s at most)
             for _ in range(60):
-                reached = command("state", r"  当前关节角度: \[(.*)\]°.*")
+                reached = terminal.command("state", r"  当前关节角度: \[(.*)\]°.*")
                 angles = [float(word) for word in reached.group(1).split(",")]
                 if all(abs(angle - target) <= 1.0 for angle, target in zip(angles, target_deg)):
                     return
@@ -112,18 +113,18 @@ def test_a_person_drives_the_arm_from_the_prompt(tmp_path):
             raise AssertionError(f"the arm did not reach {target_deg}: last state {angles}")
 
         state_reaches(TARGET_DEG)
-        saved = command("save a", r"  → 姿态 'a' 已保存: \[(.*)\]°.*")
+        saved = terminal.command("save a", r"  → 姿态 'a' 已保存: \[(.*)\]°.*")
         saved_deg = [float(word) for word in saved.group(1).split(",")]
         assert all(abs(angle - target) <= 1.0 for angle, target in zip(saved_deg, TARGET_DEG)), saved_deg
-        command("home", re.escape("  → 回零指令已发送"))
+        terminal.command("home", re.escape("  → 回零指令已发送"))
         state_reaches([0.0] * 5)
-        command("go a", re.escape("  → 移动到姿态 'a'"))
+        terminal.command("go a", re.escape("  → 移动到姿态 'a'"))
         state_reaches(saved_deg)
-        command("9 10", re.escape("  关节号范围 0-5(0-4 手臂,5 夹爪),收到 '9';格式:关节号 角度(如 '0 45')"))
-        command("go b", re.escape("  未找到姿态 'b';已保存的姿态: a(用 'save 名字' 保存)"))
-        command("0 nan", re.escape("  'nan' 不是角度:角度是十进制数字,单位度(如 45、-30.5)"))
-        command("quit", re.escape("  再见"))
-        terminal.wait_for(r"^数据流已停止\nTELEOP_EXIT=0$", timeout_s=60, after=end)
+        terminal.command("9 10", re.escape("  关节号范围 0-5(0-4 手臂,5 夹爪),收到 '9';格式:关节号 角度(如 '0 45')"))
+        terminal.command("go b", re.escape("  未找到姿态 'b';已保存的姿态: a(用 'save 名字' 保存)"))
+        terminal.command("0 nan", re.escape("  'nan' 不是角度:角度是十进制数字,单位度(如 45、-30.5)"))
+        terminal.command("quit", re.escape("  再见"))
+        terminal.wait_for(r"^数据流已停止\nTELEOP_EXIT=0$", timeout_s=60, after=terminal.seen)
         screen = terminal.screen()
     finally:
         terminal.close()

@@ -120,6 +120,13 @@ def feed(rec, clock, seconds, arm=(10.0, 20.0, 30.0, 40.0, 50.0), gripper=45.0):
         rec.tick()
 
 
+def record_for(rec, clock, task, seconds):
+    """An episode of `task` started once the arm's state has come, and `seconds` of it recorded."""
+    feed(rec, clock, 0.01)
+    rec.command(RecordCommand("record", task))
+    feed(rec, clock, seconds)
+
+
 def test_an_episode_samples_state_and_target_at_each_frame():
     rec, writer, clock, said = recording()
     rec.on_joint_state([10, 20, 30, 40, 50])
@@ -180,9 +187,7 @@ def test_refusals_are_one_line_and_change_nothing(lang):
 
 def test_discard_drops_the_episode_and_keeps_its_index():
     rec, writer, clock, said = recording()
-    feed(rec, clock, 0.01)
-    rec.command(RecordCommand("record", "t"))
-    feed(rec, clock, 0.3)
+    record_for(rec, clock, "t", 0.3)
     first = rec.episode
     assert rec.command(RecordCommand("discard"))[0].startswith("episode 0 discarded (")
     assert first.discarded and rec.episode is None
@@ -203,9 +208,7 @@ def test_toggle_starts_with_the_last_task_and_stops():
 def test_a_failed_save_gives_its_index_back():
     rec, writer, clock, said = recording()
     writer.fail = OSError(28, "No space left on device")
-    feed(rec, clock, 0.01)
-    rec.command(RecordCommand("record", "t"))
-    feed(rec, clock, 0.2)
+    record_for(rec, clock, "t", 0.2)
     rec.command(RecordCommand("stop"))
     rec.close()
     writer.fail = None
@@ -220,9 +223,7 @@ def test_a_failed_save_gives_its_index_back():
 def test_commands_are_answered_while_an_episode_saves_and_a_failed_save_says_why():
     rec, writer, clock, said = recording()
     writer.fail = OSError(28, "No space left on device")
-    feed(rec, clock, 0.01)
-    rec.command(RecordCommand("record", "t"))
-    feed(rec, clock, 0.2)
+    record_for(rec, clock, "t", 0.2)
     episode = rec.episode
     episode.release.clear()  # the save blocks until released
     rec.command(RecordCommand("stop"))
@@ -234,9 +235,7 @@ def test_commands_are_answered_while_an_episode_saves_and_a_failed_save_says_why
 
 def test_stop_saves_an_episode_still_recording():
     rec, writer, clock, said = recording()
-    feed(rec, clock, 0.01)
-    rec.command(RecordCommand("record", "t"))
-    feed(rec, clock, 0.2)
+    record_for(rec, clock, "t", 0.2)
     rec.close()
     assert len(writer.saved) == 1 and said[0] == "the dataflow stops: saving the unfinished episode 0"
 
