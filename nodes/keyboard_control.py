@@ -52,18 +52,11 @@ def joint_cmd_sender(node) -> Callable[[Sequence[float]], None]:
     return send
 
 
-def recorder_link(node, control: KeyboardControl, interactive: bool) -> RecorderLink | None:
-    """The line to the recorder, where the dataflow has one (`so101 teleop --record`)."""
-    if "record_cmd" not in (node.node_config() or {}).get("outputs", []):
-        return None
-    import pyarrow as pa
-
-    def send(record_cmd: str, request: str) -> None:
-        node.send_output("record_cmd", pa.array([record_cmd]), {"request": request})
+def news_printer(control: KeyboardControl, interactive: bool) -> Callable[[str], None]:
+    """Prints news while the person types or jogs (the recorder's, the leader's): on a line of its
+    own, then the prompt (or jog's status line) drawn again below it."""
 
     def show(line: str) -> None:
-        """News while the person types or jogs: on a line of its own, then the prompt (or jog's
-        status line) drawn again below it."""
         if not interactive:
             say(line)
             return
@@ -79,6 +72,18 @@ def recorder_link(node, control: KeyboardControl, interactive: bool) -> Recorder
                 typed = ""
             sys.stdout.write(f"> {typed}")  # readline's own state is unchanged
         sys.stdout.flush()
+
+    return show
+
+
+def recorder_link(node, show: Callable[[str], None]) -> RecorderLink | None:
+    """The line to the recorder, where the dataflow has one (`so101 teleop --record`)."""
+    if "record_cmd" not in (node.node_config() or {}).get("outputs", []):
+        return None
+    import pyarrow as pa
+
+    def send(record_cmd: str, request: str) -> None:
+        node.send_output("record_cmd", pa.array([record_cmd]), {"request": request})
 
     return RecorderLink(send, show)
 
@@ -164,7 +169,8 @@ def main(argv: list[str] | None = None) -> int:
         _KEPT_TO_EXIT.append(node)
         control = KeyboardControl(joint_cmd_sender(node), poses, settings.lang,
                                   keys_fd=sys.stdin.fileno() if interactive else None)  # `jog` reads keys there
-        control.recorder = recorder_link(node, control, interactive)
+        control.show_news = news_printer(control, interactive)
+        control.recorder = recorder_link(node, control.show_news)
         # On STOP, wake the main thread from input() or readline(): only a signal can.
         pump = EventPump(node, control, on_stop=lambda: os.kill(os.getpid(), signal.SIGINT))
         pump.start()

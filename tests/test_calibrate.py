@@ -12,6 +12,7 @@ import pytest
 from so101.feetech.calibration import MOTOR_IDS, MOTOR_NAMES, load_calibration
 from so101.feetech.fake_arm import FakeArm
 from so101.bodies.real_arm import SO101Real
+from so101.leader.arm import SO101Leader
 from tests.dataflow_helpers import SO101, dora_env
 
 
@@ -44,11 +45,12 @@ class Calibrate:
         return self.process.returncode, (self.output + out).decode(), err.decode()
 
 
-def test_a_scripted_calibration_finds_the_emulated_arms_offsets_and_ranges(tmp_path):
+@pytest.mark.parametrize("role", ["follower", "leader"])
+def test_a_scripted_calibration_finds_the_emulated_arms_offsets_and_ranges(tmp_path, role):
     out = tmp_path / "arm.json"
     with FakeArm() as arm:
         arm.write_register(1, "Torque_Enable", 1)  # left on by an earlier program: calibrate switches it off
-        calibrate = Calibrate("--port", arm.port, "--out", str(out))
+        calibrate = Calibrate("--port", arm.port, "--out", str(out), *(["--leader"] if role == "leader" else []))
         calibrate.wait_for("Then press Enter.")
         assert [arm.read_register(i, "Torque_Enable") for i in MOTOR_IDS] == [0] * 6
         calibrate.enter()  # the emulated arm rests in the middle pose
@@ -63,9 +65,14 @@ def test_a_scripted_calibration_finds_the_emulated_arms_offsets_and_ranges(tmp_p
         registers = {i: {name: arm.read_register(i, name) for name in ("Homing_Offset", "Min_Position_Limit",
                                                                          "Max_Position_Limit", "Lock")}
                      for i in MOTOR_IDS}
-        # The file drives the arm: at the middle pose every arm joint reads 0°.
-        with SO101Real(arm.port, load_calibration(out)) as body:
-            angles = body.joint_angles_deg()
+        # The file drives the arm (or, from the leader, the body): at the middle pose every arm joint reads 0°.
+        if role == "leader":
+            with SO101Leader(arm.port, load_calibration(out, role="leader")) as leader:
+                angles = leader.latest_deg
+            assert all(arm.values_written(i, "Torque_Enable") == {0} for i in MOTOR_IDS)
+        else:
+            with SO101Real(arm.port, load_calibration(out)) as body:
+                angles = body.joint_angles_deg()
 
     written = json.loads(out.read_text())
     assert list(written) == list(MOTOR_NAMES)
@@ -83,7 +90,9 @@ def test_a_scripted_calibration_finds_the_emulated_arms_offsets_and_ranges(tmp_p
         assert registers[servo_id] == {"Homing_Offset": offset, "Min_Position_Limit": expected["range_min"],
                                        "Max_Position_Limit": expected["range_max"], "Lock": 1}
     assert angles[:5] == pytest.approx([0.0] * 5, abs=0.1)
-    assert f"Wrote {out}:" in output and f"so101 teleop --body real --port {arm.port} --calibration {out}" in output
+    use_it = (f"so101 teleop --leader {arm.port} --leader-calibration {out}" if role == "leader"
+              else f"so101 teleop --body real --port {arm.port} --calibration {out}")
+    assert f"Wrote {out}:" in output and use_it in output
 
 
 def test_an_existing_file_is_kept_unless_forced_and_then_backed_up(tmp_path):

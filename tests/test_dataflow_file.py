@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
+from pathlib import PurePosixPath
+
 import yaml
 
-from so101.runtime.dataflow import TICK_PERIOD_S, timer_period_s
+from so101.leader.settings import LeaderSettings
+from so101.runtime.dataflow import TICK_PERIOD_S, timer_period_s, with_leader
+from so101.runtime.settings import declared
 from tests.dataflow_helpers import ROOT
 
 DATAFLOW = yaml.safe_load((ROOT / "dataflow.yml").read_text(encoding="utf-8"))
@@ -44,3 +48,19 @@ def test_every_simulation_setting_is_declared_with_its_default():
         "SO101_MODE": "auto", "SO101_CONTROL": "position", "SO101_SERVO_ZETA": "0.7", "SO101_IMAGE_HZ": "0",
         "SO101_FAST_STEPS": "0", "SO101_TICK_LOG": "", "SO101_LANG": "zh",
     }
+
+
+def test_the_leader_dataflow_is_the_course_graph_with_the_leader_driving():
+    """dataflow_leader.yml is what `so101 teleop --leader` derives from dataflow.yml (with_leader), so
+    the file a student reads is the graph teleop runs."""
+    leader_file = yaml.safe_load((ROOT / "dataflow_leader.yml").read_text(encoding="utf-8"))
+    file_env = next(node for node in leader_file["nodes"] if node["id"] == "leader")["env"]
+    derived = with_leader(yaml.safe_load((ROOT / "dataflow.yml").read_text(encoding="utf-8")), "simulation",
+                          file_env, root=PurePosixPath("."))
+    for node in derived["nodes"]:
+        if node["path"] != "dynamic":
+            node["path"] = str(PurePosixPath(node["path"]))
+    assert derived == leader_file
+    leader = next(node for node in leader_file["nodes"] if node["id"] == "leader")
+    assert timer_period_s(leader) == 0.010  # the issue's 10 ms tick
+    assert set(file_env) == {setting.env_var for setting in declared(LeaderSettings)}

@@ -8,6 +8,7 @@ STS3215 would give, the timing of its motion, what the SDK reports for each faul
 
 from __future__ import annotations
 
+import math
 import os
 import select
 import signal
@@ -21,10 +22,17 @@ import pytest
 import serial
 import scservo_sdk as scs
 
-from so101.feetech.fake_arm import MECHANICAL_TABLE, MECHANICS, FakeArm
+from so101.feetech.bus import FeetechBus
+from so101.feetech.calibration import MOTOR_NAMES, steps_to_deg
+from so101.feetech.fake_arm import (
+    MECHANICAL_TABLE, MECHANICS, FakeArm, calibrate_as_at_the_factory, joint_deg, physical_steps,
+)
+from so101.feetech.hand import eased_in, figure_eight_deg, parse_keyframes
+from so101.feetech.sts3215 import decode_signed
 from so101.robot import ACTUATED_JOINTS
 
 SO101 = Path(sys.executable).parent / "so101"
+EXAMPLE_KEYFRAMES = Path(__file__).resolve().parent.parent / "examples" / "leader_wave.keyframes"
 IDS = (1, 2, 3, 4, 5, 6)
 JOINT_NAMES = ("shoulder_pan", "shoulder_lift", "elbow_flex", "wrist_flex", "wrist_roll", "gripper")
 
@@ -106,6 +114,47 @@ def test_mechanical_table_gives_each_joint_its_urdf_travel_off_centre():
         assert m.lower + m.upper == 2 * m.centre  # the middle of the travel
         assert 0 < m.lower < m.upper < 4095  # no stop range crosses the encoder's seam
     assert MECHANICS[6].upper - MECHANICS[6].lower == pytest.approx(110 / 360 * 4096, abs=1)  # gripper: -10°..100°
+
+
+@pytest.mark.parametrize("servo_id, angle_deg, steps, read_back_deg", [
+    (1, 0.0, 2358, 0.0),  # shoulder_pan's middle: 2048 + 310
+    (1, 45.0, 2358 + 512, 45.0),  # 45° = 4096 / 8 steps
+    (1, -90.0, 2358 - 1024, -90.0),
+    (1, 200.0, 2358 + 1252, 1252 * 360 / 4096),  # past its stop (220° of travel = 2 x 1252 steps): held there
+    (2, -30.0, 1628 - 4096 / 12, -30.0),
+    (5, 90.0, 2578 + 1024, 90.0),
+    (5, 180.0, (2578 + 2048) % 4096, -180.0),  # wrist_roll has no stops: round its turn
+    (6, -10.0, 1062, -10.0),  # the gripper's -10°..100° across its stops 1688 ± 626
+    (6, 100.0, 2314, 100.0),
+    (6, 45.0, 1688, 45.0),
+    (6, 17.5, 1062 + 0.25 * 1252, 17.5),
+    (6, 150.0, 2314, 100.0),
+])
+def test_angles_are_placed_on_the_encoder_as_the_factory_calibrated_arm_reads_them(
+    servo_id, angle_deg, steps, read_back_deg
+):
+    m = MECHANICS[servo_id]
+    # Within 1e-3: the URDF's limits are radians, -10° is -0.174533 rad = -10.00000 3°.
+    assert physical_steps(m, angle_deg) == pytest.approx(steps, abs=1e-3)
+    assert joint_deg(m, steps) == pytest.approx(read_back_deg, abs=1e-3)
+
+
+def test_degrees_agree_with_the_calibration_maths_over_the_bus():
+    with FakeArm() as fake:
+        calibration = calibrate_as_at_the_factory(fake)
+        poses = ((40.0, -60.0, 75.0, -20.0, 120.0, 80.0), (-100.0, 90.0, -90.0, 90.0, -150.0, -10.0))
+        bus = FeetechBus(fake.port).open()
+        try:
+            for pose in poses:
+                for servo_id, angle in zip(IDS, pose):
+                    fake.move_by_hand(servo_id, round(physical_steps(MECHANICS[servo_id], angle)))
+                present = bus.sync_read("Present_Position", IDS)
+                reading = [steps_to_deg(i, present[i + 1], calibration[name]) for i, name in enumerate(MOTOR_NAMES)]
+                # Whole steps on the encoder (0.088°); wrist_roll's calibrated middle is half a step off.
+                assert reading == pytest.approx(pose, abs=0.1)
+                assert [fake.joint_angle_deg(i) for i in IDS] == pytest.approx(pose, abs=0.1)
+        finally:
+            bus.close()
 
 
 def test_ping_answers_model_777_for_ids_1_to_6_and_nothing_for_7(bus):
@@ -461,6 +510,168 @@ def test_torque_on_mid_sweep_the_joint_stops_following_the_hand(arm, bus):
     assert not arm.hand_busy()
 
 
+# -- a scripted hand: the emulator as a leader arm -------------------------------------------------------
+
+# The fastest any figure-eight angle changes with a 2 s loop: the gripper, 40° x 2π/2 s ≈ 126°/s.
+FIGURE_EIGHT_2S_TOP_DEG_S = 130.0
+
+
+def expected_between(script, started: tuple[float, float], read: tuple[float, float], top_deg_s: float):
+    """What `script` says for a reading taken between read[0] and read[1] of a hand started between
+    started[0] and started[1] (time.monotonic), and how far off it can be: the script's top speed
+    over half that window, plus the encoder's step."""
+    earliest, latest = read[0] - started[1], read[1] - started[0]
+    return script((earliest + latest) / 2), top_deg_s * (latest - earliest) / 2 + 0.1
+
+
+def read_angles(bus: FeetechBus, calibration) -> tuple[tuple[float, ...], float, float]:
+    """The six angles as a leader reads them (one SYNC READ), and the clock before and after it."""
+    before = time.monotonic()
+    present = bus.sync_read("Present_Position", IDS)
+    after = time.monotonic()
+    angles = tuple(steps_to_deg(i, present[i + 1], calibration[name]) for i, name in enumerate(MOTOR_NAMES))
+    return angles, before, after
+
+
+@pytest.fixture
+def leader():
+    """An emulated arm calibrated as at the factory, a FeetechBus on it, and the calibration."""
+    with FakeArm() as fake:
+        calibration = calibrate_as_at_the_factory(fake)
+        bus = FeetechBus(fake.port).open()
+        try:
+            yield fake, bus, calibration
+        finally:
+            bus.close()
+
+
+def test_torque_off_joints_follow_the_figure_eight_read_over_the_bus_and_a_held_one_does_not(leader):
+    fake, bus, calibration = leader
+    bus.write(2, "Torque_Enable", 1)  # shoulder_lift held by its motor (Goal_Position = present)
+    period_s, ease_s = 2.0, 0.3
+    script = eased_in(lambda t_s: figure_eight_deg(t_s, period_s), (0.0, 0.0, 0.0, 0.0, 0.0, 45.0), ease_s)
+    started_before = time.monotonic()
+    assert fake.play_hand(lambda t_s: figure_eight_deg(t_s, period_s), None, ease_s=ease_s) == (1, 3, 4, 5, 6)
+    started_after = time.monotonic()
+    samples, velocities = 0, 0
+    pan_seen = []
+    while time.monotonic() < started_after + 1.6:
+        angles, before, after = read_angles(bus, calibration)
+        expected, tolerance = expected_between(
+            script, (started_before, started_after), (before, after), FIGURE_EIGHT_2S_TOP_DEG_S
+        )
+        for index in (0, 2, 3, 4, 5):
+            assert angles[index] == pytest.approx(expected[index], abs=tolerance), (index, before - started_after)
+        assert angles[1] == 0.0  # held at its middle
+        pan_seen.append(angles[0])
+        samples += 1
+        if before - started_after > ease_s:  # Present_Velocity: the figure eight's own rate, in steps/s
+            before = time.monotonic()
+            raw = bus.read(1, "Present_Velocity")
+            after = time.monotonic()
+            earliest, latest = before - started_after, after - started_before
+            omega = 2 * math.pi / period_s
+            rate_steps_s = 30.0 * omega * math.cos(omega * (earliest + latest) / 2) * 4096 / 360
+            change_steps_s2 = 30.0 * omega**2 * 4096 / 360  # how fast that rate changes
+            assert decode_signed(raw, 15) == pytest.approx(rate_steps_s, abs=change_steps_s2 * (latest - earliest) / 2 + 2)
+            velocities += 1
+        time.sleep(0.005)
+    assert samples > 50 and velocities > 20
+    assert max(pan_seen) > 25.0 and min(pan_seen) < -25.0  # it went round the loop: pan 30° each way
+    assert fake.hand_busy()  # a figure eight goes on ...
+    assert not fake.wait_hand(timeout=0.05)
+    assert bus.sync_read("Moving", (1, 2)) == {1: 1, 2: 0}
+    assert {value for i in IDS for value in fake.values_written(i, "Torque_Enable")} == {1}  # the test's own write
+
+
+def test_keyframes_start_where_the_joints_stand_and_the_last_is_held(leader):
+    fake, bus, calibration = leader
+    fake.move_by_hand(1, round(physical_steps(MECHANICS[1], -10.0)))
+    keyframes = parse_keyframes("0.3  20 -20 30 0 90 100\n0.6  -20 10 -30 15 -90 -10\n", "test")
+    script = eased_in(keyframes.at, (-10.0, 0.0, 0.0, 0.0, 0.0, 45.0), keyframes.times_s[0])
+    started_before = time.monotonic()
+    fake.play_hand(keyframes.at, keyframes.duration_s, ease_s=keyframes.times_s[0])
+    started_after = time.monotonic()
+    angles, before, after = read_angles(bus, calibration)
+    # The hand starts from where the joints stood and reaches the first keyframe by 0.3 s: the
+    # fastest leg, wrist_roll's 90° in 0.3 s on a smoothstep, peaks at 450°/s.
+    expected, tolerance = expected_between(script, (started_before, started_after), (before, after), 450.0)
+    assert angles == pytest.approx(expected, abs=tolerance)
+    if after - started_before < 0.05:  # read at once, as it nearly always is: barely moved yet
+        assert angles[0] == pytest.approx(-10.0, abs=1.0) and angles[5] == pytest.approx(45.0, abs=1.5)
+    assert fake.hand_busy()
+    assert fake.wait_hand(timeout=2.0)
+    angles, _, _ = read_angles(bus, calibration)
+    assert angles == pytest.approx((-20.0, 10.0, -30.0, 15.0, -90.0, -10.0), abs=0.1)
+    time.sleep(0.1)
+    assert read_angles(bus, calibration)[0] == angles  # held: nothing moves it any more
+    assert (bus.read(1, "Moving"), bus.read(1, "Present_Velocity")) == (0, 0)
+
+
+def test_hold_lets_go_where_the_joints_stand(leader):
+    fake, bus, calibration = leader
+    def script(t_s):
+        return figure_eight_deg(t_s, 2.0)
+
+    started_before = time.monotonic()
+    fake.play_hand(script, None, ease_s=0.0)
+    started = started_before, time.monotonic()
+    time.sleep(0.3)  # on its way: pan ≈ 30 sin(0.3π) ≈ 24°
+    stopping = time.monotonic()
+    assert fake.stop_hand() == IDS
+    stopped = time.monotonic()
+    held, _, _ = read_angles(bus, calibration)
+    # Let go where the script had them when the hand stopped: no jump back, no further.
+    expected, tolerance = expected_between(script, started, (stopping, stopped), FIGURE_EIGHT_2S_TOP_DEG_S)
+    assert held == pytest.approx(expected, abs=tolerance)
+    assert held[0] > 15.0
+    time.sleep(0.2)
+    assert read_angles(bus, calibration)[0] == held
+    assert bus.sync_read("Moving", IDS) == bus.sync_read("Present_Velocity", IDS) == {i: 0 for i in IDS}
+    assert not fake.hand_busy() and fake.wait_hand(timeout=0)
+    assert fake.stop_hand() == ()  # nothing left to let go
+
+
+def test_a_new_hand_takes_over_and_a_script_must_give_six_finite_angles(arm):
+    arm.play_hand(figure_eight_deg)
+    assert arm.sweep(duration_s=0.2) == IDS  # the sweep takes the joints from the figure eight
+    assert arm.wait_hand(timeout=1.0)
+    assert [arm.physical_position(i) for i in IDS] == [MECHANICS[i].centre for i in IDS]  # the sweep's end
+    for script in (lambda t_s: (0.0,) * 5, lambda t_s: (0.0, 0.0, 0.0, float("nan"), 0.0, 0.0)):
+        with pytest.raises(ValueError, match="expected 6 finite angles"):
+            arm.play_hand(script)
+    with pytest.raises(ValueError, match="duration_s must be 0 or more"):
+        arm.play_hand(figure_eight_deg, -1.0)
+    assert not arm.hand_busy()
+
+
+# -- the write log ----------------------------------------------------------------------------------------
+
+
+def test_values_written_records_what_the_bus_wrote_and_not_the_api(arm, bus):
+    port, packets = bus
+    assert packets.write1ByteTxRx(port, 1, TORQUE_ENABLE, 0)[0] == scs.COMM_SUCCESS
+    assert packets.write1ByteTxRx(port, 1, TORQUE_ENABLE, 128)[0] == scs.COMM_SUCCESS  # taken as a calibration, still written
+    arm.write_register(1, "Torque_Enable", 1)  # the test's own: not the bus's
+    assert arm.values_written(1, "Torque_Enable") == {0, 128}
+    sync_write(port, packets, GOAL_POSITION, 2, {1: 2000, 2: 2100})
+    eventually(lambda: arm.values_written(2, "Goal_Position") == {2100})
+    assert arm.values_written(1, "Goal_Position") == {2000}
+    assert packets.regWriteTxRx(port, 3, GOAL_POSITION, 2, [0x34, 0x12])[0] == scs.COMM_SUCCESS
+    assert arm.values_written(3, "Goal_Position") == frozenset()  # held until ACTION
+    assert packets.action(port, 3) == scs.COMM_SUCCESS
+    assert arm.values_written(3, "Goal_Position") == {0x1234}
+    # One write over Goal_Position and Goal_Time (42-45) counts for both; half a register for neither.
+    assert packets.writeTxRx(port, 4, GOAL_POSITION, 4, [0x00, 0x08, 0x10, 0x00])[0] == scs.COMM_SUCCESS
+    assert packets.write1ByteTxRx(port, 4, GOAL_POSITION + 1, 0x09)[0] == scs.COMM_SUCCESS
+    assert (arm.values_written(4, "Goal_Position"), arm.values_written(4, "Goal_Time")) == ({0x800}, {0x10})
+    assert packets.write2ByteTxRx(port, 4, GOAL_VELOCITY, 300 | 0x8000)[0] == scs.COMM_SUCCESS
+    assert arm.values_written(4, "Goal_Velocity") == {-300}  # signed registers decoded, as read_register does
+    assert arm.values_written(5, "Torque_Enable") == frozenset()
+    with pytest.raises(KeyError):
+        arm.values_written(1, "Speed")
+
+
 # -- performance -------------------------------------------------------------------------------------
 
 
@@ -578,3 +789,105 @@ def test_cli_runs_on_after_end_of_input_until_sigterm(start_cli):
     process.send_signal(signal.SIGTERM)
     assert process.wait(timeout=10) == 0
     assert process.stderr.read() == b""
+
+
+# -- the command line: a scripted hand (an emulated leader) ------------------------------------------------
+
+ACCEPTED = (
+    "help, status, sweep [SECONDS], move ID STEPS, figure8 [PERIOD_S], play FILE, hold, "
+    "silent ID, corrupt ID, answer ID|all, mute, close, quit"
+)
+KEYFRAME_LINE = (
+    "a keyframe is SECONDS then 6 angles in degrees "
+    "(shoulder_pan shoulder_lift elbow_flex wrist_flex wrist_roll gripper)"
+)
+BAD_KEYFRAMES = "# a good keyframe, then one short of an angle\n1 0 0 0 0 0 0\n2 0 0 0 0 0\n"
+
+
+def send(process, command: str) -> None:
+    process.stdin.write(command.encode() + b"\n")
+    process.stdin.flush()
+
+
+@pytest.fixture(scope="module")
+def cli_session(tmp_path_factory):
+    """One `so101 fake-arm` (started in a folder holding bad.keyframes) for replies that change nothing."""
+    folder = tmp_path_factory.mktemp("hand")
+    (folder / "bad.keyframes").write_text(BAD_KEYFRAMES)
+    process = subprocess.Popen(
+        [str(SO101), "fake-arm"], stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=folder,
+    )
+    lines = Lines(process.stdout)
+    port_path = lines.next()
+    lines.next()
+    yield process, lines, port_path
+    process.kill()
+    process.wait(timeout=10)
+    for stream in (process.stdin, process.stdout, process.stderr):
+        stream.close()
+
+
+@pytest.mark.parametrize("command, reply", [
+    ("figure8 0", "figure8 takes a period in seconds, from 1 to 600; got '0'"),
+    ("figure8 fast", "figure8 takes a period in seconds, from 1 to 600; got 'fast'"),
+    ("figure8 8 2", f"usage: figure8 [PERIOD_S]; commands: {ACCEPTED}"),
+    ("play", f"usage: play FILE; commands: {ACCEPTED}"),
+    ("play nowhere.keyframes", "no keyframe file nowhere.keyframes"),
+    ("play bad.keyframes", f"bad.keyframes, line 3: 6 values; {KEYFRAME_LINE}"),
+    ("hold now", f"usage: hold; commands: {ACCEPTED}"),
+    ("hold", "hand: no joint was moving by hand; they stand where they are"),
+    ("wave", f"unknown command 'wave'; commands: {ACCEPTED}"),
+])
+def test_cli_a_hand_mistake_is_one_line_and_the_emulator_runs_on(cli_session, command, reply):
+    process, lines, port_path = cli_session
+    send(process, command)
+    assert lines.next() == reply
+    port, packets = open_bus(port_path)
+    assert packets.ping(port, 1) == (777, scs.COMM_SUCCESS, 0)
+    assert sync_read(port, packets, PRESENT_POSITION, 2)[1] == {i: MECHANICS[i].centre for i in IDS}  # nothing moved
+    port.closePort()
+
+
+def test_cli_plays_a_leader_figure_eight_and_keyframes_and_holds(start_cli):
+    process, lines, port_path = start_cli("--hand", "figure8")
+    lines.next()
+    assert lines.next() == "hand: figure eight, 8 s a loop, joints 1-6 (hold stops it)"
+    port, packets = open_bus(port_path)
+    first = sync_read(port, packets, PRESENT_POSITION, 2)[1]
+    time.sleep(0.4)  # easing in: shoulder_pan ≈ 0.35 x 30 sin(18°) ≈ 3°, 37 steps
+    assert abs(sync_read(port, packets, PRESENT_POSITION, 2)[1][1] - first[1]) > 10
+    send(process, "figure8 2")
+    assert lines.next() == "hand: figure eight, 2 s a loop, joints 1-6 (hold stops it)"
+    send(process, "hold")
+    assert lines.next() == "hand: let go of joints 1-6 where they stand"
+    held = sync_read(port, packets, PRESENT_POSITION, 2)[1]
+    time.sleep(0.2)
+    assert sync_read(port, packets, PRESENT_POSITION, 2)[1] == held
+    # Servo 2 held by its motor where the hand left it, as a driver does it: goal = present, then torque on.
+    assert packets.write2ByteTxRx(port, 2, GOAL_POSITION, held[2])[0] == scs.COMM_SUCCESS
+    assert packets.write1ByteTxRx(port, 2, TORQUE_ENABLE, 1)[0] == scs.COMM_SUCCESS
+    send(process, f"play {EXAMPLE_KEYFRAMES}")
+    assert lines.next() == (
+        f"hand: playing {EXAMPLE_KEYFRAMES} once, 8 keyframes over 6 s, joints 1, 3-6; torque holds 2 (hold stops it)"
+    )
+    time.sleep(0.5)  # half way to the first keyframe, elbow_flex -80° at 1 s
+    moved = sync_read(port, packets, PRESENT_POSITION, 2)[1]
+    assert moved[3] < held[3] - 100 and moved[2] == held[2]
+    send(process, "hold")
+    assert lines.next() == "hand: let go of joints 1, 3-6 where they stand"
+    port.closePort()
+    send(process, "quit")
+    assert process.wait(timeout=10) == 0
+    assert process.stderr.read() == b""
+
+
+def test_cli_a_bad_hand_file_stops_the_start_in_one_line(tmp_path):
+    (tmp_path / "bad.keyframes").write_text(BAD_KEYFRAMES)
+    result = subprocess.run(
+        [str(SO101), "fake-arm", "--hand", "bad.keyframes"], capture_output=True, text=True, cwd=tmp_path, timeout=30,
+    )
+    assert result.returncode == 2 and result.stdout == ""
+    assert result.stderr.splitlines()[-1] == (
+        f"so101 fake-arm: error: argument --hand: bad.keyframes, line 3: 6 values; {KEYFRAME_LINE} "
+        "(--hand takes figure8 or a keyframe file)"
+    )

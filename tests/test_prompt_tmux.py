@@ -226,6 +226,26 @@ def test_teleop_drives_the_mujoco_body_with_the_same_prompt(tmp_path):
     assert spawned and [pid for pid in spawned if _alive(pid)] == []
 
 
+def calibrate_in_tmux(fake_arm: Terminal, calibration_file: Path, *options: str) -> str:
+    """`so101 calibrate` in a second terminal on the port `fake_arm` (a `so101 fake-arm` terminal)
+    printed, as a person does it: Enter, `sweep` in the emulator's terminal, Enter. Returns the port."""
+    port = fake_arm.wait_for(r"^(/dev/\S+)$", timeout_s=30).group(1)
+    calibrate = Terminal(f"{SO101} calibrate --port {port} --out {calibration_file} {' '.join(options)}",
+                         {"PATH": os.environ["PATH"]})
+    try:
+        calibrate.wait_for(r"Then press Enter\.", timeout_s=30)
+        calibrate.type_line("")
+        calibrate.wait_for(r"Press Enter when done\.", timeout_s=30)
+        fake_arm.type_line("sweep 2")  # the emulated hand takes each joint to both of its stops
+        time.sleep(2.5)
+        calibrate.type_line("")
+        calibrate.wait_for(r"^TELEOP_EXIT=0$", timeout_s=30)
+        assert f"Wrote {calibration_file}:" in calibrate.screen()
+    finally:
+        calibrate.close()
+    return port
+
+
 def test_a_person_without_an_arm_calibrates_the_emulated_one_and_drives_it(tmp_path):
     """The real arm's "done when": `so101 fake-arm`, `so101 calibrate` with its printed port, then
     `so101 teleop --body real` typed at as in the course; torque off after quit."""
@@ -233,19 +253,7 @@ def test_a_person_without_an_arm_calibrates_the_emulated_one_and_drives_it(tmp_p
     fake_arm = Terminal(f"{SO101} fake-arm", {"PATH": os.environ["PATH"]})
     terminal = None
     try:
-        port = fake_arm.wait_for(r"^(/dev/\S+)$", timeout_s=30).group(1)
-        calibrate = Terminal(f"{SO101} calibrate --port {port} --out {calibration_file}", {"PATH": os.environ["PATH"]})
-        try:
-            calibrate.wait_for(r"Then press Enter\.", timeout_s=30)
-            calibrate.type_line("")
-            calibrate.wait_for(r"Press Enter when done\.", timeout_s=30)
-            fake_arm.type_line("sweep 2")  # the emulated hand takes each joint to both of its stops
-            time.sleep(2.5)
-            calibrate.type_line("")
-            calibrate.wait_for(r"^TELEOP_EXIT=0$", timeout_s=30)
-            assert f"Wrote {calibration_file}:" in calibrate.screen()
-        finally:
-            calibrate.close()
+        port = calibrate_in_tmux(fake_arm, calibration_file)
 
         terminal, poses_file, log_file = start_teleop(
             tmp_path, "en", body=f"real --port {port} --calibration {calibration_file}")

@@ -20,7 +20,7 @@ from so101.dataset.features import ACTION_KEY, STATE_KEY, from_lerobot, to_lerob
 from so101.dataset.lerobot_v3 import Dataset, DatasetWriter
 from tests.dataflow_helpers import SO101, body_environment
 from so101.runtime.processes import processes_with_env
-from tests.test_prompt_tmux import _keys, start_teleop
+from tests.test_prompt_tmux import Terminal, _keys, calibrate_in_tmux, start_teleop
 
 pytestmark = [pytest.mark.person]
 
@@ -161,3 +161,59 @@ def test_replay_onto_the_emulated_arm_is_ramped_and_stays_inside_its_limits(tmp_
     assert speeds_deg_s and max(speeds_deg_s) < 40, max(speeds_deg_s)
     assert "moving to the first frame at no more than 30°/s" in replay.stdout
     assert ACTUATED_JOINTS[0].upper_deg < 150
+
+
+@pytest.mark.skipif(shutil.which("tmux") is None, reason="tmux is not installed (.ci/run installs it)")
+def test_a_person_drives_the_simulation_from_the_emulated_leader_records_and_replays(tmp_path):
+    """The leader arm's "done when": `so101 fake-arm` as the leader, `so101 calibrate --leader`, then
+    `so101 teleop --leader ... --record`; the emulator's figure eight drives the simulation, `state`
+    follows it, an episode is recorded and replayed."""
+    calibration_file = tmp_path / "leader.json"
+    dataset_dir = tmp_path / "leader-demos"
+    leader = Terminal(f"{SO101} fake-arm", {"PATH": os.environ["PATH"]})
+    terminal = None
+    try:
+        port = calibrate_in_tmux(leader, calibration_file, "--leader")
+        terminal, _, log_file = start_teleop(
+            tmp_path, "en", extra=f"--leader {port} --leader-calibration {calibration_file} --record {dataset_dir}")
+        terminal.seen = terminal.wait_for(r"^=+\n>$", timeout_s=120).start()
+        assert "the leader is ready: move it and the body follows" in terminal.screen()
+        leader.type_line("figure8 4")
+
+        def state() -> list[float]:
+            reply = terminal.command("state", r"  joint angles now: \[(.*)\]°.*")
+            return [float(word) for word in reply.group(1).split(",")]
+
+        time.sleep(1.5)  # the hand eases into the figure eight over its first second
+        seen = [state()]
+        for _ in range(3):
+            time.sleep(0.7)
+            seen.append(state())
+        pan_deg = [angles[0] for angles in seen]
+        assert max(pan_deg) - min(pan_deg) > 5.0, seen  # the simulation follows the hand
+        terminal.command("record figure eight", re.escape("  ● recording episode 0: task 'figure eight' (stop: stop, drop: discard)"))
+        time.sleep(4.0)
+        terminal.command("stop", r"  ■ episode 0: \d+ frames \(\d+\.\d s\), saving\.\.\.")
+        terminal.wait_for(r"^  ✓ episode 0 saved: \d+ frames", timeout_s=60, after=terminal.seen)
+        leader.type_line("hold")
+        terminal.type_line("quit")
+        terminal.wait_for(r"^TELEOP_EXIT=0$", timeout_s=60, after=terminal.seen)
+        screen = terminal.screen()
+    finally:
+        if terminal is not None:
+            terminal.close()
+        leader.close()
+    assert "Traceback" not in screen, screen
+
+    actions_deg = from_lerobot(Dataset.open(dataset_dir).episode_frames(0)[ACTION_KEY])
+    # The leader drew a figure eight into the episode: its pan swung across tens of degrees.
+    assert np.ptp(actions_deg[:, 0]) > 20.0 and np.ptp(actions_deg[:, 1]) > 10.0, actions_deg[:, :2]
+    replay = subprocess.run(
+        [str(SO101), "replay", str(dataset_dir), "--episode", "0", "--mode", "direct", "--lang", "en",
+         "--log", str(tmp_path / "replay.log")], capture_output=True, text=True, timeout=180)
+    assert replay.returncode == 0, replay.stdout + replay.stderr
+    match = re.match(TRACKING_LINE, replay.stdout.strip().splitlines()[-1])
+    assert match, replay.stdout
+    # A hand's smooth motion, not typed steps: the body tracks it within a few degrees throughout.
+    p50, p99, worst = (float(value) for value in match.groups())
+    assert p50 < 3.0 and worst < 15.0, replay.stdout

@@ -140,19 +140,21 @@ def test_a_bad_value_is_one_line_naming_it(settings_class, environ, message):
 
 
 
-# The recording and replay nodes' settings, each class against its node's table in the README.
-RECORDING_NODES = {
-    "### recorder (`nodes/recorder.py`)": "RecorderSettings",
-    "### camera (`nodes/camera.py`)": "CameraSettings",
-    "### replay (`nodes/replay.py`)": "ReplaySettings",
+# The other nodes' settings (recording, replay, the leader), each class against its node's table in the README.
+OTHER_NODES = {
+    "### recorder (`nodes/recorder.py`)": "so101.dataset.settings:RecorderSettings",
+    "### camera (`nodes/camera.py`)": "so101.dataset.settings:CameraSettings",
+    "### replay (`nodes/replay.py`)": "so101.dataset.settings:ReplaySettings",
+    "### leader (`nodes/leader_node.py`)": "so101.leader.settings:LeaderSettings",
 }
 
 
-@pytest.mark.parametrize("heading, class_name", list(RECORDING_NODES.items()))
-def test_the_readme_documents_the_recording_nodes_settings(heading, class_name):
-    from so101.dataset import settings as recording_settings
+@pytest.mark.parametrize("heading, class_path", list(OTHER_NODES.items()))
+def test_the_readme_documents_the_other_nodes_settings(heading, class_path):
+    import importlib
 
-    declared_settings = declared(getattr(recording_settings, class_name))
+    module, class_name = class_path.split(":")
+    declared_settings = declared(getattr(importlib.import_module(module), class_name))
     rows = readme_table(heading)
     assert sorted(name for names, _, _ in rows for name in names) == sorted(each.env_var for each in declared_settings)
     by_name = {each.env_var: each for each in declared_settings}

@@ -4,7 +4,8 @@ A body is what so101.bodies.protocol.Body describes. This loop turns one into th
 dataflow.yml declares: each `tick` advances the physics by the tick's period (and the
 periods of ticks dora dropped while the node was late) and publishes `joint_state` and
 `gripper_state`; a `joint_cmd` is decoded, clamped to the joint limits and logged, and only
-updates the targets, which the next tick applies; bad ones are logged and ignored. Where the
+updates the targets, which the next tick applies; bad ones are logged and ignored (a stream of
+commands, marked so in their metadata, is not logged command by command). Where the
 dataflow declares a `joint_target` output (`so101 teleop --record` does, for the recorder), the
 targets the body applies go out on it at the first tick, whenever they change, and once a second
 for a node that joined late. STOP or
@@ -40,6 +41,8 @@ if TYPE_CHECKING:
 Event = dict[str, Any]
 
 IMAGE_SIZE = (320, 240)
+# A joint_cmd whose metadata has this key is one of a stream (the leader node's, a tick each): not logged.
+STREAM_KEY = "stream"
 # `joint_target` goes out again this often even when unchanged, for a node that joined late.
 TARGET_REFRESH_S = 1.0
 
@@ -181,12 +184,14 @@ def run_body_node(body: Body, node: Node, settings: NodeSettings, identity: str,
                     if decoded.targets_deg is None:  # what arrived is not a command: decoded.error says why
                         logger.warning(text["rejected"].format(error=decoded.error))
                         continue
-                    for note in decoded.notes:
-                        logger.warning(text["clamped"].format(note=note))
                     previous_gripper_deg = joint_targets_deg[GRIPPER_COMMAND_INDEX]
                     joint_targets_deg = decoded.targets_deg
                     body.set_targets_deg(joint_targets_deg)
                     targets_sent_at_step = None
+                    if STREAM_KEY in (event.get("metadata") or {}):
+                        continue  # one command a tick (the leader's): a log line each would bury the log
+                    for note in decoded.notes:
+                        logger.warning(text["clamped"].format(note=note))
                     if decoded.joint_index is not None:
                         logger.info(text["one"].format(index=decoded.joint_index, angle=joint_targets_deg[decoded.joint_index]))
                     else:

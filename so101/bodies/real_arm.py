@@ -27,12 +27,13 @@ from so101.feetech.calibration import (
     MOTOR_IDS,
     MOTOR_NAMES,
     Calibration,
+    CalibrationError,
     goal_steps,
     load_calibration,
     step_toward,
     steps_to_deg,
 )
-from so101.feetech.sts3215 import MODEL_NUMBER, SIGN_BITS, decode_signed
+from so101.feetech.checks import check_calibration_on_servos, check_servos_answer
 from so101.robot import ACTUATED_JOINTS, goal_deg
 from so101.stats import percentile
 
@@ -43,27 +44,8 @@ PROBE_READS = 20
 # Reads of Torque_Enable after torque off before a servo that says "on" is believed, and the gap between.
 TORQUE_OFF_READS = 3
 TORQUE_OFF_READ_GAP_S = 0.02
-# Pings of each servo at start before it is called silent: one lost packet must not refuse the arm.
-START_PINGS = 3
-
-
 class ArmFailed(BodyFailed):
     """The arm cannot start or go on; the message is one line for the user."""
-
-
-def check_servos_answer(bus: FeetechBus) -> None:
-    """Every servo of an SO-101 follower answers at its ID and is an STS3215; BusError names the first that is not."""
-    for name, servo_id in zip(MOTOR_NAMES, MOTOR_IDS):
-        model = None
-        for _ in range(START_PINGS):
-            model = bus.ping(servo_id)
-            if model is not None:
-                break
-        if model is None:
-            raise BusError(f"servo {servo_id} ({name}) does not answer on {bus.port_name}: "
-                           f"check its power and cable, and that it has ID {servo_id}")
-        if model != MODEL_NUMBER:
-            raise BusError(f"servo {servo_id} ({name}) is model {model}, not an STS3215 ({MODEL_NUMBER})")
 
 
 def check_node_settings(settings: NodeSettings) -> None:
@@ -138,21 +120,11 @@ class SO101Real:
 
     def _check_servos(self, bus: FeetechBus, calibration_name: str) -> None:
         check_servos_answer(bus)
-        for name, servo_id, motor in zip(MOTOR_NAMES, MOTOR_IDS, self._motors):
-            on_servo = {
-                "homing_offset": decode_signed(bus.read(servo_id, "Homing_Offset"), SIGN_BITS["Homing_Offset"]),
-                "range_min": bus.read(servo_id, "Min_Position_Limit"),
-                "range_max": bus.read(servo_id, "Max_Position_Limit"),
-            }
-            for field_name, value in on_servo.items():
-                if value != getattr(motor, field_name):
-                    raise ArmFailed(
-                        f"{calibration_name} does not match the arm on {self.port}: servo {servo_id} ({name}) has "
-                        f"{field_name} {value}, the file says {getattr(motor, field_name)}; "
-                        + CALIBRATE_HINT.format(port=self.port) + " for this arm"
-                    )
-            if bus.read(servo_id, "Operating_Mode") != 0:
-                raise ArmFailed(f"servo {servo_id} ({name}) is not in position mode (Operating_Mode 0)")
+        try:
+            check_calibration_on_servos(bus, self._motors, calibration_name, "arm",
+                                        CALIBRATE_HINT.format(port=self.port) + " for this arm")
+        except CalibrationError as error:
+            raise ArmFailed(str(error)) from None
 
     def _check_in_range(self, present: dict[int, int], angles_deg: tuple[float, ...]) -> None:
         # The servo clamps goals to its limits: torque on outside them would jump to the limit.

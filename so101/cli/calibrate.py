@@ -1,13 +1,14 @@
-"""`so101 calibrate`: calibrate an SO-101 follower arm without LeRobot, into LeRobot's JSON format.
+"""`so101 calibrate`: calibrate an SO-101 follower arm (or, with --leader, a leader arm) without LeRobot,
+into LeRobot's JSON format.
 
-The steps LeRobot's `lerobot-calibrate` takes for the so101_follower: torque off; the
+The steps LeRobot's `lerobot-calibrate` takes for the so101_follower and the so101_leader alike: torque off; the
 person puts the arm in the middle of its range and presses Enter, and each servo's
 Homing_Offset is set so that it reads mid-scale (2047) there; the person moves every
 joint but wrist_roll to both ends of its travel and presses Enter, while the positions
 are read and the extremes kept; wrist_roll turns fully, so its range is the whole turn.
 The offsets and ranges go into the servos (Homing_Offset, Min/Max_Position_Limit) and
 into the file. Nothing is written to the file until the end; an existing file is kept
-as FILE.bak when --force replaces it.
+as FILE.bak when --force replaces it. Torque is only ever switched off, so a leader's never goes on.
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ from so101.feetech.calibration import (
     save_calibration,
 )
 from so101.feetech.bus import BusError, FeetechBus
-from so101.bodies.real_arm import check_servos_answer
+from so101.feetech.checks import check_servos_answer
 from so101.feetech.sts3215 import MAX_STEP, SIGN_BITS, STEPS_PER_TURN, encode_signed
 
 FULL_TURN_JOINT = "wrist_roll"
@@ -39,7 +40,9 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
     parser.add_argument("--port", required=True, metavar="PORT",
                         help="the arm's serial port (/dev/ttyACM0, ...; `so101 fake-arm` prints an emulated one)")
     parser.add_argument("--out", required=True, type=Path, metavar="FILE",
-                        help="where to write the calibration (LeRobot's so101_follower JSON format)")
+                        help="where to write the calibration (LeRobot's so101_follower JSON format; so101_leader's with --leader)")
+    parser.add_argument("--leader", action="store_true",
+                        help="the arm on PORT is a leader arm (torque stays off; the file is LeRobot's so101_leader one)")
     parser.add_argument("--force", action="store_true",
                         help="replace FILE if it exists (the old one is kept as FILE.bak)")
 
@@ -166,5 +169,8 @@ def run(args: argparse.Namespace) -> int:
         span_deg = (motor.range_max - motor.range_min) * 360 / 4096
         _say(f"  {name:<14} id {motor.id}  homing_offset {motor.homing_offset:>5}  "
              f"range {motor.range_min:>4}..{motor.range_max:<4} ({span_deg:.0f}°)")
-    _say(f"Use it: so101 teleop --body real --port {args.port} --calibration {out}")
+    if args.leader:
+        _say(f"Use it: so101 teleop --leader {args.port} --leader-calibration {out}")
+    else:
+        _say(f"Use it: so101 teleop --body real --port {args.port} --calibration {out}")
     return 0

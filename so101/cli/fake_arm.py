@@ -1,5 +1,6 @@
 """`so101 fake-arm`: the emulated SO-101 servo bus (so101/feetech/fake_arm.py) on a pseudo-terminal,
-with a command line for a person or a script: a hand that moves the joints, and faults to try."""
+with a command line for a person or a script: a hand that moves the joints (a scripted one makes
+it a leader arm that moves by itself: so101/feetech/hand.py), and faults to try."""
 
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ import time
 from so101.cli.argtypes import number
 from so101.feetech import sts3215
 from so101.feetech.fake_arm import ALL_IDS, DEFAULT_SPEED_STEPS_S, MECHANICS, FakeArm
+from so101.feetech.hand import FIGURE_EIGHT_EASE_S, FIGURE_EIGHT_PERIOD_S, Keyframes, figure_eight_deg, load_keyframes
 
 
 COMMANDS_HELP = """\
@@ -22,6 +24,11 @@ commands (one per line):
   sweep [SECONDS]    a hand moves every torque-off joint to both stops and back (default 4 s)
   move ID STEPS      a hand moves joint ID to physical encoder position STEPS (torque off only);
                      +STEPS or -STEPS moves it by that much
+  figure8 [PERIOD_S] a hand moves every torque-off joint so the tip draws a figure eight, a loop
+                     every PERIOD_S (default 8 s), until hold or another hand command: a leader
+  play FILE          a hand plays FILE's timed keyframes once and leaves the joints at the last;
+                     a line is SECONDS and six angles in degrees (examples/leader_wave.keyframes)
+  hold               the hand lets go: every joint stays where it is
   silent ID          servo ID keeps obeying but stops replying
   corrupt ID         servo ID replies with a wrong checksum
   answer ID|all      servo ID (or every servo, mute included) replies normally again
@@ -57,6 +64,19 @@ def _servo_id(text: str) -> int:
 _seconds = number(lambda value: 0 <= value < 1e6, "a time: use seconds, 0 or more")
 _speed = number(lambda value: 0 < value <= 100_000,
                  "a speed: use steps per second, more than 0 (the default is 3000)")
+# A figure eight faster than a loop a second is no hand's; slower than 10 minutes looks still.
+MIN_PERIOD_S, MAX_PERIOD_S = 1.0, 600.0
+FIGURE_EIGHT = "figure8"
+
+
+def _hand_script(text: str) -> tuple[str, Keyframes | None]:
+    """--hand: figure8 (no keyframes), or a keyframe file read now, so a bad one stops the start in one line."""
+    if text == FIGURE_EIGHT:
+        return text, None
+    try:
+        return text, load_keyframes(text)
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(f"{error} (--hand takes {FIGURE_EIGHT} or a keyframe file)") from None
 
 
 def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
@@ -64,7 +84,8 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
     parser.epilog = (
         "The first line printed is the port alone (e.g. /dev/pts/7), for `so101 fake-arm | head -1`\n"
         "or a script; open it at 1,000,000 baud as the arm's serial port. Then type commands.\n"
-        "End of input does not stop the emulator; quit, Ctrl-C or SIGTERM does.\n\n" + COMMANDS_HELP
+        "End of input does not stop the emulator; quit, Ctrl-C or SIGTERM does.\n"
+        "As a leader arm: --hand figure8 starts it moving (the same as typing figure8).\n\n" + COMMANDS_HELP
     )
     parser.add_argument(
         "--ids", type=_ids, default=ALL_IDS, metavar="IDS",
@@ -75,6 +96,11 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
         "--speed", type=_speed, default=DEFAULT_SPEED_STEPS_S, metavar="STEPS_PER_S",
         help="the motors' top speed in encoder steps per second, used when Goal_Velocity is 0 "
         "(default 3000 ≈ 264°/s, an STS3215's no-load speed at 7.4 V)",
+    )
+    parser.add_argument(
+        "--hand", type=_hand_script, default=None, metavar="figure8|FILE",
+        help="a hand starts moving the joints at once, as the figure8 or play FILE command does: "
+        "an emulated leader arm already moving, for a script",
     )
     parser.add_argument(
         "--silent", type=_servo_id, action="append", default=[], metavar="ID",
@@ -141,13 +167,49 @@ def _status_table(arm: FakeArm) -> str:
     return "\n".join(lines)
 
 
+def _ids_text(ids) -> str:
+    """Servo ids as a person writes them: "1-6", "1, 3-6"."""
+    runs: list[list[int]] = []
+    for servo_id in sorted(ids):
+        if runs and servo_id == runs[-1][-1] + 1:
+            runs[-1].append(servo_id)
+        else:
+            runs.append([servo_id])
+    return ", ".join(f"{run[0]}-{run[-1]}" if len(run) > 2 else ", ".join(map(str, run)) for run in runs)
+
+
+def _hand_reply(arm: FakeArm, what: str, moved: tuple[int, ...]) -> str:
+    held = [servo_id for servo_id in arm.ids if servo_id not in moved]
+    if not moved:
+        return f"hand: no joint to move, torque holds {_ids_text(held)}"
+    note = f"; torque holds {_ids_text(held)}" if held else ""
+    return f"hand: {what}, joint{'s' if len(moved) > 1 else ''} {_ids_text(moved)}{note} (hold stops it)"
+
+
+def _play_figure_eight(arm: FakeArm, period_s: float) -> str:
+    moved = arm.play_hand(lambda t_s: figure_eight_deg(t_s, period_s), None, ease_s=FIGURE_EIGHT_EASE_S)
+    return _hand_reply(arm, f"figure eight, {period_s:g} s a loop", moved)
+
+
+def _play_keyframes(arm: FakeArm, keyframes: Keyframes, name: str) -> str:
+    # The hand reaches the first keyframe at its time, from where the joints stand (at once if it is 0).
+    moved = arm.play_hand(keyframes.at, keyframes.duration_s, ease_s=keyframes.times_s[0])
+    count = len(keyframes.times_s)
+    return _hand_reply(
+        arm, f"playing {name} once, {count} keyframe{'s' if count > 1 else ''} over {keyframes.duration_s:g} s", moved
+    )
+
+
 def _command(arm: FakeArm, line: str, say) -> bool:
     """Carry out one typed command; False for quit."""
     words = line.split()
     if not words:
         return True
     verb, rest = words[0].lower(), words[1:]
-    accepted = "help, status, sweep [SECONDS], move ID STEPS, silent ID, corrupt ID, answer ID|all, mute, close, quit"
+    accepted = (
+        "help, status, sweep [SECONDS], move ID STEPS, figure8 [PERIOD_S], play FILE, hold, "
+        "silent ID, corrupt ID, answer ID|all, mute, close, quit"
+    )
 
     def servo_of(text: str) -> int | None:
         if text.isdigit() and int(text) in arm.ids:
@@ -156,7 +218,7 @@ def _command(arm: FakeArm, line: str, say) -> bool:
         return None
 
     def wrong_arguments(usage: str) -> bool:
-        say(f"usage: {verb} {usage}; commands: {accepted}")
+        say(f"usage: {verb}{' ' + usage if usage else ''}; commands: {accepted}")
         return True
 
     if verb in ("quit", "exit"):
@@ -197,6 +259,37 @@ def _command(arm: FakeArm, line: str, say) -> bool:
             say(f"servo {servo_id} has torque on: it holds at {reached}; the hand cannot move it")
         else:
             say(f"servo {servo_id} moved by hand from {before} to {reached}")
+    elif verb == FIGURE_EIGHT:
+        if len(rest) > 1:
+            return wrong_arguments("[PERIOD_S]")
+        try:
+            period_s = float(rest[0]) if rest else FIGURE_EIGHT_PERIOD_S
+        except ValueError:
+            period_s = float("nan")
+        if not MIN_PERIOD_S <= period_s <= MAX_PERIOD_S:
+            say(f"figure8 takes a period in seconds, from {MIN_PERIOD_S:g} to {MAX_PERIOD_S:g}; got {rest[0]!r}")
+            return True
+        say(_play_figure_eight(arm, period_s))
+    elif verb == "play":
+        name = line.strip()[len(words[0]):].strip()  # the rest as typed: a file name may hold spaces
+        if not name:
+            return wrong_arguments("FILE")
+        try:
+            keyframes = load_keyframes(name)
+        except ValueError as error:
+            say(str(error))
+            return True
+        say(_play_keyframes(arm, keyframes, name))
+    elif verb == "hold":
+        if rest:
+            return wrong_arguments("")
+        let_go = arm.stop_hand()
+        if len(let_go) == 1:
+            say(f"hand: let go of joint {let_go[0]} where it stands")
+        elif let_go:
+            say(f"hand: let go of joints {_ids_text(let_go)} where they stand")
+        else:
+            say("hand: no joint was moving by hand; they stand where they are")
     elif verb in ("silent", "corrupt", "answer"):
         if len(rest) != 1:
             return wrong_arguments("ID" if verb != "answer" else "ID|all")
@@ -249,6 +342,13 @@ def run(args: argparse.Namespace) -> int:
         def unplug() -> None:
             arm.close_port()
             out.say(f"port {arm.port} closed after {args.close_after:g} s, as an unplugged adapter")
+
+        if args.hand is not None:
+            name, keyframes = args.hand
+            if keyframes is None:
+                out.say(_play_figure_eight(arm, FIGURE_EIGHT_PERIOD_S))
+            else:
+                out.say(_play_keyframes(arm, keyframes, name))
 
         missing = [i for i in args.silent + args.corrupt if i not in arm.ids]
         if missing:

@@ -23,7 +23,7 @@ SUBCOMMANDS = {
     "bench": ("so101.cli.bench", "benchmark the simulation node's 4 ms real-time budget against raw PyBullet (JSON + table)"),
     "snapshot": ("so101.cli.snapshot", "render the arm in a pose to a PNG, headless (no window needed)"),
     "reach": ("so101.cli.reach", "check IK and the simulated arm against Cartesian targets: tip errors in mm (table, JSON)"),
-    "calibrate": ("so101.cli.calibrate", "calibrate a real SO-101 follower arm into LeRobot's calibration format (JSON)"),
+    "calibrate": ("so101.cli.calibrate", "calibrate a real SO-101 follower (or --leader: leader) arm into LeRobot's calibration format (JSON)"),
     "cluster-demo": ("so101.cli.cluster", "the dataflow on a dora cluster: two daemons on this machine, the prompt on the second"),
     "cluster-dataflow": ("so101.cli.cluster", "write the dataflow for a dora cluster of two machines: the body on `arm`, the prompt on `desk`"),
     "teleop": ("so101.cli.teleop", "steps D + exercise 1: the dataflow and the keyboard prompt in one terminal"),

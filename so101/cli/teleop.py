@@ -10,6 +10,10 @@ with, so `--mode` and `--lang` cannot reach the simulation as inherited variable
 teleop runs a copy of dataflow.yml (in a temporary folder, removed at exit) with
 those two values set and the node paths made absolute. The file itself stays as the course has it.
 
+`--leader PORT --leader-calibration FILE` puts the leader node between the prompt and the body
+(dataflow_leader.yml's graph, on whichever body `--body` chose): the leader arm drives, and typed
+motion commands take over until the leader moves again.
+
 `--record DIR` adds the recorder node (and, for a simulation, the camera node that draws its
 pictures) to that copy: the prompt's `record`, `stop`, `discard` and `episodes` then keep
 episodes in DIR as a LeRobot dataset.
@@ -29,7 +33,9 @@ from pathlib import Path
 
 from so101.bodies.registry import BODIES, DEFAULT_BODY, BodyKind, body_node_env
 from so101.dataset.features import DEFAULT_FPS
-from so101.runtime.dataflow import LOADED_MARKS, PROMPT_NODE_FILE, ROOT, dataflow_copy, with_recorder, write_dataflow
+from so101.runtime.dataflow import (
+    LEADER_READY_MARKS, LOADED_MARKS, PROMPT_NODE_FILE, ROOT, dataflow_copy, with_leader, with_recorder, write_dataflow,
+)
 from so101.gui.display import MODES, resolve_mode
 from so101.runtime.processes import alive, descendants, kill_until_gone, stop_process
 from so101.cli.argtypes import add_language_option, whole_number
@@ -48,6 +54,7 @@ TEXT = {
         "starting": "启动数据流(dora run,{mode} 模式),日志写入 {log}",
         "ready": "仿真已就绪,启动键盘控制",
         "ready_real": "机械臂已就绪(已上扭矩),启动键盘控制",
+        "ready_leader": "主臂已就绪:移动主臂,身体跟随",
         "stopping": "停止数据流...",
         "stopped": "数据流已停止",
         "exited": "dora run 提前退出(退出码 {code}),日志 {log} 最后几行:",
@@ -58,6 +65,7 @@ TEXT = {
         "starting": "starting the dataflow (dora run, {mode} mode), log in {log}",
         "ready": "simulation ready, starting the keyboard prompt",
         "ready_real": "the arm is ready (torque on), starting the keyboard prompt",
+        "ready_leader": "the leader is ready: move it and the body follows",
         "stopping": "stopping the dataflow...",
         "stopped": "dataflow stopped",
         "exited": "dora run exited early (exit code {code}); last lines of {log}:",
@@ -78,6 +86,15 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
     parser.add_argument(
         "--fps", type=whole_number(1, 1000), default=DEFAULT_FPS, metavar="N",
         help=f"--record: frames per second (default {DEFAULT_FPS}, LeRobot's)",
+    )
+    parser.add_argument(
+        "--leader", metavar="PORT", default=None,
+        help="an SO-101 leader arm on PORT drives the body (with --leader-calibration; `so101 fake-arm` emulates one); "
+        "typed motion commands take over until the leader moves again",
+    )
+    parser.add_argument(
+        "--leader-calibration", type=Path, metavar="FILE", default=None,
+        help="--leader: the leader's calibration JSON (from `so101 calibrate --leader`, or LeRobot's so101_leader one)",
     )
     add_log_option(parser)
 
@@ -124,9 +141,10 @@ def _log_tail(log: Path) -> str:
 class Dataflow:
     """`dora run` in its own session (so the terminal's Ctrl-C reaches only the prompt), log to a file."""
 
-    def __init__(self, dataflow: Path, log: Path, env: dict[str, str]):
+    def __init__(self, dataflow: Path, log: Path, env: dict[str, str], ready_marks: tuple[tuple[str, ...], ...]):
         log.parent.mkdir(parents=True, exist_ok=True)
         self.log = log
+        self.ready_marks = ready_marks
         self._log_stream = log.open("wb")
         self.process = subprocess.Popen(
             [dora_executable() or "dora", "run", str(dataflow)], cwd=dataflow.parent,
@@ -139,7 +157,7 @@ class Dataflow:
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:
             log_text = self.log.read_text(encoding="utf-8", errors="replace")
-            if any(mark in log_text for mark in LOADED_MARKS):
+            if all(any(mark in log_text for mark in marks) for marks in self.ready_marks):
                 return True
             if self.process.poll() is not None:
                 return False
@@ -204,22 +222,53 @@ def run(args: argparse.Namespace) -> int:
     if launch is None:
         return 2
     descriptor = dataflow_copy(launch.node_env, launch.body.dataflow_file)
+    ready_marks: tuple[tuple[str, ...], ...] = (LOADED_MARKS,)
+    if args.leader is not None or args.leader_calibration is not None:
+        problem = add_leader(descriptor, launch.body, args.leader, args.leader_calibration, args.port, args.lang)
+        if problem:
+            print(f"so101 teleop: {problem}", file=sys.stderr)
+            return 2
+        ready_marks += (LEADER_READY_MARKS,)
     if args.record is not None:
         problem = add_recorder(descriptor, launch.body, args.record.expanduser().resolve(), args.fps, args.lang)
         if problem:
             print(f"so101 teleop: {problem}", file=sys.stderr)
             return 2
     print(text["starting"].format(mode=launch.mode, log=launch.log), flush=True)
-    return run_beside(launch, descriptor, PROMPT_NODE_FILE, text)
+    return run_beside(launch, descriptor, PROMPT_NODE_FILE, text, ready_marks)
 
 
-def run_beside(launch: Launch, descriptor: dict, node_file: Path, text: dict[str, str]) -> int:
+def run_beside(launch: Launch, descriptor: dict, node_file: Path, text: dict[str, str],
+               ready_marks: tuple[tuple[str, ...], ...] = (LOADED_MARKS,)) -> int:
     """`dora run` of `descriptor` in the background, then `node_file` (a dynamic node) in the
-    foreground once the body is up; the dataflow stops when that node exits. Returns its exit code."""
+    foreground once the log has one line of each of `ready_marks` (the body's, the leader's); the
+    dataflow stops when that node exits. Returns its exit code."""
     with tempfile.TemporaryDirectory(prefix="so101-teleop-") as work_dir:
         copy = write_dataflow(descriptor, Path(work_dir) / "dataflow.yml")
-        dataflow = Dataflow(copy, launch.log, launch.env)
-        return _run_node(dataflow, node_file, launch.env, text, launch.log, launch.body.simulated)
+        dataflow = Dataflow(copy, launch.log, launch.env, ready_marks)
+        ready_line = "ready_leader" if len(ready_marks) > 1 else "ready" if launch.body.simulated else "ready_real"
+        return _run_node(dataflow, node_file, launch.env, text, launch.log, ready_line)
+
+
+def add_leader(descriptor: dict, body: BodyKind, port: str | None, calibration_file: Path | None,
+               follower_port: str | None, lang: str) -> str | None:
+    """The leader node added to `descriptor`, driving `body`; or, in one line, why it cannot be
+    (a missing option, the follower's own port, a calibration file that cannot be a leader's)."""
+    from so101.feetech.calibration import CalibrationError, load_calibration
+
+    if not port or calibration_file is None:
+        return ("--leader PORT and --leader-calibration FILE go together (no leader? `so101 fake-arm` emulates one; "
+                "`so101 calibrate --leader` makes the file)")
+    if follower_port and os.path.realpath(port) == os.path.realpath(follower_port):
+        return f"--leader {port} is the follower's --port too: the two arms are on two serial ports"
+    calibration_path = calibration_file.expanduser().resolve()
+    try:  # checked now, with the file's one-line error; the node checks it against the servos
+        load_calibration(calibration_path, role="leader")
+    except CalibrationError as error:
+        return str(error)
+    with_leader(descriptor, body.node_id, {"SO101_LEADER_PORT": port,
+                                           "SO101_LEADER_CALIBRATION": str(calibration_path), "SO101_LANG": lang})
+    return None
 
 
 def add_recorder(descriptor: dict, body: BodyKind, dataset_dir: Path, fps: int, lang: str) -> str | None:
@@ -258,7 +307,7 @@ def _show(line: str) -> None:
         pass
 
 
-def _run_node(dataflow: Dataflow, node_file: Path, env: dict[str, str], text: dict, log: Path, simulated: bool) -> int:
+def _run_node(dataflow: Dataflow, node_file: Path, env: dict[str, str], text: dict, log: Path, ready_line: str) -> int:
     # dora runs in a session of its own and gets no hang-up from the terminal: teleop must stop it.
     signal.signal(signal.SIGHUP, _hang_up)
     signal.signal(signal.SIGTERM, _hang_up)
@@ -270,7 +319,7 @@ def _run_node(dataflow: Dataflow, node_file: Path, env: dict[str, str], text: di
                        else text["timeout"].format(seconds=START_TIMEOUT_S, log=log))
             print(f"so101 teleop: {message}\n{_log_tail(log)}", file=sys.stderr, flush=True)
             return 1
-        _show(text["ready" if simulated else "ready_real"])
+        _show(text[ready_line])
         prompt = subprocess.Popen([sys.executable, str(node_file)], env=env)
         # Ctrl-C at the terminal goes to the whole foreground group: the prompt quits on it,
         # teleop must outlive it to stop the dataflow.

@@ -1,6 +1,7 @@
-"""The real arm's calibration: LeRobot's `so101_follower` JSON and the step <-> degree maths.
+"""The real arms' calibration: LeRobot's `so101_follower` (and `so101_leader`) JSON and the step <-> degree maths.
 
-Plain functions, no serial port, tested directly. The file is LeRobot's, read as it is:
+Plain functions, no serial port, tested directly. The file is LeRobot's, read as it is (the
+leader's has the follower's format, motor names and IDs):
 per motor name, `id`, `drive_mode`, `homing_offset`, `range_min`, `range_max` (steps, after
 the servo applies its Homing_Offset). `so101 calibrate` writes the same format.
 
@@ -16,7 +17,7 @@ from __future__ import annotations
 import json
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Mapping, Sequence
+from typing import Literal, Mapping, Sequence
 
 from so101.robot import ACTUATED_JOINTS, GRIPPER_COMMAND_INDEX
 from so101.feetech.sts3215 import MAX_STEP, STEPS_PER_TURN
@@ -50,6 +51,8 @@ class MotorCalibration:
 
 
 Calibration = dict[str, MotorCalibration]
+# Which arm of the pair a file calibrates: LeRobot's so101_follower or so101_leader.
+Role = Literal["follower", "leader"]
 
 
 def _motor(name: str, raw: object, source: str) -> MotorCalibration:
@@ -76,21 +79,22 @@ def _motor(name: str, raw: object, source: str) -> MotorCalibration:
     return motor
 
 
-def parse_calibration(document: object, source: str = "calibration") -> Calibration:
-    """LeRobot's so101_follower calibration (a parsed JSON document), checked; CalibrationError says what is wrong."""
+def parse_calibration(document: object, source: str = "calibration", role: Role = "follower") -> Calibration:
+    """LeRobot's so101_follower (or so101_leader) calibration (a parsed JSON document), checked;
+    CalibrationError says what is wrong."""
     if not isinstance(document, dict):
         raise CalibrationError(f"{source}: expected a JSON object with the motors {', '.join(MOTOR_NAMES)}")
     missing = [name for name in MOTOR_NAMES if name not in document]
     if missing:
-        raise CalibrationError(f"{source}: no calibration for {', '.join(missing)} (an SO-101 follower has {', '.join(MOTOR_NAMES)})")
+        raise CalibrationError(f"{source}: no calibration for {', '.join(missing)} (an SO-101 {role} has {', '.join(MOTOR_NAMES)})")
     calibration = {name: _motor(name, document[name], source) for name in MOTOR_NAMES}
     for name, expected_id in zip(MOTOR_NAMES, MOTOR_IDS):
         if calibration[name].id != expected_id:
-            raise CalibrationError(f"{source}: {name}.id = {calibration[name].id}, but the SO-101 follower's {name} is ID {expected_id}")
+            raise CalibrationError(f"{source}: {name}.id = {calibration[name].id}, but the SO-101 {role}'s {name} is ID {expected_id}")
     return calibration
 
 
-def load_calibration(path: str | Path) -> Calibration:
+def load_calibration(path: str | Path, role: Role = "follower") -> Calibration:
     path = Path(path).expanduser()
     try:
         text = path.read_text(encoding="utf-8")
@@ -102,7 +106,7 @@ def load_calibration(path: str | Path) -> Calibration:
         document = json.loads(text)
     except json.JSONDecodeError as error:
         raise CalibrationError(f"{path} is not JSON ({error.msg}, line {error.lineno})") from None
-    return parse_calibration(document, str(path))
+    return parse_calibration(document, str(path), role)
 
 
 def calibration_document(calibration: Mapping[str, MotorCalibration]) -> dict:

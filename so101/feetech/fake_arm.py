@@ -29,10 +29,12 @@ not 0, capped at the motor's speed) without crossing the 0/4095 seam of its own 
 frame, as a servo in position mode does; the hard stops stop it. The motion is computed
 lazily from time.monotonic() whenever a register is read or written, so it is exact however
 often, or seldom, the bus is polled. Torque_Enable = 0: the motor does not move by itself,
-but a hand can move it (`move_by_hand`, `sweep`). Writing 128 to Torque_Enable sets
-Homing_Offset so that the current position reads 2048 (Feetech's "middle position
-calibration"). Only position mode (Operating_Mode 0) is emulated; Goal_Time and Acceleration
-are stored but not emulated (the speed is constant, a new goal takes effect at once).
+but a hand can move it (`move_by_hand`, `sweep`, and `play_hand`, which plays a script of
+angles such as so101/feetech/hand.py's figure eight: the emulator then plays a leader arm).
+Writing 128 to Torque_Enable sets Homing_Offset so that the current position reads 2048
+(Feetech's "middle position calibration"). Only position mode (Operating_Mode 0) is
+emulated; Goal_Time and Acceleration are stored but not emulated (the speed is constant, a
+new goal takes effect at once). `values_written` lists what the bus wrote to a register.
 
 EEPROM (addresses below 40) behaves as Feetech describes the Lock register: a write takes
 effect at once; it is kept through `power_cycle()` only if it was made with Lock = 0. A servo
@@ -44,15 +46,18 @@ one packet with a wrong checksum.
 
 from __future__ import annotations
 
+import math
 import os
 import select
 import threading
 import time
 import tty
 from dataclasses import dataclass
+from typing import Callable, Sequence
 
 from so101.feetech import sts3215
-from so101.robot import ACTUATED_JOINTS
+from so101.feetech.hand import eased_in
+from so101.robot import ACTUATED_JOINTS, GRIPPER_COMMAND_INDEX, goal_deg
 
 # -- the protocol ------------------------------------------------------------------------
 
@@ -177,9 +182,49 @@ def _mechanics() -> dict[int, Mechanics]:
 
 MECHANICS: dict[int, Mechanics] = _mechanics()
 ALL_IDS = tuple(MECHANICS)
+STEPS_PER_DEG = sts3215.STEPS_PER_TURN / 360.0
+_GRIPPER = ACTUATED_JOINTS[GRIPPER_COMMAND_INDEX]
+
+
+# -- degrees, as the factory-calibrated arm reads them (calibrate_as_at_the_factory) --------------
+
+
+def _script_steps(mechanics: Mechanics, angle_deg: float) -> float:
+    """`angle_deg` in physical steps, held inside the stops; a joint without stops is not wrapped
+    (a hand turning it past its encoder's seam moves on smoothly, in steps/s)."""
+    if mechanics.joint == _GRIPPER.name and mechanics.stops is not None:
+        lower, upper = mechanics.stops
+        fraction = (angle_deg - _GRIPPER.lower_deg) / (_GRIPPER.upper_deg - _GRIPPER.lower_deg)
+        steps = lower + fraction * (upper - lower)
+    else:
+        steps = mechanics.centre + angle_deg * STEPS_PER_DEG
+    return steps if mechanics.stops is None else mechanics.clamp(steps)
+
+
+def physical_steps(mechanics: Mechanics, angle_deg: float) -> float:
+    """Where a joint at `angle_deg` stands on its encoder (physical steps, before any homing offset),
+    clamped into its stops (wrist_roll, without stops, on its turn 0..4096). The degrees are what the
+    arm calibrated as at the factory reads (so101/feetech/calibration.py steps_to_deg): joints 1-5 0° at
+    the middle of their travel, 360° a turn; the gripper the URDF's -10°..100° across its stops."""
+    return mechanics.clamp(_script_steps(mechanics, angle_deg))
+
+
+def joint_deg(mechanics: Mechanics, physical: float) -> float:
+    """The inverse of physical_steps: the angle of a joint standing at `physical` steps (wrist_roll
+    from -180° to 180°)."""
+    if mechanics.joint == _GRIPPER.name and mechanics.stops is not None:
+        lower, upper = mechanics.stops
+        return _GRIPPER.lower_deg + (physical - lower) / (upper - lower) * (_GRIPPER.upper_deg - _GRIPPER.lower_deg)
+    from_centre = physical - mechanics.centre
+    if mechanics.stops is None:
+        from_centre = (from_centre + MIDDLE) % sts3215.STEPS_PER_TURN - MIDDLE
+    return from_centre / STEPS_PER_DEG
+
 
 # `sweep`: how long the hand rests on each stop, as a share of the whole sweep.
 SWEEP_DWELL_SHARE = 0.1
+# A scripted hand's Present_Velocity: the change of position over this much time either side.
+VELOCITY_SPAN_S = 0.001
 
 
 class _HandPath:
@@ -205,6 +250,37 @@ class _HandPath:
         return self.points[-1][1], 0.0
 
 
+class _ScriptedHand:
+    """A hand moving one joint along a script of six angles in degrees (FakeArm.play_hand),
+    from `start` (time.monotonic) for `duration_s` (None: until it is stopped)."""
+
+    def __init__(self, script: Callable[[float], Sequence[float]], mechanics: Mechanics, start: float,
+                 duration_s: float | None):
+        self.script = script
+        self.mechanics = mechanics
+        self.index = mechanics.servo_id - 1
+        self.start = start
+        self.duration_s = duration_s
+
+    @property
+    def end_time(self) -> float:
+        return math.inf if self.duration_s is None else self.start + self.duration_s
+
+    def _steps(self, t_s: float) -> float:
+        return _script_steps(self.mechanics, float(self.script(t_s)[self.index]))
+
+    def at(self, now: float) -> tuple[float, float]:
+        """(position, velocity in steps/s) at `now`; the velocity by a central difference."""
+        t_s = max(0.0, now - self.start)
+        if self.duration_s is not None and t_s >= self.duration_s:
+            return self._steps(self.duration_s), 0.0
+        before = max(0.0, t_s - VELOCITY_SPAN_S)
+        after = t_s + VELOCITY_SPAN_S
+        if self.duration_s is not None:
+            after = min(after, self.duration_s)
+        return self._steps(t_s), (self._steps(after) - self._steps(before)) / (after - before)
+
+
 class _Servo:
     """One STS3215: its register memory and the physical position of its joint."""
 
@@ -214,7 +290,9 @@ class _Servo:
         self.physical = float(physical)  # encoder steps, inside the stops (or 0..4096 without)
         self.velocity = 0.0  # steps/s at self.time
         self.time = now
-        self.hand: _HandPath | None = None
+        self.hand: _HandPath | _ScriptedHand | None = None
+        # Every value the bus wrote, by register (FakeArm.values_written).
+        self.written: dict[str, set[int]] = {name: set() for name in sts3215.REGISTERS}
         self.pending: tuple[int, bytes] | None = None  # REG_WRITE, until ACTION
         self.fault = ""  # "", "silent" or "corrupt"
         for name, value in POWER_UP.items():
@@ -328,6 +406,16 @@ class _Servo:
         elif self.hand is None:
             self.velocity = 0.0
         self.refresh()
+
+    def host_write(self, address: int, data: bytes) -> None:
+        """A write that came over the bus: logged for values_written, then taken as write() does."""
+        end = address + len(data)
+        for name, (start, size) in sts3215.REGISTERS.items():
+            if address <= start and start + size <= end:
+                raw = int.from_bytes(data[start - address : start - address + size], "little")
+                bit = sts3215.SIGN_BITS.get(name)
+                self.written[name].add(sts3215.decode_signed(raw, bit) if bit is not None else raw)
+        self.write(address, data)
 
     def calibrate_middle(self) -> None:
         bit = sts3215.SIGN_BITS["Homing_Offset"]
@@ -487,12 +575,28 @@ class FakeArm:
             servo.advance(time.monotonic(), self.speed_steps_s)
             servo.write(address, raw.to_bytes(size, "little"))
 
+    def values_written(self, servo_id: int, name: str) -> frozenset[int]:
+        """Every value the bus (WRITE, REG_WRITE then ACTION, SYNC_WRITE) ever wrote to this register of
+        servo `servo_id`, as sent, whether or not the servo kept it (signed registers decoded); a write
+        counts for each register it covers whole. Not write_register's: those are the test's own."""
+        if name not in sts3215.REGISTERS:
+            raise KeyError(f"no register {name!r}; see so101/feetech/sts3215.py")
+        with self._lock:
+            return frozenset(self._servo(servo_id).written[name])
+
     def physical_position(self, servo_id: int) -> int:
         """The joint's encoder reading before the homing offset (steps, 0..4095)."""
         with self._lock:
             servo = self._servo(servo_id)
             servo.advance(time.monotonic(), self.speed_steps_s)
             return round(servo.physical) % sts3215.STEPS_PER_TURN
+
+    def joint_angle_deg(self, servo_id: int) -> float:
+        """The joint's angle in degrees as the arm calibrated at the factory reads it (joint_deg)."""
+        with self._lock:
+            servo = self._servo(servo_id)
+            servo.advance(time.monotonic(), self.speed_steps_s)
+            return joint_deg(servo.mechanics, servo.physical)
 
     def mechanics(self, servo_id: int) -> Mechanics:
         """The joint's middle and hard stops (physical steps)."""
@@ -574,14 +678,66 @@ class FakeArm:
         points.append((now + duration_s, float(m.centre)))
         return points
 
+    def play_hand(
+        self,
+        angles_at: Callable[[float], Sequence[float]],
+        duration_s: float | None = None,
+        ease_s: float = 0.0,
+        ids: tuple[int, ...] | None = None,
+    ) -> tuple[int, ...]:
+        """A hand moves every torque-off joint (of `ids`) along a script: `angles_at(t_s)` gives the six
+        angles in degrees (so101/feetech/hand.py; physical_steps places them) `t_s` seconds from now,
+        for `duration_s` (None: until stop_hand or another hand), the joints then left at the script's
+        last angles. Over the first `ease_s` seconds the hand eases from where the joints stand into
+        the script (hand.eased_in); with ease_s = 0 it takes them where the script starts at once.
+        Returns at once with the ids it moves; the motion is evaluated from the clock, as the motor's
+        is, so it is exact however often the bus is read. A joint whose torque is (or is turned) on
+        does not follow. ValueError for a script that does not give six finite angles."""
+        if duration_s is not None and not duration_s >= 0:
+            raise ValueError(f"duration_s must be 0 or more (or None: until stopped), got {duration_s}")
+        goal_deg(angles_at(0.0))  # six finite angles, or ValueError here rather than in the bus thread
+        moved = []
+        with self._lock:
+            now = time.monotonic()
+            for servo in self._servos.values():
+                servo.advance(now, self.speed_steps_s)
+            # The script sees all six joints; one not on this bus stays at 0°.
+            start_deg = [0.0] * len(ACTUATED_JOINTS)
+            for servo_id, servo in self._servos.items():
+                start_deg[servo_id - 1] = joint_deg(servo.mechanics, servo.physical)
+            script = eased_in(angles_at, start_deg, ease_s)
+            chosen = [(servo_id, self._servo(servo_id)) for servo_id in (ids if ids is not None else self.ids)]
+            for servo_id, servo in chosen:
+                if servo.torque_on:
+                    continue
+                moved.append(servo_id)
+                servo.hand = _ScriptedHand(script, servo.mechanics, now, duration_s)
+        return tuple(moved)
+
+    def stop_hand(self) -> tuple[int, ...]:
+        """The hand lets go (a sweep or a script): every joint stays where it is. Returns the ids it
+        was still moving."""
+        let_go = []
+        with self._lock:
+            now = time.monotonic()
+            for servo_id, servo in self._servos.items():
+                servo.advance(now, self.speed_steps_s)  # a hand that has ended is gone after this
+                if servo.hand is not None:
+                    let_go.append(servo_id)
+                    servo.hand = None
+                    servo.velocity = 0.0
+                    servo.refresh()
+        return tuple(let_go)
+
     def hand_busy(self) -> bool:
-        """Whether a sweep is still moving some joint."""
+        """Whether a hand (a sweep or a script) is still moving some joint; a script without a
+        duration is, until stop_hand."""
         with self._lock:
             now = time.monotonic()
             return any(s.hand is not None and now < s.hand.end_time and not s.torque_on for s in self._servos.values())
 
     def wait_hand(self, timeout: float | None = None) -> bool:
-        """Wait for the sweep to end; False if `timeout` (s) passed first."""
+        """Wait for the hand to end; False if `timeout` (s) passed first."""
         deadline = None if timeout is None else time.monotonic() + timeout
         while self.hand_busy():
             if deadline is not None and time.monotonic() >= deadline:
@@ -763,7 +919,7 @@ class FakeArm:
                 if len(params) < 2:
                     return b""
                 for servo in servos:
-                    servo.write(params[0], params[1:])
+                    servo.host_write(params[0], params[1:])
             elif instruction == REG_WRITE:
                 if len(params) < 2:
                     return b""
@@ -772,7 +928,7 @@ class FakeArm:
             elif instruction == ACTION:
                 for servo in servos:
                     if servo.pending is not None:
-                        servo.write(*servo.pending)
+                        servo.host_write(*servo.pending)
                         servo.pending = None
             else:
                 return b""  # an instruction the STS3215 does not know: no answer
@@ -819,7 +975,7 @@ class FakeArm:
             for servo in listening:
                 if servo.bus_id == servo_id:
                     servo.advance(now, self.speed_steps_s)
-                    servo.write(address, data)
+                    servo.host_write(address, data)
 
 
 # -- a calibrated arm ---------------------------------------------------------------------------

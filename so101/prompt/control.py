@@ -55,7 +55,9 @@ class KeyboardControl:
         self.keys_fd = keys_fd
         self.recorder = recorder
         self.jogging = False  # `jog` has the terminal
-        self.news_shown = 0  # lines the recorder's news printed (jog draws its status line again)
+        self.news_shown = 0  # lines of news printed while jogging (jog draws its status line again)
+        # Prints a line of news at once (the leader's, on `leader_status`); None: nowhere to show it.
+        self.show_news: Callable[[str], None] | None = None
 
     # -- events, from the pump thread ----------------------------------------------------
     def on_event(self, event: dict) -> None:
@@ -67,6 +69,9 @@ class KeyboardControl:
             status = event["value"].to_pylist()
             reply_to = str((event.get("metadata") or {}).get("reply_to", ""))
             self.recorder.on_status(str(status[0]) if status else "", reply_to)
+        elif event["type"] == "INPUT" and event["id"] == "leader_status" and self.show_news is not None:
+            for line in event["value"].to_pylist():
+                self.show_news(f"  {line}")
         elif event["type"] == "INPUT" and event["id"] in ("joint_state", "gripper_state"):
             values = [float(angle) for angle in event["value"].to_pylist()]
             with self._state_changed:

@@ -15,6 +15,11 @@ RECORDER_NODE_FILE = ROOT / "nodes" / "recorder.py"
 CAMERA_NODE_FILE = ROOT / "nodes" / "camera.py"
 REPLAY_NODE_FILE = ROOT / "nodes" / "replay.py"
 REPLAY_NODE_ID = "replay"
+# `so101 teleop --leader` puts the leader node between the prompt and the body (dataflow_leader.yml).
+LEADER_NODE_FILE = ROOT / "nodes" / "leader_node.py"
+LEADER_NODE_ID = "leader"
+LEADER_DATAFLOW_FILE = ROOT / "dataflow_leader.yml"
+LEADER_TICK = "dora/timer/millis/10"
 # The recorder samples at its frame rate by its own clock, woken this often (the frame's jitter).
 RECORDER_TICK = "dora/timer/millis/5"
 # The period of dataflow.yml's `dora/timer/millis/4` tick, and so of the physics step
@@ -24,6 +29,8 @@ TICK_PERIOD_S = 0.004
 # The start of the simulation node's "loaded" log line, in its two languages (so101/bodies/node_loop.py):
 # every body logs it once the arm is loaded, just before it starts publishing joint_state.
 LOADED_MARKS = ("SO-101 loaded", "SO-101 加载完成")
+# The leader node's line once its servos are checked and read (nodes/leader_node.py), in its two languages.
+LEADER_READY_MARKS = ("SO-101 leader ready", "SO-101 主臂就绪")
 
 _TIMER = re.compile(r"^dora/timer/(millis|secs)/(\d+(?:\.\d+)?)$")
 
@@ -156,15 +163,36 @@ def with_recorder(descriptor: dict, body_node_id: str, recorder_env: dict[str, s
     return descriptor
 
 
+def _retarget(node: dict, input_id: str, source: str) -> None:
+    """Point `input_id` of `node` at `source`, keeping its queue settings."""
+    spec = node["inputs"][input_id]
+    node["inputs"][input_id] = {**spec, "source": source} if isinstance(spec, dict) else source
+
+
+def with_leader(descriptor: dict, body_node_id: str, leader_env: dict[str, str], root: PurePath = ROOT) -> dict:
+    """A dataflow (dataflow_copy's dict) whose body takes `joint_cmd` from the leader node, which takes the
+    prompt's `joint_cmd` as `typed_cmd` and tells the prompt its news on `leader_status`: dataflow_leader.yml's
+    graph, on any body (tests/test_dataflow_file.py holds the two equal)."""
+    prompt = _node(descriptor, PROMPT_NODE_ID)
+    prompt["inputs"] = {**prompt["inputs"],
+                        "leader_status": {"source": f"{LEADER_NODE_ID}/leader_status", "queue_size": 100}}
+    body = _node(descriptor, body_node_id)
+    typed_input = body["inputs"]["joint_cmd"]
+    _retarget(body, "joint_cmd", f"{LEADER_NODE_ID}/joint_cmd")
+    leader = {
+        "id": LEADER_NODE_ID, "path": str(root / LEADER_NODE_FILE.relative_to(ROOT)),
+        "inputs": {"tick": {"source": LEADER_TICK, "queue_size": 1}, "typed_cmd": typed_input},
+        "outputs": ["joint_cmd", "leader_status"], "env": leader_env,
+    }
+    # Beside the prompt, before the body, as dataflow_leader.yml has it.
+    descriptor["nodes"].insert(descriptor["nodes"].index(body), leader)
+    return descriptor
+
+
 def with_replay(descriptor: dict, body_node_id: str) -> dict:
     """A dataflow (dataflow_copy's dict) whose body takes `joint_cmd` from the replay node (dynamic,
     started by `so101 replay`) instead of the prompt."""
     prompt = _node(descriptor, PROMPT_NODE_ID)
     prompt["id"] = REPLAY_NODE_ID
-    body = _node(descriptor, body_node_id)
-    command_input = body["inputs"]["joint_cmd"]
-    if isinstance(command_input, dict):
-        body["inputs"]["joint_cmd"] = {**command_input, "source": f"{REPLAY_NODE_ID}/joint_cmd"}
-    else:
-        body["inputs"]["joint_cmd"] = f"{REPLAY_NODE_ID}/joint_cmd"
+    _retarget(_node(descriptor, body_node_id), "joint_cmd", f"{REPLAY_NODE_ID}/joint_cmd")
     return descriptor

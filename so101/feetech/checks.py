@@ -1,0 +1,48 @@
+"""What a driver checks before it trusts the servos on a bus: the follower's (so101/bodies/real_arm.py),
+the leader's (so101/leader/arm.py) and `so101 calibrate`'s. Each check raises with one line for the user."""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+from so101.feetech.bus import BusError, FeetechBus
+from so101.feetech.calibration import MOTOR_IDS, MOTOR_NAMES, CalibrationError, MotorCalibration
+from so101.feetech.sts3215 import MODEL_NUMBER, SIGN_BITS, decode_signed
+
+# Pings of each servo at start before it is called silent: one lost packet must not refuse the arm.
+START_PINGS = 3
+
+
+def check_servos_answer(bus: FeetechBus) -> None:
+    """Every servo of an SO-101 answers at its ID and is an STS3215; BusError names the first that is not."""
+    for name, servo_id in zip(MOTOR_NAMES, MOTOR_IDS):
+        model = None
+        for _ in range(START_PINGS):
+            model = bus.ping(servo_id)
+            if model is not None:
+                break
+        if model is None:
+            raise BusError(f"servo {servo_id} ({name}) does not answer on {bus.port_name}: "
+                           f"check its power and cable, and that it has ID {servo_id}")
+        if model != MODEL_NUMBER:
+            raise BusError(f"servo {servo_id} ({name}) is model {model}, not an STS3215 ({MODEL_NUMBER})")
+
+
+def check_calibration_on_servos(bus: FeetechBus, motors: Sequence[MotorCalibration], calibration_name: str,
+                                which_arm: str, remedy: str) -> None:
+    """The servos hold the calibration's offsets and ranges (a calibration writes them into their EEPROM) and are
+    in position mode; CalibrationError names the first servo that differs, then `remedy`. `which_arm`: "arm",
+    "leader", as the line calls it."""
+    for name, servo_id, motor in zip(MOTOR_NAMES, MOTOR_IDS, motors):
+        on_servo = {
+            "homing_offset": decode_signed(bus.read(servo_id, "Homing_Offset"), SIGN_BITS["Homing_Offset"]),
+            "range_min": bus.read(servo_id, "Min_Position_Limit"),
+            "range_max": bus.read(servo_id, "Max_Position_Limit"),
+        }
+        for field_name, value in on_servo.items():
+            if value != getattr(motor, field_name):
+                raise CalibrationError(
+                    f"{calibration_name} does not match the {which_arm} on {bus.port_name}: servo {servo_id} ({name}) "
+                    f"has {field_name} {value}, the file says {getattr(motor, field_name)}; {remedy}")
+        if bus.read(servo_id, "Operating_Mode") != 0:
+            raise CalibrationError(f"servo {servo_id} ({name}) is not in position mode (Operating_Mode 0)")
