@@ -156,7 +156,9 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as error:
         print(f"{NODE_ID}: {error}", file=sys.stderr)
         return 2
-    with dora_logs_aside(settings.log_file):
+    # Not restored at the end: the node lives until the process exits (_KEPT_TO_EXIT), and its runtime
+    # may log meanwhile (inputs dropped once the pump has stopped) where the terminal would show it.
+    with dora_logs_aside(settings.log_file, restore=False):
         interactive = sys.stdin.isatty()
         poses = PoseStore(settings.poses_file)
         # Ctrl-C must raise KeyboardInterrupt even when started with SIGINT ignored: STOP relies on it too.

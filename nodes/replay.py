@@ -152,7 +152,7 @@ def main() -> int:
                                  fps=dataset.fps, seconds=len(actions_deg) / dataset.fps,
                                  task=" | ".join(summary.tasks)), flush=True)
     # dora's own log lines (JSON) go to the prompt's log file, not between these lines.
-    with dora_logs_aside(prompt_settings.log_file):
+    with dora_logs_aside(prompt_settings.log_file, restore=False):  # the node outlives the block, as the prompt's
         node = join_dataflow(REPLAY_NODE_ID, prompt_settings.daemon_port, settings.lang)
         if node is None:  # why is on stderr, in one line
             return 1

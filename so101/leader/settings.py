@@ -6,10 +6,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from so101.bodies.settings import DEFAULT_BUS_RETRIES, read_language
+from so101.bodies.settings import read_language
 from so101.lang import DEFAULT_LANGUAGE, ENV_VAR as LANG_ENV_VAR
 from so101.runtime.settings import EnvironSettings, read_file_path, read_stripped_text, read_whole_number, setting
 
+# 250 ms at the 10 ms tick: a silence a person could notice. Shorter ones (a busy machine starving an
+# emulated leader for a few ticks) pass without a word; the body holds through them either way.
+DEFAULT_LEADER_RETRIES = 25
 CALIBRATE_LEADER_HINT = "make one with `so101 calibrate --leader --port {port} --out FILE`, or use LeRobot's so101_leader calibration"
 
 
@@ -26,6 +29,6 @@ class LeaderSettings(EnvironSettings):
         required="(the dataflow's env:, or so101 teleop --leader-calibration) to the leader's calibration file; "
                  + CALIBRATE_LEADER_HINT.format(port="{port}"))
     retries: int = setting(
-        "SO101_LEADER_RETRIES", f"{DEFAULT_BUS_RETRIES}",
+        "SO101_LEADER_RETRIES", f"{DEFAULT_LEADER_RETRIES}",
         "ticks the leader may fail to answer before the log says so (the body holds meanwhile)", read_whole_number)
     lang: str = setting(LANG_ENV_VAR, DEFAULT_LANGUAGE, "log language, `zh` or `en`", read_language)

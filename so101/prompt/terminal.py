@@ -49,9 +49,10 @@ def _writes_to_descriptor_1(stream) -> bool:
 
 
 @contextlib.contextmanager
-def dora_logs_to(log_path: Path):
+def dora_logs_to(log_path: Path, restore: bool = True):
     """Descriptor 1 goes to `log_path` (appended) inside the block; Python's prints and the
-    line editor go to the terminal as before."""
+    line editor go to the terminal as before. With restore=False it stays so after the block,
+    for a dora node that outlives it (its runtime logs until the process ends)."""
     sys.stdout.flush()
     log_path.parent.mkdir(parents=True, exist_ok=True)
     log_fd = os.open(log_path, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
@@ -84,26 +85,27 @@ def dora_logs_to(log_path: Path):
         yield
     finally:
         sys.stdout.flush()
-        sys.stdout = saved_stdout
-        os.dup2(terminal_fd, 1)
-        if stream:
-            libc.fflush(stream)
-            variable.value = saved_c_stdout
-            libc.fclose(stream)  # closes terminal_fd with it
-        else:
-            os.close(terminal_fd)
+        if restore:
+            sys.stdout = saved_stdout
+            os.dup2(terminal_fd, 1)
+            if stream:
+                libc.fflush(stream)
+                variable.value = saved_c_stdout
+                libc.fclose(stream)  # closes terminal_fd with it
+            else:
+                os.close(terminal_fd)
 
 
 @contextlib.contextmanager
-def dora_logs_aside(log_path: Path):
-    """`dora_logs_to(log_path)`; where that file cannot be written, one line says so and dora's
+def dora_logs_aside(log_path: Path, restore: bool = True):
+    """`dora_logs_to(log_path, restore)`; where that file cannot be written, one line says so and dora's
     log lines are dropped (a terminal full of JSON would be worse than none)."""
     with contextlib.ExitStack() as stack:
         try:
-            stack.enter_context(dora_logs_to(log_path))
+            stack.enter_context(dora_logs_to(log_path, restore))
         except OSError as error:
             print(f"  (dora's log lines are dropped: cannot write {log_path}: {error.strerror or error})", flush=True)
-            stack.enter_context(dora_logs_to(Path(os.devnull)))
+            stack.enter_context(dora_logs_to(Path(os.devnull), restore))
         yield
 
 
