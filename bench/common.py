@@ -218,12 +218,15 @@ def peak_rss_mb(pid: int | None) -> float | None:
 
 
 def run_dataflow(run_dir: Path, duration_s: float, sim_env: dict, probe_env: dict, display: str | None = None,
-                 body: str = "pybullet", extend: Callable[[dict], None] | None = None) -> dict:
+                 body: str = "pybullet", extend: Callable[[dict], None] | None = None,
+                 during: Callable[[float], None] | None = None) -> dict:
     """`dora run` for duration_s after the first joint_state, then Ctrl-C; the raw records.
 
     With `display` the nodes get that DISPLAY, and the measured time starts once the
     window shows the arm (it loads for a few seconds while the physics already runs);
-    without, no DISPLAY (headless)."""
+    without, no DISPLAY (headless). `during(duration_s)`, when given, is called in place of
+    sleeping through the measured time (bench/leader_bench.py moves the emulated leader in it;
+    the dataflow runs until it returns)."""
     run_dir.mkdir(parents=True)
     tick_log = run_dir / "ticks.bin"
     probe_log = run_dir / "probe.json"
@@ -258,7 +261,7 @@ def run_dataflow(run_dir: Path, duration_s: float, sim_env: dict, probe_env: dic
                         raise RuntimeError(f"the window did not show the arm (see {log_path})")
                     time.sleep(0.05)
                 measured_from_ns = time.monotonic_ns()
-            time.sleep(duration_s)
+            (during or time.sleep)(duration_s)
             simulation = processes_with_env("SO101_TICK_LOG", str(tick_log))
             rss_mb = peak_rss_mb(simulation[0] if simulation else None)
         finally:

@@ -6,7 +6,9 @@ One run measures:
      in process, through SO101Real as the node uses it;
   2. dataflow_real.yml under a real headless `dora run`, with bench/nodes/prober.py in the
      place of keyboard_control: joint_state/s against the 50 Hz tick, ticks missed, per-tick
-     work, the joint_cmd -> joint_state latency (the first state that moved), start-up.
+     work, the joint_cmd -> joint_state latency (the first state that moved), start-up;
+  3. the same dataflow driven by a second emulated arm as the leader (bench/leader_bench.py): the
+     leader moved by hand -> the first joint_state that shows it.
 What it does not measure: a real adapter. The emulator answers over a pseudo-terminal in
 a fraction of a millisecond; a USB serial adapter adds its latency timer to every read
 (1-16 ms, see dataflow_real.yml), and real servos add their return delay.
@@ -19,6 +21,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from bench import leader_bench
 from bench.common import (
     PROBE_STEP_DEG, WARMUP_S, latency_breakdown, machine_facts, machine_line, reflecting_states, run_dataflow, target_lines,
     target_row, tick_figures,
@@ -36,6 +39,9 @@ TARGETS = {
     # it back, so the move shows on the tick after: two ticks, and the transit, at most.
     "latency_p99_ms": 2 * TICK_S * 1e3 + 5,
     "startup_s": 3.0,
+    # The leader moved by hand -> the follower's joint_state showing it, p99, at most: the leader's
+    # 10 ms tick and read, then the command latency's two follower ticks and the transits.
+    "leader_latency_p99_ms": 45.0,
 }
 PROBE_PERIOD_S = "0.3"  # a 4° probe at 90°/s takes 45 ms: each probe is done before the next
 
@@ -70,6 +76,8 @@ def run_real_benchmark(duration_s: float, exchanges: int) -> dict:
             {"SO101_PORT": arm.port, "SO101_CALIBRATION": str(calibration_file)},
             {"PROBE_PERIOD_S": PROBE_PERIOD_S, "PROBE_STEP_DEG": PROBE_STEP_DEG, "PROBE_PHASE_S": str(TICK_S)}, body="real",
         )
+        leader = leader_bench.run_leader_benchmark(
+            work_dir, duration_s, "real", {"SO101_PORT": arm.port, "SO101_CALIBRATION": str(calibration_file)})
     probe = record["probe"]
     states = probe["states"]
     steady_from_ns = max(states[0][0], record["measured_from_ns"]) + int(WARMUP_S * 1e9)
@@ -88,7 +96,8 @@ def run_real_benchmark(duration_s: float, exchanges: int) -> dict:
         "tick_work_ms": summary([(end - start) / 1e6 for start, end, _ in record["ticks"]]),
         "startup_s": (probe["first_state_ns"] - record["started_ns"]) / 1e9,
     }
-    figures = {"bus": bus, "dataflow": dataflow, "command_latency_ms": {**latency, "probes_sent": len(probe["commands"])}}
+    figures = {"bus": bus, "dataflow": dataflow, "command_latency_ms": {**latency, "probes_sent": len(probe["commands"])},
+               "leader": leader}
     figures["targets"] = [
         target_row(name, value, target, met) for name, value, target, met in (
             ("joint_state per s (dora run)", dataflow["joint_state_per_s"], f">= {TARGETS['joint_state_per_s']}",
@@ -99,7 +108,7 @@ def run_real_benchmark(duration_s: float, exchanges: int) -> dict:
             ("start-up to first joint_state (s)", dataflow["startup_s"], f"<= {TARGETS['startup_s']:g}",
              dataflow["startup_s"] <= TARGETS["startup_s"]),
         )
-    ]
+    ] + [leader_bench.target(leader, TARGETS["leader_latency_p99_ms"], "emulated follower")]
     return {
         "body": "real",
         "machine": machine_facts(),
@@ -129,7 +138,8 @@ def table(result: dict) -> str:
         f"{'node work per tick (ms, p50 | p99 | max)':<66} {ms(flow['tick_work_ms']):>22}",
         f"{'joint_cmd -> joint_state latency (ms, p50 | p99 | max)':<66} {ms(latency):>22}",
         f"{'start-up to first joint_state (s)':<66} {flow['startup_s']:>22.2f}",
-        "",
-        *target_lines(result["targets"]),
     ]
+    if "leader" in result:  # results from before the leader arm have no leader rows
+        lines += leader_bench.table_lines(result["leader"], 66, 22)
+    lines += ["", *target_lines(result["targets"])]
     return "\n".join(lines)

@@ -18,7 +18,7 @@ import pyarrow as pa
 import pytest
 
 from so101.bodies import node_loop as body_node
-from bench import common, run_bench
+from bench import common, leader_bench, real_bench, run_bench
 from tests.dataflow_helpers import TICK, run_simulation_node
 
 MS = 1_000_000  # ns
@@ -84,6 +84,39 @@ def test_dropped_tick_warnings_split_at_the_first_state():
     ])
     first_state = 1767225602.0  # 2026-01-01T00:00:02Z
     assert common.dropped_tick_warnings(jsonl, first_state) == (2, 1)
+
+
+def test_leader_latency_is_the_move_to_the_first_state_showing_it_split_at_the_bodys_tick():
+    # States every 4 ms (their ticks start 0.5 ms before); joint 4 shows the move at 16 ms, joint 0's
+    # later move away from the hand's new angle does not count, then the move toward it at 40 ms does.
+    states = [[t * MS, 0.0, 0.0] for t in (0, 4, 8, 12)] + [[16 * MS, 0.0, 0.1], [20 * MS, 0.0, 0.5],
+                                                           [24 * MS, 0.0, 0.5], [28 * MS, -0.2, 0.5], [40 * MS, 0.3, 0.5]]
+    moves = [[5 * MS, 4, 2.0], [22 * MS, 0, 2.0], [41 * MS, 4, -2.0]]  # the last: the run ended first
+    tick_starts = [int((t - 0.5) * MS) for t in (4, 8, 12, 16, 20, 24, 28, 40)]
+    figures = leader_bench.leader_latency(states, moves, [0, 4], tick_starts)
+    assert figures["count"] == 2 and figures["moves"] == 3
+    assert figures["max"] == pytest.approx(18.0)  # 22 -> 40 ms
+    assert figures["p50"] == pytest.approx((11.0 + 18.0) / 2)
+    assert figures["to_the_body_tick_ms"]["max"] == pytest.approx(17.5)
+    assert figures["body_tick_to_arrival_ms"]["p50"] == pytest.approx(0.5)
+
+
+def test_the_hand_moves_each_leader_joint_a_few_degrees_each_way_in_turn(tmp_path, monkeypatch):
+    from so101.feetech.fake_arm import FakeArm, calibrate_as_at_the_factory
+    from so101.runtime.dataflow import LEADER_READY_MARKS
+
+    monkeypatch.setattr(leader_bench, "WARMUP_S", 0.0)
+    monkeypatch.setattr(leader_bench, "MOVE_PERIOD_S", 0.01)
+    monkeypatch.setattr(leader_bench, "LEADER_TICK_S", 0.0)
+    dora_log = tmp_path / "dora.log"
+    dora_log.write_text(f"[leader] {LEADER_READY_MARKS[0]}, /dev/pts/9\n")
+    with FakeArm() as arm:
+        hand = leader_bench.Hand(arm, calibrate_as_at_the_factory(arm), dora_log)
+        hand.move(0.035)  # a move at 0, 10, 20 and 30 ms of the 35 asked for, however late each comes
+    half = leader_bench.HAND_STEP_DEG / 2
+    assert [joint for _, joint, _ in hand.moves] == [0, 4, 0, 4]
+    assert [target for _, _, target in hand.moves] == pytest.approx([half, half, -half, -half], abs=0.1)
+    assert all(a[0] < b[0] for a, b in zip(hand.moves, hand.moves[1:]))
 
 
 # -- the node's fast mode and tick log ---------------------------------------------------
@@ -227,9 +260,16 @@ def test_quick_bench_writes_every_figure(tmp_path, body):
     assert "recording with video: joint_state per s" in result.stdout
     recording_rows = 2  # the 60 s save's target is judged in full runs only
 
+    leader = figures["leader"]["latency_ms"]
+    # The hand moved every 0.3 s for the 3 s run; the body showed (nearly) every move.
+    assert leader["moves"] >= 8 and leader["count"] >= leader["moves"] - 1
+    assert leader["max"] >= leader["p99"] >= leader["p50"] > 0
+    assert "leader moved -> joint_state" in result.stdout
+    leader_rows = 1
+
     if body == "mujoco":
         assert "memory_stages_mb" not in figures and machine["mujoco"].startswith("4.")
-        assert len(figures["targets"]) == 8 + window_rows + recording_rows
+        assert len(figures["targets"]) == 8 + window_rows + recording_rows + leader_rows
         return
     stages = figures["memory_stages_mb"]
     assert list(stages) == ["course", "plugins", "node"]
@@ -240,9 +280,41 @@ def test_quick_bench_writes_every_figure(tmp_path, body):
     assert stages["plugins"]["the arm loaded"]["current"] < stages["course"]["the arm loaded"]["current"]
     assert "memory, peak | current RSS (MB)" in result.stdout
 
-    assert len(figures["targets"]) == 8 + window_rows + recording_rows
+    assert len(figures["targets"]) == 8 + window_rows + recording_rows + leader_rows
     assert all(isinstance(row["met"], bool) for row in figures["targets"])
     assert "targets:" in result.stdout and "joint_state per s" in result.stdout
+
+
+LEADER_FIGURES = {"latency_ms": {"p50": 8.51, "p99": 17.26, "mean": 9.0, "max": 18.73, "count": 66, "moves": 67,
+                                  "to_the_body_tick_ms": {"p50": 7.1, "p99": 16.02, "mean": 7.0, "max": 17.0, "count": 66},
+                                  "body_tick_to_arrival_ms": {"p50": 0.9, "p99": 1.24, "mean": 0.9, "max": 1.3, "count": 66}},
+                   "move_period_s": 0.3, "hand_step_deg": 4.0, "leader_tick_ms": 10.0}
+
+
+@pytest.mark.parametrize("body", ["pybullet", "real"])
+def test_the_tables_show_the_leader_rows_and_their_target_and_old_results_show_without(body):
+    saved = json.loads(run_bench.DEFAULT_OUT[body].read_text())
+    table = real_bench.table if body == "real" else run_bench.table
+    saved.pop("leader", None)
+    saved["targets"] = [row for row in saved["targets"] if not row["figure"].startswith("leader")]
+    assert "leader" not in table(saved)  # a result from before the leader arm
+    targets = real_bench.TARGETS if body == "real" else run_bench.TARGETS
+    row = leader_bench.target(LEADER_FIGURES, targets["leader_latency_p99_ms"], body)
+    assert row["met"] is (17.26 <= targets["leader_latency_p99_ms"])
+    shown = table({**saved, "leader": LEADER_FIGURES, "targets": [*saved["targets"], row]})
+    lines = shown.splitlines()
+    latency_row = next(line for line in lines if line.startswith("leader moved -> joint_state (ms, p50 | p99 | max)"))
+    assert latency_row.split()[-5:] == ["8.51", "|", "17.26", "|", "18.73"]
+    assert any(line.startswith("  moves the body showed / moves made") and line.endswith("66 / 67") for line in lines)
+    assert any("12-34 ms per loop" in line for line in lines)
+    target_line = next(line for line in lines if f"leader -> joint_state latency p99, {body} (ms)" in line)
+    assert "17.260" in target_line and target_line.startswith("  met")
+
+
+def test_the_leader_targets_are_25_ms_in_simulation_and_45_ms_to_the_emulated_follower():
+    assert run_bench.TARGETS["leader_latency_p99_ms"] == 25.0 and real_bench.TARGETS["leader_latency_p99_ms"] == 45.0
+    late = {**LEADER_FIGURES, "latency_ms": {**LEADER_FIGURES["latency_ms"], "p99": 30.0}}
+    assert not leader_bench.target(late, 25.0, "pybullet")["met"] and leader_bench.target(late, 45.0, "real")["met"]
 
 
 def test_show_prints_a_saved_result_and_refuses_what_is_not_one(tmp_path, capsys):

@@ -328,3 +328,28 @@ def test_a_silent_or_unplugged_leader_leaves_the_body_where_it_is(tmp_path):
     assert log.count("reads failed in a row: the body holds where it is") == 1, log[-3000:]
     assert log.count("the leader answers again") == 1 and log.count("lost the serial port") == 1, log[-3000:]
     assert "Traceback" not in log, log[-3000:]
+
+
+@pytest.mark.parametrize("options, message", [
+    (["--leader", "/dev/ttyACM1"], "--leader PORT and --leader-calibration FILE go together (no leader? `so101 fake-arm` "
+                                   "emulates one; `so101 calibrate --leader` makes the file)"),
+    (["--leader-calibration", "leader.json"], "--leader PORT and --leader-calibration FILE go together"),
+    (["--leader", "/dev/ttyACM0", "--leader-calibration", "leader.json", "--body", "real", "--port", "/dev/ttyACM0",
+      "--calibration", "arm.json"], "--leader /dev/ttyACM0 is the follower's --port too: the two arms are on two serial ports"),
+    (["--leader", "/dev/ttyACM1", "--leader-calibration", "missing.json"], "no calibration file {tmp}/missing.json"),
+    (["--leader", "/dev/ttyACM1", "--leader-calibration", "not_json.json"], "{tmp}/not_json.json is not JSON"),
+])
+def test_teleop_refuses_a_leader_it_cannot_use_in_one_line_before_starting_anything(tmp_path, monkeypatch, capsys,
+                                                                                      options, message):
+    from so101.cli import main as cli
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "not_json.json").write_text("{")
+    for name in ("leader.json", "arm.json"):
+        with FakeArm() as arm:
+            save_calibration(tmp_path / name, calibrate_as_at_the_factory(arm))
+    log_file = tmp_path / "dora.log"
+    assert cli.main(["teleop", "--mode", "direct", "--lang", "en", "--log", str(log_file), *options]) == 2
+    error = capsys.readouterr().err.strip()
+    assert error.startswith("so101 teleop: " + message.format(tmp=tmp_path)) and len(error.splitlines()) == 1
+    assert not log_file.exists()  # no dataflow was started
