@@ -306,7 +306,7 @@ def test_the_tables_show_the_leader_rows_and_their_target_and_old_results_show_w
     latency_row = next(line for line in lines if line.startswith("leader moved -> joint_state (ms, p50 | p99 | max)"))
     assert latency_row.split()[-5:] == ["8.51", "|", "17.26", "|", "18.73"]
     assert any(line.startswith("  moves the body showed / moves made") and line.endswith("66 / 67") for line in lines)
-    assert any("12-34 ms per loop" in line for line in lines)
+    assert any("12-34 ms a teleoperation loop" in line for line in lines)
     target_line = next(line for line in lines if f"leader -> joint_state latency p99, {body} (ms)" in line)
     assert "17.260" in target_line and target_line.startswith("  met")
 
