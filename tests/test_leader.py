@@ -15,7 +15,9 @@ from so101.feetech.calibration import MOTOR_IDS, MotorCalibration, save_calibrat
 from so101.feetech.fake_arm import FakeArm, calibrate_as_at_the_factory
 from so101.leader.arm import LeaderFailed, SO101Leader
 from so101.leader.command import MOVED_DEG, Takeover, leader_command_deg, leader_values
-from tests.dataflow_helpers import PROMPT_COMMAND, DoraRun, body_environment, prompt_env, write_test_dataflow
+from tests.dataflow_helpers import (
+    PROMPT_COMMAND, DoraRun, body_environment, error_lines, prompt_env, run_so101, write_test_dataflow,
+)
 
 STEPS_PER_DEG = 4096 / 360
 
@@ -353,3 +355,17 @@ def test_teleop_refuses_a_leader_it_cannot_use_in_one_line_before_starting_anyth
     error = capsys.readouterr().err.strip()
     assert error.startswith("so101 teleop: " + message.format(tmp=tmp_path)) and len(error.splitlines()) == 1
     assert not log_file.exists()  # no dataflow was started
+
+
+@pytest_dataflow
+def test_teleop_with_no_leader_on_the_port_says_so_in_one_line(tmp_path):
+    """The leader node refuses before it joins; dora then fails the other nodes with backtraces, and
+    teleop shows the node's one line, not those."""
+    with FakeArm() as arm:
+        save_calibration(tmp_path / "leader.json", calibrate_as_at_the_factory(arm))
+    result = run_so101("teleop", "--leader", "/dev/pts/nonexistent", "--leader-calibration", str(tmp_path / "leader.json"),
+                       "--mode", "direct", "--lang", "en", "--log", str(tmp_path / "dora.log"))
+    assert result.returncode == 1
+    (line,) = error_lines(result.stderr)
+    assert line.startswith("so101 teleop: [leader] cannot start: cannot open the serial port /dev/pts/nonexistent: ")
+    assert line.endswith(f"({tmp_path / 'dora.log'})")

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -136,6 +137,19 @@ def _log_tail(log: Path) -> str:
     except OSError:
         return ""
     return "\n".join("  " + line for line in lines[-LOG_TAIL_LINES:])
+
+
+# A node's one-line refusal to start (so101.bodies.node_loop.cannot_start), as dora's log carries it.
+_REFUSAL = re.compile(r"(\[\w+\] cannot start: .*?)\s*$", re.MULTILINE)
+
+
+def _refusal(log: Path) -> str | None:
+    """The first node's refusal to start in the dataflow's log, if one refused."""
+    try:
+        match = _REFUSAL.search(log.read_text(encoding="utf-8", errors="replace"))
+    except OSError:
+        return None
+    return match.group(1) if match else None
 
 
 class Dataflow:
@@ -314,6 +328,10 @@ def _run_node(dataflow: Dataflow, node_file: Path, env: dict[str, str], text: di
     prompt = None
     try:
         ready = dataflow.wait_ready(START_TIMEOUT_S)
+        refusal = _refusal(log) if ready is False else None
+        if refusal:  # a node said why in one line: that line, not dora's backtraces of the others
+            print(f"so101 teleop: {refusal} ({log})", file=sys.stderr, flush=True)
+            return 1
         if not ready:
             message = (text["exited"].format(code=dataflow.process.returncode, log=log) if ready is False
                        else text["timeout"].format(seconds=START_TIMEOUT_S, log=log))
