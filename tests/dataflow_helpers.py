@@ -143,15 +143,19 @@ def unused_display() -> str:
 
 
 def write_test_dataflow(tmp_path: Path, sim_env: dict[str, str] | None = None, record_file: Path | None = None,
-                        body: str = "pybullet", leader_env: dict[str, str] | None = None) -> Path:
+                        body: str = "pybullet", leader_env: dict[str, str] | None = None,
+                        web_env: dict[str, str] | None = None) -> Path:
     """A body's dataflow file (dataflow.yml by default) with absolute node paths, the simulation
-    forced headless, optionally the leader node driving it (`leader_env`: its settings) and a recorder node."""
+    forced headless, optionally the leader node driving it (`leader_env`: its settings), the web
+    view (`web_env`) and a recorder node."""
     from so101.bodies.registry import BODIES
-    from so101.runtime.dataflow import with_leader
+    from so101.runtime.dataflow import with_leader, with_web_view
 
     descriptor = dataflow_copy({"SO101_MODE": "direct", **(sim_env or {})}, BODIES[body].dataflow_file)
     if leader_env is not None:
         with_leader(descriptor, BODIES[body].node_id, leader_env)
+    if web_env is not None:
+        with_web_view(descriptor, BODIES[body].node_id, web_env)
     if record_file is not None:
         descriptor["nodes"].append(
             {

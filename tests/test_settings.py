@@ -146,6 +146,7 @@ OTHER_NODES = {
     "### camera (`nodes/camera.py`)": "so101.dataset.settings:CameraSettings",
     "### replay (`nodes/replay.py`)": "so101.dataset.settings:ReplaySettings",
     "### leader (`nodes/leader_node.py`)": "so101.leader.settings:LeaderSettings",
+    "### web_view (`nodes/web_view.py`)": "so101.web.settings:WebViewSettings",
 }
 
 

@@ -35,9 +35,11 @@ from pathlib import Path
 from so101.bodies.registry import BODIES, DEFAULT_BODY, BodyKind, body_node_env
 from so101.dataset.features import DEFAULT_FPS
 from so101.runtime.dataflow import (
-    LEADER_READY_MARKS, LOADED_MARKS, PROMPT_NODE_FILE, ROOT, dataflow_copy, with_leader, with_recorder, write_dataflow,
+    LEADER_READY_MARKS, LOADED_MARKS, PROMPT_NODE_FILE, ROOT, WEB_VIEW_MARKS, dataflow_copy, with_leader, with_recorder,
+    with_web_view, write_dataflow,
 )
 from so101.gui.display import MODES, resolve_mode
+from so101.web.settings import DEFAULT_HOST as DEFAULT_WEB_HOST, DEFAULT_PORT as DEFAULT_WEB_PORT
 from so101.runtime.processes import alive, descendants, kill_until_gone, stop_process
 from so101.cli.argtypes import add_language_option, whole_number
 from so101.runtime.venv import dora_executable, env_with_bin_first
@@ -97,6 +99,15 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
         "--leader-calibration", type=Path, metavar="FILE", default=None,
         help="--leader: the leader's calibration JSON (from `so101 calibrate --leader`, or LeRobot's so101_leader one)",
     )
+    parser.add_argument(
+        "--web", action="store_true",
+        help="show the arm in a browser too (for a machine with no display): prints the page's address",
+    )
+    parser.add_argument("--web-port", type=whole_number(1, 65535), default=DEFAULT_WEB_PORT, metavar="P",
+                        help=f"--web: the page's port (default {DEFAULT_WEB_PORT})")
+    parser.add_argument("--web-host", default=DEFAULT_WEB_HOST, metavar="ADDRESS",
+                        help=f"--web: the address to serve on (default {DEFAULT_WEB_HOST}, this machine only; "
+                        "0.0.0.0 serves every network this machine is on)")
     add_log_option(parser)
 
 
@@ -248,20 +259,28 @@ def run(args: argparse.Namespace) -> int:
         if problem:
             print(f"so101 teleop: {problem}", file=sys.stderr)
             return 2
+    if args.web:
+        if args.web_host not in ("127.0.0.1", "localhost", "::1"):
+            print(f"so101 teleop: the web view serves on {args.web_host}: anyone who can reach port {args.web_port} "
+                  "there sees the arm", flush=True)
+        with_web_view(descriptor, launch.body.node_id, {"SO101_WEB_HOST": args.web_host, "SO101_WEB_PORT": str(args.web_port)})
+        ready_marks += (WEB_VIEW_MARKS,)
     print(text["starting"].format(mode=launch.mode, log=launch.log), flush=True)
-    return run_beside(launch, descriptor, PROMPT_NODE_FILE, text, ready_marks)
+    web_line = f"web view: http://{args.web_host}:{args.web_port}/" if args.web else ""
+    return run_beside(launch, descriptor, PROMPT_NODE_FILE, text, ready_marks, web_line)
 
 
 def run_beside(launch: Launch, descriptor: dict, node_file: Path, text: dict[str, str],
-               ready_marks: tuple[tuple[str, ...], ...] = (LOADED_MARKS,)) -> int:
+               ready_marks: tuple[tuple[str, ...], ...] = (LOADED_MARKS,), also_say: str = "") -> int:
     """`dora run` of `descriptor` in the background, then `node_file` (a dynamic node) in the
     foreground once the log has one line of each of `ready_marks` (the body's, the leader's); the
-    dataflow stops when that node exits. Returns its exit code."""
+    dataflow stops when that node exits; `also_say` is printed once it is ready. Returns its exit code."""
     with tempfile.TemporaryDirectory(prefix="so101-teleop-") as work_dir:
         copy = write_dataflow(descriptor, Path(work_dir) / "dataflow.yml")
         dataflow = Dataflow(copy, launch.log, launch.env, ready_marks)
-        ready_line = "ready_leader" if len(ready_marks) > 1 else "ready" if launch.body.simulated else "ready_real"
-        return _run_node(dataflow, node_file, launch.env, text, launch.log, ready_line)
+        ready_line = ("ready_leader" if LEADER_READY_MARKS in ready_marks else "ready" if launch.body.simulated
+                      else "ready_real")
+        return _run_node(dataflow, node_file, launch.env, text, launch.log, ready_line, also_say)
 
 
 def add_leader(descriptor: dict, body: BodyKind, port: str | None, calibration_file: Path | None,
@@ -321,7 +340,8 @@ def _show(line: str) -> None:
         pass
 
 
-def _run_node(dataflow: Dataflow, node_file: Path, env: dict[str, str], text: dict, log: Path, ready_line: str) -> int:
+def _run_node(dataflow: Dataflow, node_file: Path, env: dict[str, str], text: dict, log: Path, ready_line: str,
+              also_say: str = "") -> int:
     # dora runs in a session of its own and gets no hang-up from the terminal: teleop must stop it.
     signal.signal(signal.SIGHUP, _hang_up)
     signal.signal(signal.SIGTERM, _hang_up)
@@ -338,6 +358,7 @@ def _run_node(dataflow: Dataflow, node_file: Path, env: dict[str, str], text: di
             print(f"so101 teleop: {message}\n{_log_tail(log)}", file=sys.stderr, flush=True)
             return 1
         _show(text[ready_line])
+        _show(also_say)
         prompt = subprocess.Popen([sys.executable, str(node_file)], env=env)
         # Ctrl-C at the terminal goes to the whole foreground group: the prompt quits on it,
         # teleop must outlive it to stop the dataflow.

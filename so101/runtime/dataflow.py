@@ -20,6 +20,10 @@ LEADER_NODE_FILE = ROOT / "nodes" / "leader_node.py"
 LEADER_NODE_ID = "leader"
 LEADER_DATAFLOW_FILE = ROOT / "dataflow_leader.yml"
 LEADER_TICK = "dora/timer/millis/10"
+# `so101 teleop --web` adds the web view; its "serving" line, as nodes/web_view.py prints it.
+WEB_VIEW_NODE_FILE = ROOT / "nodes" / "web_view.py"
+WEB_VIEW_NODE_ID = "web_view"
+WEB_VIEW_MARKS = ("web view: http://",)
 # The recorder samples at its frame rate by its own clock, woken this often (the frame's jitter).
 RECORDER_TICK = "dora/timer/millis/5"
 # The period of dataflow.yml's `dora/timer/millis/4` tick, and so of the physics step
@@ -186,6 +190,22 @@ def with_leader(descriptor: dict, body_node_id: str, leader_env: dict[str, str],
     }
     # Beside the prompt, before the body, as dataflow_leader.yml has it.
     descriptor["nodes"].insert(descriptor["nodes"].index(body), leader)
+    return descriptor
+
+
+def with_web_view(descriptor: dict, body_node_id: str, web_env: dict[str, str], root: PurePath = ROOT) -> dict:
+    """A dataflow (dataflow_copy's dict) with the web view added: it reads the body's state and, where the
+    dataflow has the camera node, its pictures."""
+    inputs = {
+        "joint_state": _queued(f"{body_node_id}/joint_state", STATE_QUEUE),
+        "gripper_state": _queued(f"{body_node_id}/gripper_state", STATE_QUEUE),
+    }
+    if any(node["id"] == "camera" for node in descriptor["nodes"]):
+        inputs["image"] = _queued("camera/image", TICK_QUEUE)
+    descriptor["nodes"].append({
+        "id": WEB_VIEW_NODE_ID, "path": str(root / WEB_VIEW_NODE_FILE.relative_to(ROOT)), "restart_policy": "never",
+        "inputs": inputs, "env": web_env,
+    })
     return descriptor
 
 

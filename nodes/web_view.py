@@ -1,0 +1,91 @@
+"""web_view: the arm in a browser, for machines with no display (SSH, WSL, a container, a cluster's arm).
+
+Serves a page (so101/web/view.py, with viser) showing the SO-101 from the URDF's meshes, posed
+by the body's `joint_state` and `gripper_state`, with the angles as text and a rolling plot; the
+body's `image` where the dataflow has one. It redraws at most REDRAW_HZ times a second, whatever
+the body's rate, and runs below the body's priority: a browser closing, reloading or stalling
+costs the body nothing. Read-only: the page sends nothing into the dataflow.
+Settings: so101.web.settings.WebViewSettings (SO101_WEB_HOST, SO101_WEB_PORT).
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+import numpy as np  # noqa: E402
+from dora import Node  # noqa: E402
+
+from so101.assets import ModelFilesError, urdf_path  # noqa: E402
+from so101.bodies.node_loop import announce, cannot_start  # noqa: E402
+from so101.robot import NUM_ARM_JOINTS  # noqa: E402
+from so101.runtime.logs import send_diagnostics_to  # noqa: E402
+from so101.runtime.processes import yield_cpu_to_the_body  # noqa: E402
+from so101.web.settings import WebViewSettings  # noqa: E402
+from so101.web.urdf_scene import load_urdf_scene  # noqa: E402
+from so101.web.view import WebView  # noqa: E402
+
+NODE_ID = "web_view"
+# A browser's screen refreshes 60 times a second: more poses than that are never seen.
+REDRAW_HZ = 60.0
+# The line `so101 teleop --web` waits for and prints.
+SERVING_MARK = "web view: http://"
+
+
+def main() -> int:
+    send_diagnostics_to("stdout")
+    try:
+        settings = WebViewSettings.from_environ(os.environ)
+        scene = load_urdf_scene(urdf_path(settings.assets_dir))
+    except (ValueError, ModelFilesError) as error:
+        return cannot_start(error, NODE_ID)
+    yield_cpu_to_the_body()
+    try:
+        view = WebView(scene, settings.host, settings.port)
+    except OSError as error:  # the port is taken, or the address is not this machine's
+        return cannot_start(OSError(f"cannot serve on {settings.host}:{settings.port}: {error.strerror or error}"), NODE_ID)
+    announce(f"{SERVING_MARK}{settings.host}:{settings.port}/")
+    arm_deg: tuple[float, ...] | None = None
+    gripper_deg = 0.0
+    shown_at = 0.0
+    try:
+        for event in Node():
+            if event["type"] == "INPUT":
+                if event["id"] == "joint_state":
+                    values = event["value"].to_pylist()
+                    if len(values) == NUM_ARM_JOINTS:
+                        arm_deg = tuple(float(angle) for angle in values)
+                elif event["id"] == "gripper_state":
+                    values = event["value"].to_pylist()
+                    if len(values) == 1:
+                        gripper_deg = float(values[0])
+                elif event["id"] == "image":
+                    metadata = event.get("metadata") or {}
+                    width, height = int(metadata.get("width", 0)), int(metadata.get("height", 0))
+                    pixels = event["value"].to_numpy(zero_copy_only=False)
+                    if width * height * 3 == len(pixels):
+                        view.show_picture(np.asarray(pixels, dtype=np.uint8).reshape(height, width, 3))
+                    continue
+                else:
+                    continue
+                now = time.monotonic()
+                if arm_deg is not None and now - shown_at >= 1.0 / REDRAW_HZ:
+                    view.show(arm_deg + (gripper_deg,))
+                    shown_at = now
+            elif event["type"] == "STOP":
+                break
+    except KeyboardInterrupt:
+        pass
+    finally:
+        view.close()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,29 @@
+"""The web view node's settings (nodes/web_view.py), declared as so101/runtime/settings.py says."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Mapping
+
+from so101.assets import ASSETS_ENV_VAR
+from so101.runtime.settings import EnvironSettings, Setting, read_optional_path, read_stripped_text, setting
+
+DEFAULT_HOST = "127.0.0.1"  # this machine only: anyone who can reach the port sees the arm
+DEFAULT_PORT = 8101
+
+
+def read_port(environ: Mapping[str, str], declared_setting: Setting) -> int:
+    text = declared_setting.raw(environ).strip()
+    if not text.isdigit() or not 1 <= int(text) <= 65535:
+        raise ValueError(f"{declared_setting.env_var}={text!r}: expected a TCP port, a whole number from 1 to 65535")
+    return int(text)
+
+
+@dataclass(frozen=True)
+class WebViewSettings(EnvironSettings):
+    host: str = setting("SO101_WEB_HOST", DEFAULT_HOST,
+                        "the address the page is served on; 127.0.0.1 = this machine only", read_stripped_text)
+    port: int = setting("SO101_WEB_PORT", str(DEFAULT_PORT), "the page's TCP port", read_port)
+    assets_dir: Path | None = setting(
+        ASSETS_ENV_VAR, "", "where the model is; empty = where `so101 assets` puts it", read_optional_path)

@@ -1,0 +1,121 @@
+"""The arm in a browser: a viser server showing the URDF's meshes, posed by the joint angles it is given.
+
+One frame per joint, nested as the URDF's tree (so101/web/urdf_scene.py), so a new pose is one
+rotation per joint sent to every open page, and each browser works out the rest. The page has
+viser's own orbit (drag), pan (right drag) and zoom (wheel); a panel with the joint angles as
+text, a rolling plot of the last seconds, the body's camera picture when it has one, and a
+marker while an episode records. viser serves its page from its installed package and the
+meshes from the model files: nothing comes from the internet. Read-only: the page has no control
+that sends anything to the arm.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+from typing import Sequence
+
+import numpy as np
+import numpy.typing as npt
+import trimesh
+import viser
+from viser import uplot
+
+from so101.robot import ACTUATED_JOINTS
+from so101.web.urdf_scene import UrdfScene
+
+# The rolling plot: this many seconds, one point per redraw.
+PLOT_SECONDS = 10.0
+ANGLE_TEXT_TITLE = "**Joint angles**"
+# The plot's line colours, one per joint.
+PLOT_COLOURS = ("#e6194b", "#3cb44b", "#4363d8", "#f58231", "#911eb4", "#42d4f4")
+CAMERA_POSITION = (0.55, -0.45, 0.40)
+CAMERA_LOOK_AT = (0.10, 0.0, 0.15)
+
+
+def angles_markdown(angles_deg: Sequence[float]) -> str:
+    """The joint angles as the page shows them, one line per joint (a test reads them back)."""
+    rows = [f"{joint.name}: {angle:.1f}°" for joint, angle in zip(ACTUATED_JOINTS, angles_deg)]
+    return ANGLE_TEXT_TITLE + "\n\n" + "  \n".join(rows)
+
+
+class WebView:
+    """A viser server on host:port showing `scene`; `show(angles_deg)` poses the arm. `close()` is safe twice."""
+
+    def __init__(self, scene: UrdfScene, host: str, port: int):
+        self.scene = scene
+        self.server: viser.ViserServer | None = viser.ViserServer(host=host, port=port, verbose=False)
+        server = self.server
+        server.scene.set_up_direction("+z")
+        # In front of the arm, a little to its right and above (metres, the URDF's frame: x forward, z up).
+        server.initial_camera.position = CAMERA_POSITION
+        server.initial_camera.look_at = CAMERA_LOOK_AT
+        server.scene.add_grid("/ground", width=0.6, height=0.6, cell_size=0.05)
+        server.scene.add_frame(scene.link_path(scene.root_link), show_axes=False)
+        self._joints = {joint.name: joint for joint in scene.joints}
+        self._joint_frames = {}
+        for joint in scene.joints:
+            self._joint_frames[joint.name] = server.scene.add_frame(
+                scene.link_path(joint.child), show_axes=False, position=joint.xyz, wxyz=joint.rotation(0.0))
+        for number, visual in enumerate(scene.visuals):
+            mesh = trimesh.load_mesh(visual.mesh_file)
+            red, green, blue = (round(component * 255) for component in visual.rgba[:3])
+            server.scene.add_mesh_simple(
+                f"{scene.link_path(visual.link)}/visual_{number}", np.asarray(mesh.vertices, dtype=np.float32),
+                np.asarray(mesh.faces, dtype=np.uint32), color=(red, green, blue), position=visual.xyz, wxyz=visual.wxyz)
+        self._recording = server.gui.add_markdown("")
+        self._angles = server.gui.add_markdown(angles_markdown([0.0] * len(ACTUATED_JOINTS)))
+        self._started = time.monotonic()
+        self._history: deque[tuple[float, tuple[float, ...]]] = deque()
+        self._plot = server.gui.add_uplot(
+            data=self._plot_data(), title=f"the last {PLOT_SECONDS:g} s (degrees)", aspect=1.6,
+            scales={"x": uplot.Scale(time=False)},
+            series=(uplot.Series(label="s"), *(uplot.Series(label=joint.name, stroke=colour, width=1.5)
+                                               for joint, colour in zip(ACTUATED_JOINTS, PLOT_COLOURS))),
+        )
+        self._picture: viser.GuiImageHandle | None = None
+
+    def _plot_data(self) -> tuple[npt.NDArray[np.float64], ...]:
+        if not self._history:
+            return (np.zeros(1),) + tuple(np.zeros(1) for _ in ACTUATED_JOINTS)
+        times = np.array([t for t, _ in self._history])
+        angles = np.array([a for _, a in self._history])
+        return (times, *(angles[:, column] for column in range(angles.shape[1])))
+
+    def show(self, angles_deg: Sequence[float]) -> None:
+        """The arm posed at six angles in degrees (five arm joints, the gripper)."""
+        server = self.server
+        if server is None:
+            return
+        now = time.monotonic() - self._started
+        self._history.append((now, tuple(float(a) for a in angles_deg)))
+        while self._history and self._history[0][0] < now - PLOT_SECONDS:
+            self._history.popleft()
+        with server.atomic():
+            for joint, angle in zip(ACTUATED_JOINTS, angles_deg):
+                self._joint_frames[joint.name].wxyz = self._joints[joint.name].rotation(np.radians(angle))
+            self._angles.content = angles_markdown(angles_deg)
+            self._plot.data = self._plot_data()
+
+    def show_picture(self, rgb: npt.NDArray[np.uint8]) -> None:
+        """The body's camera picture, under the plot (added on the first one)."""
+        if self.server is None:
+            return
+        if self._picture is None:
+            self._picture = self.server.gui.add_image(rgb, label="camera")
+        else:
+            self._picture.image = rgb
+
+    def show_recording(self, text: str) -> None:
+        """A marker while an episode records ("" hides it)."""
+        if self.server is not None:
+            self._recording.content = f"**● {text}**" if text else ""
+
+    def clients(self) -> int:
+        return len(self.server.get_clients()) if self.server is not None else 0
+
+    def close(self) -> None:
+        server, self.server = self.server, None
+        if server is not None:
+            server.stop()
+

@@ -1,0 +1,56 @@
+"""The URDF as nested frames (so101/web/urdf_scene.py) against PyBullet's own forward kinematics."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pybullet
+import pytest
+
+from so101.assets import urdf_path
+from so101.robot import ACTUATED_JOINTS
+from so101.web.urdf_scene import axis_angle, load_urdf_scene, multiply, rotate, rpy
+
+pytestmark = pytest.mark.slow
+
+
+def test_quaternions_by_hand():
+    quarter = axis_angle((0, 0, 1), math.pi / 2)
+    assert rotate(quarter, (1.0, 0.0, 0.0)) == pytest.approx((0.0, 1.0, 0.0))
+    # URDF's rpy: roll about x first, then yaw about the parent's z.
+    assert rotate(rpy(math.pi / 2, 0, math.pi / 2), (0.0, 1.0, 0.0)) == pytest.approx((0.0, 0.0, 1.0))
+    assert multiply(quarter, quarter) == pytest.approx(axis_angle((0, 0, 1), math.pi))
+
+
+@pytest.fixture(scope="module")
+def arm():
+    client = pybullet.connect(pybullet.DIRECT)
+    robot = pybullet.loadURDF(str(urdf_path()), useFixedBase=True, physicsClientId=client)
+    yield client, robot
+    pybullet.disconnect(client)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_every_link_frame_matches_pybullets(arm, seed):
+    client, robot = arm
+    scene = load_urdf_scene(urdf_path())
+    rng = np.random.default_rng(seed)
+    angles = {joint.name: float(rng.uniform(joint.lower_deg, joint.upper_deg)) for joint in ACTUATED_JOINTS}
+    for joint in ACTUATED_JOINTS:
+        pybullet.resetJointState(robot, joint.index, math.radians(angles[joint.name]), physicsClientId=client)
+    poses = scene.link_poses({name: math.radians(angle) for name, angle in angles.items()})
+    for index in range(pybullet.getNumJoints(robot, physicsClientId=client)):
+        link = pybullet.getJointInfo(robot, index, physicsClientId=client)[12].decode()
+        state = pybullet.getLinkState(robot, index, computeForwardKinematics=True, physicsClientId=client)
+        position, (x, y, z, w) = state[4], state[5]
+        ours_position, ours_rotation = poses[link]
+        assert ours_position == pytest.approx(position, abs=1e-6), link
+        same = np.isclose(ours_rotation, (w, x, y, z), atol=1e-6).all() or np.isclose(ours_rotation, (-w, -x, -y, -z), atol=1e-6).all()
+        assert same, (link, ours_rotation, (w, x, y, z))
+
+
+def test_the_scene_has_every_visual_mesh_and_names_frames_by_joint():
+    scene = load_urdf_scene(urdf_path())
+    assert len(scene.visuals) == 17 and all(visual.mesh_file.is_file() for visual in scene.visuals)
+    assert scene.link_path("gripper_link") == "/arm/base_link/shoulder_pan/shoulder_lift/elbow_flex/wrist_flex/wrist_roll"
