@@ -28,12 +28,13 @@ from so101.feetech.calibration import (
     homing_offset,
     save_calibration,
 )
-from so101.feetech.bus import BusError, FeetechBus
+from so101.feetech.bus import BusError, FeetechBus, ServoSilent
 from so101.feetech.checks import check_servos_answer
 from so101.feetech.sts3215 import MAX_STEP, SIGN_BITS, STEPS_PER_TURN, encode_signed
 
 FULL_TURN_JOINT = "wrist_roll"
 POLL_S = 0.01  # how often positions are read while the person moves the joints
+WRITE_TRIES = 3
 
 
 def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
@@ -74,8 +75,16 @@ class _Lines:
 
 
 def _write_eeprom(bus: FeetechBus, name: str, values: dict[int, int]) -> None:
+    """Each write acknowledged, each tried up to WRITE_TRIES times: one lost reply must not end a
+    calibration (writing the same value again is harmless)."""
     for servo_id, value in values.items():
-        bus.write(servo_id, name, value)
+        for attempt in range(WRITE_TRIES):
+            try:
+                bus.write(servo_id, name, value)
+                break
+            except ServoSilent:
+                if attempt == WRITE_TRIES - 1:
+                    raise
 
 
 def calibrate(bus: FeetechBus) -> dict[str, MotorCalibration] | None:
@@ -105,7 +114,11 @@ def calibrate(bus: FeetechBus) -> dict[str, MotorCalibration] | None:
     shown = [""]
 
     def record() -> None:
-        present = bus.sync_read("Present_Position", MOTOR_IDS)
+        try:
+            present = bus.sync_read("Present_Position", MOTOR_IDS)
+        except ServoSilent:
+            return  # this poll is lost; the next one, 10 ms later, reads the same joints
+
         for servo_id, position in present.items():
             low[servo_id] = min(low[servo_id], position)
             high[servo_id] = max(high[servo_id], position)
