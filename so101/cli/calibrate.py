@@ -118,7 +118,6 @@ def calibrate(bus: FeetechBus) -> dict[str, MotorCalibration] | None:
             present = bus.sync_read("Present_Position", MOTOR_IDS)
         except ServoSilent:
             return  # this poll is lost; the next one, 10 ms later, reads the same joints
-
         for servo_id, position in present.items():
             low[servo_id] = min(low[servo_id], position)
             high[servo_id] = max(high[servo_id], position)
