@@ -41,7 +41,7 @@ def yellow(pixels: np.ndarray) -> np.ndarray:
     return (red > 150) & (green > 110) & (blue < 120) & (red - blue > 100)
 
 
-def the_arm_drawn(browser: Browser, path, timeout_s: float = 30) -> np.ndarray:
+def the_arm_drawn(browser: Browser, path, timeout_s: float = 90) -> np.ndarray:
     """The scene once the arm is drawn in full (viser fades new meshes in)."""
     deadline = time.monotonic() + timeout_s
     while True:

@@ -3,10 +3,9 @@
 One frame per joint, nested as the URDF's tree (so101/web/urdf_scene.py), so a new pose is one
 rotation per joint sent to every open page, and each browser works out the rest. The page has
 viser's own orbit (drag), pan (right drag) and zoom (wheel); a panel with the joint angles as
-text, a rolling plot of the last seconds, the body's camera picture when it has one, and a
-marker while an episode records. viser serves its page from its installed package and the
-meshes from the model files: nothing comes from the internet. Read-only: the page has no control
-that sends anything to the arm.
+text, a rolling plot of the last seconds, and the body's camera picture when it has one. viser
+serves its page from its installed package and the meshes from the model files: nothing comes
+from the internet. Read-only: the page has no control that sends anything to the arm.
 """
 
 from __future__ import annotations
@@ -63,7 +62,6 @@ class WebView:
             server.scene.add_mesh_simple(
                 f"{scene.link_path(visual.link)}/visual_{number}", np.asarray(mesh.vertices, dtype=np.float32),
                 np.asarray(mesh.faces, dtype=np.uint32), color=(red, green, blue), position=visual.xyz, wxyz=visual.wxyz)
-        self._recording = server.gui.add_markdown("")
         self._angles = server.gui.add_markdown(angles_markdown([0.0] * len(ACTUATED_JOINTS)))
         self._started = time.monotonic()
         self._history: deque[tuple[float, tuple[float, ...]]] = deque()
@@ -105,14 +103,6 @@ class WebView:
             self._picture = self.server.gui.add_image(rgb, label="camera")
         else:
             self._picture.image = rgb
-
-    def show_recording(self, text: str) -> None:
-        """A marker while an episode records ("" hides it)."""
-        if self.server is not None:
-            self._recording.content = f"**● {text}**" if text else ""
-
-    def clients(self) -> int:
-        return len(self.server.get_clients()) if self.server is not None else 0
 
     def close(self) -> None:
         server, self.server = self.server, None
