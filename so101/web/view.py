@@ -42,7 +42,6 @@ class WebView:
     """A viser server on host:port showing `scene`; `show(angles_deg)` poses the arm. `close()` is safe twice."""
 
     def __init__(self, scene: UrdfScene, host: str, port: int):
-        self.scene = scene
         self.server: viser.ViserServer | None = viser.ViserServer(host=host, port=port, verbose=False)
         server = self.server
         server.scene.set_up_direction("+z")
