@@ -20,7 +20,9 @@ One run on one machine measures:
   11. recording (bench/record_bench.py): a picture's cost, pictures drawn inside the loop, the
      body while `so101 teleop --record`'s dataflow records an episode with video, and saving one;
   12. the leader arm (bench/leader_bench.py): the emulated leader moved by hand -> the first
-     joint_state that shows it, through `so101 teleop --leader`'s dataflow.
+     joint_state that shows it, through `so101 teleop --leader`'s dataflow;
+  13. the web view (bench/web_bench.py): the body with five viewers on `so101 teleop --web`'s
+     page, viewers elsewhere and browsers on this machine (`--web`: this alone).
 It prints a table and writes the figures, the targets and the machine to a JSON file.
 Timings are wall-clock on a shared machine: the load average is recorded with them.
 """
@@ -53,7 +55,8 @@ from so101.stats import summary  # noqa: E402
 
 DEFAULT_OUT = {"pybullet": ROOT / "bench" / "results" / "latest.json", "mujoco": ROOT / "bench" / "results" / "latest-mujoco.json",
                "real": ROOT / "bench" / "results" / "latest-real.json",
-               "cluster": ROOT / "bench" / "results" / "latest-cluster.json"}
+               "cluster": ROOT / "bench" / "results" / "latest-cluster.json",
+               "web": ROOT / "bench" / "results" / "latest-web.json"}
 # The engine's own call for one 4 ms tick, as the table names it.
 RAW_STEP_LABEL = {"pybullet": "raw stepSimulation, DIRECT", "mujoco": "raw mj_step x 2 (one 4 ms tick)"}
 
@@ -120,6 +123,10 @@ def target_rows(figures: dict, body: str = "pybullet") -> list[dict]:
         from bench import leader_bench
 
         rows.append(leader_bench.target(leader, TARGETS["leader_latency_p99_ms"], body))
+    if "web" in figures:
+        from bench import web_bench
+
+        rows += web_bench.targets(figures["web"], TARGETS["joint_state_per_s"], TARGETS["sim_over_wall_error"])
     best = max(figures["fast_mode"]["runs"], key=lambda run: run["ratio_to_raw"])
     row(f"fast mode steps/s / raw (SO101_FAST_STEPS={best['steps_per_state']})", best["ratio_to_raw"],
         f">= {TARGETS['fast_ratio']}", best["ratio_to_raw"] >= TARGETS["fast_ratio"])
@@ -299,6 +306,9 @@ def run_benchmark(duration_s: float, fast_s: float, fast_steps: list[int], raw_s
         from bench import leader_bench
 
         figures["leader"] = leader_bench.run_leader_benchmark(work_dir, duration_s, body, {"SO101_FAST_STEPS": "0"})
+        from bench import web_bench
+
+        figures["web"] = web_bench.run_web_benchmark(work_dir, duration_s, body)
         runs = []
         for steps in fast_steps:
             print(f"dora run, fast mode SO101_FAST_STEPS={steps}, {fast_s:g} s ...", flush=True)
@@ -331,6 +341,29 @@ def run_benchmark(duration_s: float, fast_s: float, fast_steps: list[int], raw_s
                      "fast_steps_per_state": fast_steps, "saved_episode_s": saved_episode_s},
         **figures,
     }
+
+
+def run_web_only(duration_s: float, body: str) -> dict:
+    """`--web`: the web view's runs alone."""
+    from bench import web_bench
+
+    if body == "real":
+        raise RuntimeError("--web measures a simulation: --body pybullet or mujoco")
+    load_start = os.getloadavg()
+    with tempfile.TemporaryDirectory(prefix="so101-bench-") as tmp:
+        web = web_bench.run_web_benchmark(Path(tmp), duration_s, body)
+    return {"body": body, "only": "web", "machine": machine_facts(),
+            "load_average_1_5_15min": {"start": list(load_start), "end": list(os.getloadavg())},
+            "settings": {"duration_s": duration_s}, "web": web,
+            "targets": web_bench.targets(web, TARGETS["joint_state_per_s"], TARGETS["sim_over_wall_error"])}
+
+
+def web_table(result: dict) -> str:
+    from bench import web_bench
+
+    machine = result["machine"]
+    return "\n".join([f"SO-101 web view benchmark ({result['body']}), {machine['date']}", machine_line(result), "",
+                      *web_bench.table_lines(result["web"]), "", *target_lines(result["targets"])])
 
 
 def table(result: dict) -> str:
@@ -375,6 +408,10 @@ def table(result: dict) -> str:
         from bench import leader_bench
 
         lines += leader_bench.table_lines(result["leader"])
+    if "web" in result:  # results from before the web view have no web rows
+        from bench import web_bench
+
+        lines += web_bench.table_lines(result["web"])
     for run in result["fast_mode"]["runs"]:
         label = f"fast mode, SO101_FAST_STEPS={run['steps_per_state']} (steps/s, x raw)"
         lines.append(f"{label:<52} {run['steps_per_s']:>10.0f} | {run['ratio_to_raw']:<9.2f}")
@@ -408,6 +445,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--cluster", action="store_true",
                         help="measure the simulation across two dora daemons on 127.0.0.1 (dataflow_cluster.yml), next "
                         "to one daemon: joint_state rate and command latency")
+    parser.add_argument("--web", action="store_true",
+                        help="measure only the web view: the body with five viewers on `so101 teleop --web`'s page, "
+                        "then five browsers, --duration seconds each (600 shows whether its memory grows)")
     parser.add_argument("--out", type=Path, default=None,
                         help="JSON file to write (default " + ", ".join(f"{path.relative_to(ROOT)} for {body}" for body, path in DEFAULT_OUT.items()) + ")")
     parser.add_argument("--quick", action="store_true",
@@ -429,11 +469,11 @@ def run(args: argparse.Namespace) -> int:
     # serial bus, the fake arm and the cluster (about 0.1 s of imports) that only a run needs.
     from bench import cluster_bench, real_bench
 
-    tables = {"real": real_bench.table, "cluster": cluster_bench.table}
+    tables = {"real": real_bench.table, "cluster": cluster_bench.table, "web": web_table}
     if args.show is not None:
         try:
             shown = json.loads(args.show.read_text(encoding="utf-8"))
-            print(tables.get(shown.get("body"), table)(shown))
+            print(tables.get(shown.get("only", shown.get("body")), table)(shown))
         except OSError as error:
             print(f"so101 bench: cannot read {args.show}: {error.strerror or error}", file=sys.stderr)
             return 2
@@ -446,10 +486,12 @@ def run(args: argparse.Namespace) -> int:
                         saved_episode_s=5.0)
     else:
         settings = dict(duration_s=args.duration, fast_s=5.0, fast_steps=[1, 10, 100], raw_steps=40000, node_ticks=10000, after_sleep_steps=1000)
-    kind = "cluster" if args.cluster else args.body
+    kind = "cluster" if args.cluster else "web" if args.web else args.body
     try:
         if args.cluster:
             result = cluster_bench.run_cluster_benchmark(settings["duration_s"])
+        elif args.web:
+            result = run_web_only(settings["duration_s"], args.body)
         elif args.body == "real":
             result = real_bench.run_real_benchmark(settings["duration_s"], exchanges=500 if args.quick else 3000)
         else:

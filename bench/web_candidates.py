@@ -48,6 +48,9 @@ import zlib
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:  # run as a script: the checkout holds `bench`
+    sys.path.insert(0, str(ROOT))
+from bench.browser import FLAGS as BROWSER_FLAGS  # noqa: E402  the tests' headless Chromium, unthrottled
 URDF = ROOT / "assets" / "SO101" / "so101_new_calib.urdf"
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser") or "chromium"
 VIEW = (960, 540)  # CSS pixels of the page, device scale 1
@@ -455,8 +458,7 @@ def launch_chromium(profile: Path) -> tuple[subprocess.Popen, Cdp]:
     shutil.rmtree(profile, ignore_errors=True)
     port = free_port()
     proc = subprocess.Popen([
-        CHROMIUM, "--headless=new", "--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
-        "--host-resolver-rules=MAP * ~NOTFOUND, EXCLUDE 127.0.0.1", f"--remote-debugging-port={port}",
+        CHROMIUM, *(flag for flag in BROWSER_FLAGS if not flag.startswith("--window-size=")), f"--remote-debugging-port={port}",
         f"--user-data-dir={profile}", f"--window-size={VIEW[0]},{VIEW[1]}", "--no-first-run",
         "--disable-background-networking", "--disable-component-update", "about:blank",
     ], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)

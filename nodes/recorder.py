@@ -4,7 +4,8 @@
 the dataset's rate, each with the latest `joint_state` + `gripper_state` (observation.state),
 `joint_target` (action: what the body was told) and `image` (the camera node's picture, stored
 as video); `record_cmd` messages from the prompt start, stop, discard and list episodes, and
-each gets its reply on `record_status`. Saving runs in the background. STOP saves an episode
+each gets its reply on `record_status`, whose metadata also says which episode is recording (the
+web view's marker). Saving runs in the background. STOP saves an episode
 still recording. What it does is so101/dataset/recording.py; the files, lerobot_v3.py there.
 Settings: so101.dataset.settings.RecorderSettings (SO101_RECORD_DIR, SO101_RECORD_FPS,
 SO101_RECORD_IMAGE_SIZE, SO101_LANG).
@@ -28,7 +29,7 @@ from dora import Node  # noqa: E402
 
 from so101.bodies.node_loop import cannot_start  # noqa: E402
 from so101.dataset.lerobot_v3 import DatasetError, DatasetWriter  # noqa: E402
-from so101.dataset.messages import decode_record_cmd  # noqa: E402
+from so101.dataset.messages import decode_record_cmd, recording_metadata  # noqa: E402
 from so101.dataset.recording import Recording  # noqa: E402
 from so101.dataset.settings import RecorderSettings  # noqa: E402
 from so101.runtime.logs import send_diagnostics_to  # noqa: E402
@@ -70,7 +71,8 @@ def main() -> int:
     def send_status(lines: list[str], reply_to: str | None = None) -> None:
         for line in lines:
             logger.info("[recorder] %s", line)
-        node.send_output("record_status", pa.array(["\n".join(lines)]), {"reply_to": reply_to or ""})
+        node.send_output("record_status", pa.array(["\n".join(lines)]),
+                         {"reply_to": reply_to or "", **recording_metadata(recording.recording_now())})
 
     logger.info("[recorder] %s: %d episodes, %d fps, %s", settings.root, len(writer.episodes), settings.fps,
                 f"video {settings.image_size[0]}x{settings.image_size[1]}" if settings.image_size else "no video")

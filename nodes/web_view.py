@@ -2,7 +2,8 @@
 
 Serves a page (so101/web/view.py, with viser) showing the SO-101 from the URDF's meshes, posed
 by the body's `joint_state` and `gripper_state`, with the angles as text and a rolling plot; the
-body's `image` where the dataflow has one. It redraws at most REDRAW_HZ times a second, whatever
+camera's `image` where the dataflow has one (`--record` on a simulation), and a marker while the
+recorder's `record_status` says an episode is recording. It redraws at most REDRAW_HZ times a second, whatever
 the body's rate, and runs below the body's priority: a browser closing, reloading or stalling
 costs the body nothing. Read-only: the page sends nothing into the dataflow.
 Settings: so101.web.settings.WebViewSettings (SO101_WEB_HOST, SO101_WEB_PORT).
@@ -24,18 +25,29 @@ from dora import Node  # noqa: E402
 
 from so101.assets import ModelFilesError, urdf_path  # noqa: E402
 from so101.bodies.node_loop import announce, cannot_start  # noqa: E402
+from so101.dataset.messages import recording_from_metadata  # noqa: E402
 from so101.robot import NUM_ARM_JOINTS  # noqa: E402
 from so101.runtime.logs import send_diagnostics_to  # noqa: E402
 from so101.runtime.processes import yield_cpu_to_the_body  # noqa: E402
-from so101.web.settings import WebViewSettings  # noqa: E402
+from so101.web.settings import WebViewSettings, page_address  # noqa: E402
 from so101.web.urdf_scene import load_urdf_scene  # noqa: E402
 from so101.web.view import WebView  # noqa: E402
 
 NODE_ID = "web_view"
 # A browser's screen refreshes 60 times a second: more poses than that are never seen.
 REDRAW_HZ = 60.0
-# The line `so101 teleop --web` waits for and prints.
-SERVING_MARK = "web view: http://"
+# Camera pictures sent to the page: enough to watch by, each one a JPEG per browser.
+PICTURE_HZ = 10.0
+
+
+def picture(event: dict) -> np.ndarray | None:
+    """The camera's `image` as (height, width, 3) uint8, or None if its size is not the metadata's."""
+    metadata = event.get("metadata") or {}
+    width, height = int(metadata.get("width", 0)), int(metadata.get("height", 0))
+    pixels = event["value"].to_numpy(zero_copy_only=False)
+    if width * height * 3 != len(pixels) or not width:
+        return None
+    return np.asarray(pixels, dtype=np.uint8).reshape(height, width, 3)
 
 
 def main() -> int:
@@ -50,10 +62,10 @@ def main() -> int:
         view = WebView(scene, settings.host, settings.port)
     except OSError as error:  # the port is taken, or the address is not this machine's
         return cannot_start(OSError(f"cannot serve on {settings.host}:{settings.port}: {error.strerror or error}"), NODE_ID)
-    announce(f"{SERVING_MARK}{settings.host}:{settings.port}/")
+    announce(f"web view: {page_address(settings.host, settings.port)}")
     arm_deg: tuple[float, ...] | None = None
     gripper_deg = 0.0
-    shown_at = 0.0
+    shown_at = picture_at = 0.0
     try:
         for event in Node():
             if event["type"] == "INPUT":
@@ -66,11 +78,13 @@ def main() -> int:
                     if len(values) == 1:
                         gripper_deg = float(values[0])
                 elif event["id"] == "image":
-                    metadata = event.get("metadata") or {}
-                    width, height = int(metadata.get("width", 0)), int(metadata.get("height", 0))
-                    pixels = event["value"].to_numpy(zero_copy_only=False)
-                    if width * height * 3 == len(pixels):
-                        view.show_picture(np.asarray(pixels, dtype=np.uint8).reshape(height, width, 3))
+                    now = time.monotonic()
+                    if now - picture_at >= 1.0 / PICTURE_HZ and (rgb := picture(event)) is not None:
+                        view.show_picture(rgb)
+                        picture_at = now
+                    continue
+                elif event["id"] == "record_status":
+                    view.show_recording(recording_from_metadata(event.get("metadata") or {}))
                     continue
                 else:
                     continue

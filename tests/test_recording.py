@@ -12,12 +12,13 @@ import pyarrow as pa
 import pytest
 
 from so101.dataset.features import MOTOR_NAMES, from_lerobot, to_lerobot
-from so101.dataset.messages import RecordCommand, decode_record_cmd, encode_record_cmd
+from so101.dataset.messages import (RecordCommand, decode_record_cmd, encode_record_cmd, recording_from_metadata,
+                                    recording_metadata)
 from so101.dataset.recording import FrameClock, Recording
 from so101.dataset.replay import ramp_deg, tracking_errors_deg, tracking_line
 from so101.prompt.commands import Episodes, ParseError, parse_command
 from so101.prompt.recorder_link import RecorderLink
-from so101.runtime.dataflow import DATAFLOW_FILE, dataflow_copy, with_recorder, with_replay
+from so101.runtime.dataflow import DATAFLOW_FILE, dataflow_copy, with_recorder, with_replay, with_web_view
 from tests.dataflow_helpers import TICK, TICK_TIMER_CONFIG, run_simulation_node
 
 
@@ -240,6 +241,23 @@ def test_stop_saves_an_episode_still_recording():
     assert len(writer.saved) == 1 and said[0] == "the dataflow stops: saving the unfinished episode 0"
 
 
+def test_the_status_metadata_says_which_episode_records():
+    rec, writer, clock, said = recording()
+    assert recording_from_metadata(recording_metadata(rec.recording_now())) is None
+    record_for(rec, clock, "put 方块 in", 0.2)
+    assert recording_from_metadata(recording_metadata(rec.recording_now())) == (0, "put 方块 in")
+    rec.command(RecordCommand("stop"))
+    assert rec.recording_now() is None
+    rec.command(RecordCommand("record", "wave"))
+    assert rec.recording_now() == (1, "wave")
+    rec.command(RecordCommand("discard"))
+    assert rec.recording_now() is None
+    rec.close()
+    # A status from a recorder that does not say (or says nonsense): no marker.
+    assert recording_from_metadata({"reply_to": "3"}) is None
+    assert recording_from_metadata({"recording_episode": "x"}) is None
+
+
 def test_record_cmd_text_round_trips():
     assert decode_record_cmd(encode_record_cmd("record", "put 方块 in")) == RecordCommand("record", "put 方块 in")
     assert isinstance(decode_record_cmd('{"task": 1}'), str)
@@ -320,6 +338,18 @@ def test_record_adds_the_recorder_and_the_camera_and_wires_the_prompt():
     assert nodes["recorder"]["inputs"]["joint_target"]["source"] == "simulation/joint_target"
     assert nodes["camera"]["inputs"]["tick"]["source"] == "dora/timer/millis/33"
     assert nodes["recorder"]["path"].endswith("nodes/recorder.py") and nodes["recorder"]["env"] == {"SO101_RECORD_DIR": "/d"}
+
+
+def test_the_web_view_reads_the_camera_and_the_recorders_status_where_there_are_some():
+    bare = {node["id"]: node for node in with_web_view(dataflow_copy({}), "simulation", {})["nodes"]}
+    assert set(bare["web_view"]["inputs"]) == {"joint_state", "gripper_state"}
+    recording = with_recorder(dataflow_copy({}), "simulation", {}, {"SO101_CAMERA_BODY": "pybullet"}, 30)
+    nodes = {node["id"]: node for node in with_web_view(recording, "simulation", {"SO101_WEB_PORT": "8200"})["nodes"]}
+    inputs = nodes["web_view"]["inputs"]
+    assert {name: spec["source"] for name, spec in inputs.items()} == {
+        "joint_state": "simulation/joint_state", "gripper_state": "simulation/gripper_state",
+        "image": "camera/image", "record_status": "recorder/record_status"}
+    assert nodes["web_view"]["env"] == {"SO101_WEB_PORT": "8200"} and "outputs" not in nodes["web_view"]
 
 
 def test_record_without_a_camera_has_no_image_input():

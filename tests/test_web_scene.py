@@ -11,6 +11,8 @@ import pytest
 from so101.assets import urdf_path
 from so101.robot import ACTUATED_JOINTS
 from so101.web.urdf_scene import axis_angle, load_urdf_scene, multiply, rotate, rpy
+from so101.web.settings import page_address
+from so101.web.view import angles_markdown, recording_html
 
 pytestmark = pytest.mark.slow
 
@@ -54,3 +56,24 @@ def test_the_scene_has_every_visual_mesh_and_names_frames_by_joint():
     scene = load_urdf_scene(urdf_path())
     assert len(scene.visuals) == 17 and all(visual.mesh_file.is_file() for visual in scene.visuals)
     assert scene.link_path("gripper_link") == "/arm/base_link/shoulder_pan/shoulder_lift/elbow_flex/wrist_flex/wrist_roll"
+
+
+def test_the_angle_text_names_every_joint_to_a_tenth_of_a_degree():
+    text = angles_markdown([90.04, -12.35, 0.0, 3.0, -0.04, 45.5])
+    assert text.splitlines()[2:] == ["shoulder_pan: 90.0°  ", "shoulder_lift: -12.3°  ", "elbow_flex: 0.0°  ",
+                                     "wrist_flex: 3.0°  ", "wrist_roll: 0.0°  ", "gripper: 45.5°"]
+
+
+def test_the_recording_marker_names_the_episode_and_escapes_the_task():
+    assert recording_html(None) == ""
+    marker = recording_html((3, "put <the> cube & go"))
+    assert "● recording episode 3: put &lt;the&gt; cube &amp; go" in marker
+    assert recording_html((0, "")).endswith("● recording episode 0</div>")
+
+
+@pytest.mark.parametrize("host, address", [
+    ("127.0.0.1", "http://127.0.0.1:8101/"), ("0.0.0.0", "http://127.0.0.1:8101/"), ("::", "http://127.0.0.1:8101/"),
+    ("192.168.1.20", "http://192.168.1.20:8101/"), ("fe80::1", "http://[fe80::1]:8101/"),
+])
+def test_the_printed_address_is_one_to_open(host, address):
+    assert page_address(host, 8101) == address

@@ -1,6 +1,8 @@
-"""The web view in a real headless browser (tests/browser.py), every host but 127.0.0.1 unreachable:
-the page draws the arm, follows a typed command, its angle text matches joint_state, and a browser
-killed mid-stream leaves the dataflow running."""
+"""The web view in real headless browsers (bench/browser.py), every host but 127.0.0.1 unreachable:
+the page draws the arm, follows a typed command, its angle text matches joint_state; five pages at
+once follow it; a browser killed or a page reloaded mid-stream leaves the dataflow running; `so101
+teleop --web` shows the camera and marks a recording episode. (The body's pace with five viewers is
+`so101 bench --web`'s: no speed is asserted here.)"""
 
 from __future__ import annotations
 
@@ -13,7 +15,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from tests.browser import CHROMIUM, Browser
+from bench.browser import CHROMIUM, Browser
 from tests.dataflow_helpers import PROMPT_COMMAND, DoraRun, prompt_env, write_test_dataflow
 
 pytestmark = [pytest.mark.dataflow, pytest.mark.skipif(CHROMIUM is None, reason="chromium is not installed (.ci/run installs it)")]
@@ -100,3 +102,82 @@ def test_the_page_draws_the_arm_follows_0_90_and_outlives_its_browser(tmp_path):
     # The browser killed: states go on, and the web view did not fail.
     assert any(t > killed_at + 1.5 for t, _ in samples)
     assert "Traceback" not in log and "web_view: daemon exited with code" not in log, log[-3000:]
+
+
+def test_five_pages_follow_the_arm_and_one_reloaded_or_killed_disturbs_nothing(tmp_path):
+    record_file = tmp_path / "joint_state.json"
+    web_port = WEB_PORT + 2
+    dataflow = write_test_dataflow(tmp_path, {"SO101_LANG": "en"}, record_file=record_file,
+                                   web_env={"SO101_WEB_PORT": str(web_port)})
+    dora = DoraRun(dataflow, tmp_path / "dora.log", stop_after_s=400)
+    browsers: list[Browser] = []
+    try:
+        dora.wait_for(f"web view: http://127.0.0.1:{web_port}/", timeout_s=60)
+        for number in range(5):
+            # Idle priority: five pages drawing with SwiftShader would otherwise take the body's CPU.
+            browsers.append(Browser(DEBUG_PORT + 10 + number, idle=True))
+            browsers[-1].open(f"http://127.0.0.1:{web_port}/")
+        for browser in browsers:
+            browser.wait_for_text("shoulder_pan: 0.0°", timeout_s=180)
+        connected_at = time.monotonic()
+        prompt = subprocess.run(PROMPT_COMMAND, input="0 -45\n", capture_output=True, text=True,
+                                env=prompt_env(tmp_path), cwd=tmp_path, timeout=120)
+        assert prompt.returncode == 0, prompt.stdout + prompt.stderr
+        browsers[1].open(f"http://127.0.0.1:{web_port}/")  # a reload
+        browsers.pop(2).kill()  # a browser gone mid-stream
+        for browser in browsers:
+            browser.wait_for_text("shoulder_pan: -45.0°", timeout_s=180)
+        time.sleep(max(0.0, 30 - (time.monotonic() - connected_at)))
+        watched_s = time.monotonic() - connected_at
+    finally:
+        for browser in browsers:
+            browser.kill()
+        dora.stop()
+    log = dora.log()
+    assert "Traceback" not in log and "web_view: daemon exited with code" not in log, log[-3000:]
+    arrivals = [t for t, _ in json.loads(record_file.read_text())["samples"] if t >= connected_at]
+    gaps = np.diff(arrivals)
+    print(f"five pages for {watched_s:.0f} s: {len(arrivals) / watched_s:.1f} joint_state/s, longest gap {gaps.max() * 1e3:.0f} ms")
+    # The states went on the whole time (the pace is so101 bench --web's to measure).
+    assert arrivals[-1] - connected_at > watched_s - 2 and gaps.max() < 2.0
+
+
+def test_teleop_web_shows_the_camera_and_marks_an_episode_while_it_records(tmp_path):
+    """`so101 teleop --record DIR --web` as a person runs it in a terminal: the page shows the camera's
+    picture, and the marker from `record` to `stop`."""
+    from so101.bodies.node_loop import IMAGE_SIZE
+    from tests.test_prompt_tmux import start_teleop
+
+    terminal, _, log_file = start_teleop(tmp_path, "en", extra=f"--record {tmp_path / 'episodes'} --web --web-port {WEB_PORT + 1}")
+    browser = None
+    try:
+        address = terminal.wait_for(r"^web view: (http://\S+)$", timeout_s=120).group(1)
+        assert address == f"http://127.0.0.1:{WEB_PORT + 1}/"
+        terminal.seen = terminal.wait_for(r"^=+\n>$", timeout_s=60).start()
+        browser = Browser(DEBUG_PORT + 1)
+        browser.open(address)
+        browser.wait_for_text("shoulder_pan: 0.0°")
+        assert "● recording" not in browser.text()
+        width, height = IMAGE_SIZE
+        camera_pictures = f"Array.from(document.images).filter(i => i.naturalWidth == {width} && i.naturalHeight == {height}).length"
+        deadline = time.monotonic() + 60
+        while browser.evaluate(camera_pictures) != 1:
+            assert time.monotonic() < deadline, "no camera picture on the page"
+            time.sleep(0.5)
+        terminal.command("record wave twice", re.escape("  ● recording episode 0: task 'wave twice' (stop: stop, drop: discard)"))
+        browser.wait_for_text("● recording episode 0: wave twice")
+        terminal.command("0 30", r"  → .*")
+        time.sleep(1)
+        terminal.command("stop", r"  ■ episode 0: \d+ frames .*")
+        deadline = time.monotonic() + 30
+        while "● recording" in browser.text():
+            assert time.monotonic() < deadline, "the marker stayed after stop"
+            time.sleep(0.3)
+        terminal.command("quit", re.escape("  bye"))
+        terminal.wait_for(r"^TELEOP_EXIT=0$", timeout_s=60, after=terminal.seen)
+        screen = terminal.screen()
+    finally:
+        if browser is not None:
+            browser.kill()
+        terminal.close()
+    assert "Traceback" not in screen and "Traceback" not in log_file.read_text(errors="replace"), screen

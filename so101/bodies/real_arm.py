@@ -22,7 +22,7 @@ from typing import NoReturn, Sequence
 
 from so101.bodies.protocol import BodyFailed, BodyName
 from so101.bodies.settings import CALIBRATE_HINT, DEFAULT_BUS_RETRIES, DEFAULT_MAX_SPEED_DEG_S, ArmSettings, NodeSettings
-from so101.feetech.bus import BusError, FeetechBus
+from so101.feetech.bus import BusError, FeetechBus, ServoSilent
 from so101.feetech.calibration import (
     MOTOR_IDS,
     MOTOR_NAMES,
@@ -97,7 +97,10 @@ class SO101Real:
             bus.sync_write("Torque_Limit", {i: round(torque_limit_percent * 10) for i in MOTOR_IDS})
             bus.sync_write("Torque_Enable", {i: 1 for i in MOTOR_IDS})
             for _ in range(PROBE_READS):
-                self._read_present(bus)
+                try:
+                    self._read_present(bus)
+                except ServoSilent:  # one lost reply is a missing sample, not an arm that cannot start
+                    continue
         except BusError as error:
             self.close()
             raise ArmFailed(str(error)) from None

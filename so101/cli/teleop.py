@@ -39,7 +39,9 @@ from so101.runtime.dataflow import (
     with_web_view, write_dataflow,
 )
 from so101.gui.display import MODES, resolve_mode
-from so101.web.settings import DEFAULT_HOST as DEFAULT_WEB_HOST, DEFAULT_PORT as DEFAULT_WEB_PORT
+from so101.web.settings import (
+    DEFAULT_HOST as DEFAULT_WEB_HOST, DEFAULT_PORT as DEFAULT_WEB_PORT, EVERY_ADDRESS, LOCAL_HOSTS, page_address,
+)
 from so101.runtime.processes import alive, descendants, kill_until_gone, stop_process
 from so101.cli.argtypes import add_language_option, whole_number
 from so101.runtime.venv import dora_executable, env_with_bin_first
@@ -260,13 +262,14 @@ def run(args: argparse.Namespace) -> int:
             print(f"so101 teleop: {problem}", file=sys.stderr)
             return 2
     if args.web:
-        if args.web_host not in ("127.0.0.1", "localhost", "::1"):
-            print(f"so101 teleop: the web view serves on {args.web_host}: anyone who can reach port {args.web_port} "
+        if args.web_host not in LOCAL_HOSTS:
+            where = "every address of this machine" if args.web_host in EVERY_ADDRESS else args.web_host
+            print(f"so101 teleop: the web view serves on {where}: anyone who can reach port {args.web_port} "
                   "there sees the arm", flush=True)
         with_web_view(descriptor, launch.body.node_id, {"SO101_WEB_HOST": args.web_host, "SO101_WEB_PORT": str(args.web_port)})
         ready_marks += (WEB_VIEW_MARKS,)
     print(text["starting"].format(mode=launch.mode, log=launch.log), flush=True)
-    web_line = f"web view: http://{args.web_host}:{args.web_port}/" if args.web else ""
+    web_line = f"web view: {page_address(args.web_host, args.web_port)}" if args.web else ""
     return run_beside(launch, descriptor, PROMPT_NODE_FILE, text, ready_marks, web_line)
 
 

@@ -210,6 +210,10 @@ class Recording:
             line += " " + self.text["waiting_picture"]
         return line
 
+    def recording_now(self) -> tuple[int, str] | None:
+        """(episode index, task) of the episode recording, or None: what `record_status` carries for the web view."""
+        return (self.episode_index, self.last_task) if self.episode is not None else None
+
     def stop(self) -> str:
         """End the episode in progress and save it in the background."""
         episode = self.episode

@@ -195,13 +195,16 @@ def with_leader(descriptor: dict, body_node_id: str, leader_env: dict[str, str],
 
 def with_web_view(descriptor: dict, body_node_id: str, web_env: dict[str, str], root: PurePath = ROOT) -> dict:
     """A dataflow (dataflow_copy's dict) with the web view added: it reads the body's state and, where the
-    dataflow has the camera node, its pictures."""
+    dataflow has them, the camera's pictures and the recorder's `record_status`."""
     inputs = {
         "joint_state": _queued(f"{body_node_id}/joint_state", STATE_QUEUE),
         "gripper_state": _queued(f"{body_node_id}/gripper_state", STATE_QUEUE),
     }
-    if any(node["id"] == "camera" for node in descriptor["nodes"]):
+    node_ids = {node["id"] for node in descriptor["nodes"]}
+    if "camera" in node_ids:
         inputs["image"] = _queued("camera/image", TICK_QUEUE)
+    if "recorder" in node_ids:
+        inputs["record_status"] = {"source": "recorder/record_status", "queue_size": 100}
     descriptor["nodes"].append({
         "id": WEB_VIEW_NODE_ID, "path": str(root / WEB_VIEW_NODE_FILE.relative_to(ROOT)), "restart_policy": "never",
         "inputs": inputs, "env": web_env,

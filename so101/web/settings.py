@@ -11,6 +11,15 @@ from so101.runtime.settings import EnvironSettings, Setting, read_optional_path,
 
 DEFAULT_HOST = "127.0.0.1"  # this machine only: anyone who can reach the port sees the arm
 DEFAULT_PORT = 8101
+# Hosts that serve on every address of the machine.
+EVERY_ADDRESS = ("0.0.0.0", "::", "")
+LOCAL_HOSTS = ("127.0.0.1", "localhost", "::1")
+
+
+def page_address(host: str, port: int) -> str:
+    """The address to open: served on every address, this machine's own is one that works."""
+    shown = "127.0.0.1" if host in EVERY_ADDRESS else f"[{host}]" if ":" in host else host
+    return f"http://{shown}:{port}/"
 
 
 def read_port(environ: Mapping[str, str], declared_setting: Setting) -> int:

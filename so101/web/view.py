@@ -3,13 +3,15 @@
 One frame per joint, nested as the URDF's tree (so101/web/urdf_scene.py), so a new pose is one
 rotation per joint sent to every open page, and each browser works out the rest. The page has
 viser's own orbit (drag), pan (right drag) and zoom (wheel); a panel with the joint angles as
-text, a rolling plot of the last seconds, and the body's camera picture when it has one. viser
+text, a rolling plot of the last seconds, the body's camera picture when it has one, and a
+marker while an episode records. viser
 serves its page from its installed package and the meshes from the model files: nothing comes
 from the internet. Read-only: the page has no control that sends anything to the arm.
 """
 
 from __future__ import annotations
 
+import html
 import time
 from collections import deque
 from typing import Sequence
@@ -23,8 +25,11 @@ from viser import uplot
 from so101.robot import ACTUATED_JOINTS
 from so101.web.urdf_scene import UrdfScene
 
-# The rolling plot: this many seconds, one point per redraw.
+# The rolling plot: this many seconds, one point per pose shown, redrawn this often.
 PLOT_SECONDS = 10.0
+PLOT_HZ = 10.0
+# A joint that moved less than this since the pages last drew it is not sent again (far below a pixel).
+MOVED_DEG = 0.01
 ANGLE_TEXT_TITLE = "**Joint angles**"
 # The plot's line colours, one per joint.
 PLOT_COLOURS = ("#e6194b", "#3cb44b", "#4363d8", "#f58231", "#911eb4", "#42d4f4")
@@ -32,9 +37,19 @@ CAMERA_POSITION = (0.55, -0.45, 0.40)
 CAMERA_LOOK_AT = (0.10, 0.0, 0.15)
 
 
+def recording_html(recording: tuple[int, str] | None) -> str:
+    """The marker shown while an episode records (empty when none does)."""
+    if recording is None:
+        return ""
+    episode, task = recording
+    return (f'<div style="color:#d01010;font-weight:bold">● recording episode {episode}'
+            + (f": {html.escape(task)}" if task else "") + "</div>")
+
+
 def angles_markdown(angles_deg: Sequence[float]) -> str:
     """The joint angles as the page shows them, one line per joint (a test reads them back)."""
-    rows = [f"{joint.name}: {angle:.1f}°" for joint, angle in zip(ACTUATED_JOINTS, angles_deg)]
+    # + 0.0: a joint resting a hair below zero reads 0.0°, not -0.0°.
+    rows = [f"{joint.name}: {round(angle, 1) + 0.0:.1f}°" for joint, angle in zip(ACTUATED_JOINTS, angles_deg)]
     return ANGLE_TEXT_TITLE + "\n\n" + "  \n".join(rows)
 
 
@@ -45,6 +60,8 @@ class WebView:
         self.server: viser.ViserServer | None = viser.ViserServer(host=host, port=port, verbose=False)
         server = self.server
         server.scene.set_up_direction("+z")
+        # No shadows: each shadow map draws the arm once more per frame, which a browser on software WebGL feels.
+        server.scene.configure_default_lights(cast_shadow=False)
         # In front of the arm, a little to its right and above (metres, the URDF's frame: x forward, z up).
         server.initial_camera.position = CAMERA_POSITION
         server.initial_camera.look_at = CAMERA_LOOK_AT
@@ -61,6 +78,7 @@ class WebView:
             server.scene.add_mesh_simple(
                 f"{scene.link_path(visual.link)}/visual_{number}", np.asarray(mesh.vertices, dtype=np.float32),
                 np.asarray(mesh.faces, dtype=np.uint32), color=(red, green, blue), position=visual.xyz, wxyz=visual.wxyz)
+        self._recording = server.gui.add_html("", visible=False)
         self._angles = server.gui.add_markdown(angles_markdown([0.0] * len(ACTUATED_JOINTS)))
         self._started = time.monotonic()
         self._history: deque[tuple[float, tuple[float, ...]]] = deque()
@@ -71,6 +89,8 @@ class WebView:
                                                for joint, colour in zip(ACTUATED_JOINTS, PLOT_COLOURS))),
         )
         self._picture: viser.GuiImageHandle | None = None
+        self._shown_deg: dict[str, float] = {}  # each joint's angle as the pages show it
+        self._plotted_at = -np.inf
 
     def _plot_data(self) -> tuple[npt.NDArray[np.float64], ...]:
         if not self._history:
@@ -80,7 +100,8 @@ class WebView:
         return (times, *(angles[:, column] for column in range(angles.shape[1])))
 
     def show(self, angles_deg: Sequence[float]) -> None:
-        """The arm posed at six angles in degrees (five arm joints, the gripper)."""
+        """The arm posed at six angles in degrees (five arm joints, the gripper). Only what changed is
+        sent: a still arm costs the pages nothing to draw, and the plot moves on PLOT_HZ times a second."""
         server = self.server
         if server is None:
             return
@@ -88,18 +109,31 @@ class WebView:
         self._history.append((now, tuple(float(a) for a in angles_deg)))
         while self._history and self._history[0][0] < now - PLOT_SECONDS:
             self._history.popleft()
+        text = angles_markdown(angles_deg)
         with server.atomic():
             for joint, angle in zip(ACTUATED_JOINTS, angles_deg):
-                self._joint_frames[joint.name].wxyz = self._joints[joint.name].rotation(np.radians(angle))
-            self._angles.content = angles_markdown(angles_deg)
-            self._plot.data = self._plot_data()
+                if abs(angle - self._shown_deg.get(joint.name, np.inf)) >= MOVED_DEG:
+                    self._joint_frames[joint.name].wxyz = self._joints[joint.name].rotation(np.radians(angle))
+                    self._shown_deg[joint.name] = angle
+            if text != self._angles.content:
+                self._angles.content = text
+            if now - self._plotted_at >= 1.0 / PLOT_HZ:
+                self._plot.data = self._plot_data()
+                self._plotted_at = now
+
+    def show_recording(self, recording: tuple[int, str] | None) -> None:
+        """The recording marker at the panel's top: (episode, task) while one records, None to hide it."""
+        if self.server is None:
+            return
+        self._recording.content = recording_html(recording)
+        self._recording.visible = recording is not None
 
     def show_picture(self, rgb: npt.NDArray[np.uint8]) -> None:
         """The body's camera picture, under the plot (added on the first one)."""
         if self.server is None:
             return
         if self._picture is None:
-            self._picture = self.server.gui.add_image(rgb, label="camera")
+            self._picture = self.server.gui.add_image(rgb, label="camera", format="jpeg")
         else:
             self._picture.image = rgb
 

@@ -1,5 +1,6 @@
-"""A headless Chromium for tests, driven over its DevTools protocol: WebGL through SwiftShader (no
-GPU), and every host but 127.0.0.1 unreachable, so a page that needs the internet fails here."""
+"""A headless Chromium for the tests and `so101 bench`, driven over its DevTools protocol: WebGL
+through SwiftShader (no GPU), and every host but 127.0.0.1 unreachable, so a page that needs the
+internet fails here."""
 
 from __future__ import annotations
 
@@ -7,14 +8,17 @@ import asyncio
 import base64
 import itertools
 import json
+import os
 import shutil
+import signal
 import subprocess
 import tempfile
 import time
 import urllib.request
 from pathlib import Path
 
-import websockets
+from so101.runtime.processes import stop_process
+
 
 CHROMIUM = shutil.which("chromium")
 FLAGS = ("--headless=new", "--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
@@ -25,13 +29,17 @@ FLAGS = ("--headless=new", "--no-sandbox", "--use-angle=swiftshader", "--enable-
 
 
 class Browser:
-    """One Chromium with one page; `kill()` ends it (as a person closing it would)."""
+    """One Chromium with one page; `kill()` ends it (as a person closing it would). `idle`: its processes
+    run under SCHED_IDLE, taking only the CPU nothing else wants (Chromium raises its own processes'
+    nice value, so nice 19 is not enough)."""
 
-    def __init__(self, debug_port: int):
-        self._profile = tempfile.TemporaryDirectory(prefix="so101-chromium-")
+    def __init__(self, debug_port: int, idle: bool = False, extra_flags: tuple[str, ...] = ()):
+        self._profile = tempfile.TemporaryDirectory(prefix="so101-chromium-", ignore_cleanup_errors=True)
         self.process = subprocess.Popen(
-            [str(CHROMIUM), *FLAGS, f"--remote-debugging-port={debug_port}", f"--user-data-dir={self._profile.name}",
-             "about:blank"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+            [str(CHROMIUM), *FLAGS, *extra_flags, f"--remote-debugging-port={debug_port}", f"--user-data-dir={self._profile.name}",
+             "about:blank"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+            start_new_session=True,  # its own process group: kill() ends every helper process with it
+            preexec_fn=(lambda: os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))) if idle else None)
         deadline = time.monotonic() + 30
         while True:
             try:
@@ -45,6 +53,8 @@ class Browser:
         self._ids = itertools.count(1)
 
     def _call(self, method: str, **params) -> dict:
+        import websockets  # viser's dependency; imported here so bench/web_candidates.py can read FLAGS without it
+
         async def call() -> dict:
             async with websockets.connect(self._socket_url, max_size=2**27) as socket:
                 request = next(self._ids)
@@ -61,9 +71,12 @@ class Browser:
         self._call("Page.bringToFront")
         self._call("Page.navigate", url=url)
 
+    def evaluate(self, expression: str):
+        """The value of a JavaScript expression in the page (None if it has none)."""
+        return self._call("Runtime.evaluate", expression=expression, returnByValue=True).get("result", {}).get("value")
+
     def text(self) -> str:
-        result = self._call("Runtime.evaluate", expression="document.body ? document.body.innerText : ''")
-        return str(result.get("result", {}).get("value", ""))
+        return str(self.evaluate("document.body ? document.body.innerText : ''") or "")
 
     def wait_for_text(self, needle: str, timeout_s: float = 60) -> str:
         deadline = time.monotonic() + timeout_s
@@ -78,6 +91,5 @@ class Browser:
         return path
 
     def kill(self) -> None:
-        self.process.kill()
-        self.process.wait()
+        stop_process(self.process, 5, ask_session=True, kill_session=True, first_signal=signal.SIGKILL)
         self._profile.cleanup()
