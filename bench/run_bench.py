@@ -290,7 +290,8 @@ def measure_gui(run_dir: Path, duration_s: float, probe_env: dict, body: str = "
 
 # -- the run --------------------------------------------------------------------------
 def run_benchmark(duration_s: float, fast_s: float, fast_steps: list[int], raw_steps: int, node_ticks: int,
-                  after_sleep_steps: int, body: str = "pybullet", saved_episode_s: float = 60.0) -> dict:
+                  after_sleep_steps: int, body: str = "pybullet", saved_episode_s: float = 60.0,
+                  web_browsers: bool = True) -> dict:
     load_start = os.getloadavg()
     with tempfile.TemporaryDirectory(prefix="so101-bench-") as tmp:
         work_dir = Path(tmp)
@@ -308,7 +309,7 @@ def run_benchmark(duration_s: float, fast_s: float, fast_steps: list[int], raw_s
         figures["leader"] = leader_bench.run_leader_benchmark(work_dir, duration_s, body, {"SO101_FAST_STEPS": "0"})
         from bench import web_bench
 
-        figures["web"] = web_bench.run_web_benchmark(work_dir, duration_s, body)
+        figures["web"] = web_bench.run_web_benchmark(work_dir, duration_s, body, browsers=web_browsers)
         runs = []
         for steps in fast_steps:
             print(f"dora run, fast mode SO101_FAST_STEPS={steps}, {fast_s:g} s ...", flush=True)
@@ -343,7 +344,7 @@ def run_benchmark(duration_s: float, fast_s: float, fast_steps: list[int], raw_s
     }
 
 
-def run_web_only(duration_s: float, body: str) -> dict:
+def run_web_only(duration_s: float, body: str, browsers: bool) -> dict:
     """`--web`: the web view's runs alone."""
     from bench import web_bench
 
@@ -351,7 +352,7 @@ def run_web_only(duration_s: float, body: str) -> dict:
         raise RuntimeError("--web measures a simulation: --body pybullet or mujoco")
     load_start = os.getloadavg()
     with tempfile.TemporaryDirectory(prefix="so101-bench-") as tmp:
-        web = web_bench.run_web_benchmark(Path(tmp), duration_s, body)
+        web = web_bench.run_web_benchmark(Path(tmp), duration_s, body, browsers)
     return {"body": body, "only": "web", "machine": machine_facts(),
             "load_average_1_5_15min": {"start": list(load_start), "end": list(os.getloadavg())},
             "settings": {"duration_s": duration_s}, "web": web,
@@ -483,7 +484,7 @@ def run(args: argparse.Namespace) -> int:
         return 0
     if args.quick:
         settings = dict(duration_s=3.0, fast_s=2.0, fast_steps=[1, 100], raw_steps=5000, node_ticks=1500, after_sleep_steps=100,
-                        saved_episode_s=5.0)
+                        saved_episode_s=5.0, web_browsers=False)
     else:
         settings = dict(duration_s=args.duration, fast_s=5.0, fast_steps=[1, 10, 100], raw_steps=40000, node_ticks=10000, after_sleep_steps=1000)
     kind = "cluster" if args.cluster else "web" if args.web else args.body
@@ -491,7 +492,7 @@ def run(args: argparse.Namespace) -> int:
         if args.cluster:
             result = cluster_bench.run_cluster_benchmark(settings["duration_s"])
         elif args.web:
-            result = run_web_only(settings["duration_s"], args.body)
+            result = run_web_only(settings["duration_s"], args.body, browsers=not args.quick)
         elif args.body == "real":
             result = real_bench.run_real_benchmark(settings["duration_s"], exchanges=500 if args.quick else 3000)
         else:

@@ -186,11 +186,15 @@ def measure(work_dir: Path, duration_s: float, body: str, kind: str) -> dict:
             "sim_over_wall": ticks["steps_per_s"] * TICK_PERIOD_S, "ticks_missed": ticks["ticks_missed"]}
 
 
-def run_web_benchmark(work_dir: Path, duration_s: float, body: str) -> dict:
-    """Both runs, `duration_s` each (the browsers' run is skipped, saying why, without chromium)."""
+def run_web_benchmark(work_dir: Path, duration_s: float, body: str, browsers: bool = True) -> dict:
+    """Both runs, `duration_s` each; the browsers' is skipped, saying why, without chromium or `browsers`."""
     figures = {"viewers": VIEWERS, "sockets": measure(work_dir, duration_s, body, "sockets")}
-    figures["browsers"] = (measure(work_dir, duration_s, body, "browsers") if CHROMIUM is not None
-                           else {"skipped": "chromium is not installed (Debian: apt-get install chromium)"})
+    if not browsers:
+        figures["browsers"] = {"skipped": "not in a --quick run"}
+    elif CHROMIUM is None:
+        figures["browsers"] = {"skipped": "chromium is not installed (Debian: apt-get install chromium)"}
+    else:
+        figures["browsers"] = measure(work_dir, duration_s, body, "browsers")
     return figures
 
 

@@ -3,9 +3,10 @@
 Serves a page (so101/web/view.py, with viser) showing the SO-101 from the URDF's meshes, posed
 by the body's `joint_state` and `gripper_state`, with the angles as text and a rolling plot; the
 camera's `image` where the dataflow has one (`--record` on a simulation), and a marker while the
-recorder's `record_status` says an episode is recording. It redraws at most REDRAW_HZ times a second, whatever
-the body's rate, and runs below the body's priority: a browser closing, reloading or stalling
-costs the body nothing. Read-only: the page sends nothing into the dataflow.
+recorder's `record_status` says an episode is recording. It poses the arm at most REDRAW_HZ
+times a second, whatever the body's rate, and runs below the body's priority: a browser
+closing, reloading or stalling costs the body nothing. Read-only: the page sends nothing into
+the dataflow.
 Settings: so101.web.settings.WebViewSettings (SO101_WEB_HOST, SO101_WEB_PORT).
 """
 

@@ -18,7 +18,7 @@ import pyarrow as pa
 import pytest
 
 from so101.bodies import node_loop as body_node
-from bench import common, leader_bench, real_bench, run_bench
+from bench import common, leader_bench, real_bench, run_bench, web_bench
 from tests.dataflow_helpers import TICK, run_simulation_node
 
 MS = 1_000_000  # ns
@@ -267,9 +267,19 @@ def test_quick_bench_writes_every_figure(tmp_path, body):
     assert "leader moved -> joint_state" in result.stdout
     leader_rows = 1
 
+    web = figures["web"]
+    # Five viewers' websockets for the 3 s run, each getting the poses (up to 60 a second); no browsers in --quick.
+    assert web["viewers"] == 5 and len(web["sockets"]["per_viewer_per_s"]) == 5
+    assert all(10 < messages < 200 for [messages] in web["sockets"]["per_viewer_per_s"])
+    assert 100 < web["sockets"]["joint_state_per_s"] < 300 and 0.4 < web["sockets"]["sim_over_wall"] < 1.2
+    assert 30 < web["sockets"]["web_view_rss_mb"]["end"] < 4000
+    assert web["browsers"] == {"skipped": "not in a --quick run"}
+    assert "5 viewers elsewhere" in result.stdout and "browsers on this machine" in result.stdout
+    web_rows = 2
+
     if body == "mujoco":
         assert "memory_stages_mb" not in figures and machine["mujoco"].startswith("4.")
-        assert len(figures["targets"]) == 8 + window_rows + recording_rows + leader_rows
+        assert len(figures["targets"]) == 8 + window_rows + recording_rows + leader_rows + web_rows
         return
     stages = figures["memory_stages_mb"]
     assert list(stages) == ["course", "plugins", "node"]
@@ -280,7 +290,7 @@ def test_quick_bench_writes_every_figure(tmp_path, body):
     assert stages["plugins"]["the arm loaded"]["current"] < stages["course"]["the arm loaded"]["current"]
     assert "memory, peak | current RSS (MB)" in result.stdout
 
-    assert len(figures["targets"]) == 8 + window_rows + recording_rows + leader_rows
+    assert len(figures["targets"]) == 8 + window_rows + recording_rows + leader_rows + web_rows
     assert all(isinstance(row["met"], bool) for row in figures["targets"])
     assert "targets:" in result.stdout and "joint_state per s" in result.stdout
 
@@ -330,3 +340,31 @@ def test_show_prints_a_saved_result_and_refuses_what_is_not_one(tmp_path, capsys
     assert capsys.readouterr().err.startswith(f"so101 bench: {not_json} is not a result of so101 bench (JSONDecodeError")
     assert run_bench.main(["--show", str(tmp_path / "missing.json")]) == 2
     assert capsys.readouterr().err == f"so101 bench: cannot read {tmp_path / 'missing.json'}: No such file or directory\n"
+
+
+WEB_RUN = {"web_view_cpu_percent": 12.0, "web_view_rss_mb": {"start": 182.8, "end": 183.7}, "measured_s": 30.0,
+           "ticks_missed": 0, "joint_state_per_s": 249.99, "sim_over_wall": 1.0}
+
+
+def test_the_web_rows_judge_the_body_with_viewers_elsewhere_and_show_the_browsers_here():
+    figures = {"viewers": 5, "sockets": {**WEB_RUN, "per_viewer_per_s": [[50.1]] * 4 + [[50.7]]},
+               "browsers": {**WEB_RUN, "joint_state_per_s": 119.0, "sim_over_wall": 0.675,
+                            "per_viewer_per_s": [[0.1, 0.2], [0.3, 0.3]] + [[0.2, 0.2]] * 3}}
+    rows = web_bench.targets(figures, 247.5, 0.01)
+    assert [row["met"] for row in rows] == [True, True]  # the browsers drawing on this machine are shown, not judged
+    slow = {**figures, "sockets": {**figures["sockets"], "joint_state_per_s": 240.0, "sim_over_wall": 0.97}}
+    assert [row["met"] for row in web_bench.targets(slow, 247.5, 0.01)] == [False, False]
+    lines = [line.split() for line in web_bench.table_lines(figures)]
+    assert "messages each viewer received per s (min | max) 50.1 | 50.7".split() in lines
+    assert "each page: frames drawn per s (min | max) 0.2 | 0.3".split() in lines
+    assert "joint_state per s | simulated / wall time 119.00 | 0.6750".split() in lines
+    skipped = web_bench.table_lines({**figures, "browsers": {"skipped": "not in a --quick run"}})
+    assert skipped[-1].endswith("not measured: not in a --quick run")
+
+
+def test_show_prints_the_saved_web_result(capsys):
+    latest = run_bench.DEFAULT_OUT["web"]
+    assert run_bench.main(["--show", str(latest)]) == 0
+    shown = capsys.readouterr().out
+    assert shown.startswith("SO-101 web view benchmark (pybullet), ")
+    assert f"{json.loads(latest.read_text())['web']['sockets']['joint_state_per_s']:.2f}" in shown

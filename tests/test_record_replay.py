@@ -141,8 +141,8 @@ def test_replay_onto_the_emulated_arm_is_ramped_and_stays_inside_its_limits(tmp_
         try:
             replay = subprocess.run(
                 [str(SO101), "replay", str(tmp_path / "set"), "--body", "real", "--port", env["SO101_PORT"],
-                 "--calibration", env["SO101_CALIBRATION"], "--lang", "en", "--log", str(tmp_path / "replay.log")],
-                capture_output=True, text=True, timeout=180)
+                 "--calibration", env["SO101_CALIBRATION"], "--lang", "en", "--log", str(tmp_path / "replay.log"),
+                 "--web", "--web-port", "8139"], capture_output=True, text=True, timeout=180)
         finally:
             done.set()
             watcher.join()
@@ -160,6 +160,7 @@ def test_replay_onto_the_emulated_arm_is_ramped_and_stays_inside_its_limits(tmp_
                     if before[1][index] and after[1][index]]
     assert speeds_deg_s and max(speeds_deg_s) < 40, max(speeds_deg_s)
     assert "moving to the first frame at no more than 30°/s" in replay.stdout
+    assert "web view: http://127.0.0.1:8139/" in replay.stdout.splitlines()  # the replay shown in a browser too
     assert ACTUATED_JOINTS[0].upper_deg < 150
 
 

@@ -7,7 +7,9 @@ teleop --web` shows the camera and marks a recording episode. (The body's pace w
 from __future__ import annotations
 
 import json
+import os
 import re
+import shutil
 import subprocess
 import time
 
@@ -16,7 +18,7 @@ import pytest
 from PIL import Image
 
 from bench.browser import CHROMIUM, Browser
-from tests.dataflow_helpers import PROMPT_COMMAND, DoraRun, prompt_env, write_test_dataflow
+from tests.dataflow_helpers import PROMPT_COMMAND, DoraRun, body_environment, prompt_env, write_test_dataflow
 
 pytestmark = [pytest.mark.dataflow, pytest.mark.skipif(CHROMIUM is None, reason="chromium is not installed (.ci/run installs it)")]
 
@@ -80,6 +82,8 @@ def test_the_page_draws_the_arm_follows_0_90_and_outlives_its_browser(tmp_path):
         time.sleep(2)  # settled
         text = browser.text()
         after = the_arm_drawn(browser, tmp_path / "after.png")
+        if os.environ.get("SO101_WEB_SCREENSHOT"):  # the README's picture: this test's own
+            shutil.copyfile(tmp_path / "after.png", os.environ["SO101_WEB_SCREENSHOT"])
         browser.kill()
         killed_at = time.monotonic()
         browser = None
@@ -102,6 +106,37 @@ def test_the_page_draws_the_arm_follows_0_90_and_outlives_its_browser(tmp_path):
     # The browser killed: states go on, and the web view did not fail.
     assert any(t > killed_at + 1.5 for t, _ in samples)
     assert "Traceback" not in log and "web_view: daemon exited with code" not in log, log[-3000:]
+
+
+@pytest.mark.parametrize("body", ["mujoco", "real"])  # PyBullet's: the test above
+def test_every_body_is_shown_posed_by_its_joint_state(tmp_path, body):
+    """MuJoCo's body, and the real arm (so101 fake-arm's emulated bus): the URDF posed by the angles it publishes."""
+    record_file = tmp_path / "joint_state.json"
+    web_port = WEB_PORT + 3
+    with body_environment(body, tmp_path) as (body_env, _):
+        dataflow = write_test_dataflow(tmp_path, {"SO101_LANG": "en", **body_env}, record_file=record_file, body=body,
+                                       web_env={"SO101_WEB_PORT": str(web_port)})
+        dora = DoraRun(dataflow, tmp_path / "dora.log", stop_after_s=300)
+        browser = None
+        try:
+            dora.wait_for(f"web view: http://127.0.0.1:{web_port}/", timeout_s=60)
+            browser = Browser(DEBUG_PORT + 3)
+            browser.open(f"http://127.0.0.1:{web_port}/")
+            browser.wait_for_text("shoulder_pan: ")
+            prompt = subprocess.run(PROMPT_COMMAND, input="0 -60\n", capture_output=True, text=True,
+                                    env=prompt_env(tmp_path), cwd=tmp_path, timeout=120)
+            assert prompt.returncode == 0, prompt.stdout + prompt.stderr
+            browser.wait_for_text("shoulder_pan: -6", timeout_s=60)
+            time.sleep(3)  # settled
+            text = browser.text()
+        finally:
+            if browser is not None:
+                browser.kill()
+            dora.stop()
+    last_state = json.loads(record_file.read_text())["samples"][-1][1]
+    assert angle_on_page(text, "shoulder_pan") == pytest.approx(last_state[0], abs=0.5)
+    assert angle_on_page(text, "shoulder_pan") == pytest.approx(-60.0, abs=1.0)
+    assert "Traceback" not in dora.log(), dora.log()[-3000:]
 
 
 def test_five_pages_follow_the_arm_and_one_reloaded_or_killed_disturbs_nothing(tmp_path):

@@ -14,8 +14,10 @@ from dataclasses import replace
 from pathlib import Path
 
 from so101.cli.argtypes import add_language_option, whole_number
-from so101.cli.teleop import TEXT as TELEOP_TEXT, add_body_arguments, add_log_option, prepare, run_beside
-from so101.runtime.dataflow import REPLAY_NODE_FILE, dataflow_copy, with_replay
+from so101.cli.teleop import (
+    TEXT as TELEOP_TEXT, add_body_arguments, add_log_option, add_web_arguments, add_web_view, prepare, run_beside,
+)
+from so101.runtime.dataflow import LOADED_MARKS, REPLAY_NODE_FILE, WEB_VIEW_MARKS, dataflow_copy, with_replay
 
 TEXT = {
     lang: {**lines, "ready": "", "ready_real": "", "stopping": "", "stopped": "",
@@ -31,6 +33,7 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
                         help="the episode to play (default 0; `so101 dataset DIR` lists them)")
     add_body_arguments(parser)
     add_language_option(parser, "the messages")
+    add_web_arguments(parser)
     add_log_option(parser)
 
 
@@ -48,6 +51,8 @@ def run(args: argparse.Namespace) -> int:
         return 2
     text = TEXT[args.lang]
     descriptor = with_replay(dataflow_copy(launch.node_env, launch.body.dataflow_file), launch.body.node_id)
+    web_line = add_web_view(args, descriptor, launch.body, "replay")
+    ready_marks = (LOADED_MARKS, WEB_VIEW_MARKS) if web_line else (LOADED_MARKS,)
     env = dict(launch.env, SO101_REPLAY_DIR=str(dataset_dir), SO101_REPLAY_EPISODE=str(args.episode))
     print(text["starting"].format(mode=launch.mode, log=launch.log), flush=True)
-    return run_beside(replace(launch, env=env), descriptor, REPLAY_NODE_FILE, text)
+    return run_beside(replace(launch, env=env), descriptor, REPLAY_NODE_FILE, text, ready_marks, web_line)

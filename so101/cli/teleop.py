@@ -101,6 +101,12 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
         "--leader-calibration", type=Path, metavar="FILE", default=None,
         help="--leader: the leader's calibration JSON (from `so101 calibrate --leader`, or LeRobot's so101_leader one)",
     )
+    add_web_arguments(parser)
+    add_log_option(parser)
+
+
+def add_web_arguments(parser: argparse.ArgumentParser) -> None:
+    """--web, --web-port, --web-host: the arm in a browser too (teleop's and replay's)."""
     parser.add_argument(
         "--web", action="store_true",
         help="show the arm in a browser too (for a machine with no display): prints the page's address",
@@ -110,7 +116,19 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
     parser.add_argument("--web-host", default=DEFAULT_WEB_HOST, metavar="ADDRESS",
                         help=f"--web: the address to serve on (default {DEFAULT_WEB_HOST}, this machine only; "
                         "0.0.0.0 serves every network this machine is on)")
-    add_log_option(parser)
+
+
+def add_web_view(args: argparse.Namespace, descriptor: dict, body: BodyKind, command: str) -> str:
+    """With --web, the web view added to `descriptor` (and a warning printed when it serves beyond this
+    machine); the line to print once it serves, or "" without --web."""
+    if not args.web:
+        return ""
+    if args.web_host not in LOCAL_HOSTS:
+        where = "every address of this machine" if args.web_host in EVERY_ADDRESS else args.web_host
+        print(f"so101 {command}: the web view serves on {where}: anyone who can reach port {args.web_port} "
+              "there sees the arm", flush=True)
+    with_web_view(descriptor, body.node_id, {"SO101_WEB_HOST": args.web_host, "SO101_WEB_PORT": str(args.web_port)})
+    return f"web view: {page_address(args.web_host, args.web_port)}"
 
 
 def add_log_option(parser: argparse.ArgumentParser) -> None:
@@ -261,15 +279,10 @@ def run(args: argparse.Namespace) -> int:
         if problem:
             print(f"so101 teleop: {problem}", file=sys.stderr)
             return 2
-    if args.web:
-        if args.web_host not in LOCAL_HOSTS:
-            where = "every address of this machine" if args.web_host in EVERY_ADDRESS else args.web_host
-            print(f"so101 teleop: the web view serves on {where}: anyone who can reach port {args.web_port} "
-                  "there sees the arm", flush=True)
-        with_web_view(descriptor, launch.body.node_id, {"SO101_WEB_HOST": args.web_host, "SO101_WEB_PORT": str(args.web_port)})
+    web_line = add_web_view(args, descriptor, launch.body, "teleop")
+    if web_line:
         ready_marks += (WEB_VIEW_MARKS,)
     print(text["starting"].format(mode=launch.mode, log=launch.log), flush=True)
-    web_line = f"web view: {page_address(args.web_host, args.web_port)}" if args.web else ""
     return run_beside(launch, descriptor, PROMPT_NODE_FILE, text, ready_marks, web_line)
 
 

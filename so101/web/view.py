@@ -4,9 +4,8 @@ One frame per joint, nested as the URDF's tree (so101/web/urdf_scene.py), so a n
 rotation per joint sent to every open page, and each browser works out the rest. The page has
 viser's own orbit (drag), pan (right drag) and zoom (wheel); a panel with the joint angles as
 text, a rolling plot of the last seconds, the body's camera picture when it has one, and a
-marker while an episode records. viser
-serves its page from its installed package and the meshes from the model files: nothing comes
-from the internet. Read-only: the page has no control that sends anything to the arm.
+marker while an episode records. viser serves its page from its installed package and the
+meshes from the model files: nothing comes from the internet. Read-only: the page has no control that sends anything to the arm.
 """
 
 from __future__ import annotations
