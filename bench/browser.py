@@ -19,7 +19,6 @@ from pathlib import Path
 
 from so101.runtime.processes import stop_process
 
-
 CHROMIUM = shutil.which("chromium")
 FLAGS = ("--headless=new", "--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
          "--window-size=1200,800", "--host-resolver-rules=MAP * ~NOTFOUND, EXCLUDE 127.0.0.1",
@@ -33,10 +32,10 @@ class Browser:
     run under SCHED_IDLE, taking only the CPU nothing else wants (Chromium raises its own processes'
     nice value, so nice 19 is not enough)."""
 
-    def __init__(self, debug_port: int, idle: bool = False, extra_flags: tuple[str, ...] = ()):
+    def __init__(self, debug_port: int, idle: bool = False):
         self._profile = tempfile.TemporaryDirectory(prefix="so101-chromium-", ignore_cleanup_errors=True)
         self.process = subprocess.Popen(
-            [str(CHROMIUM), *FLAGS, *extra_flags, f"--remote-debugging-port={debug_port}", f"--user-data-dir={self._profile.name}",
+            [str(CHROMIUM), *FLAGS, f"--remote-debugging-port={debug_port}", f"--user-data-dir={self._profile.name}",
              "about:blank"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
             start_new_session=True,  # its own process group: kill() ends every helper process with it
             preexec_fn=(lambda: os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))) if idle else None)

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import logging
 import math
+import time
 
 import numpy as np
 import pybullet
@@ -12,7 +14,7 @@ from so101.assets import urdf_path
 from so101.robot import ACTUATED_JOINTS
 from so101.web.urdf_scene import axis_angle, load_urdf_scene, multiply, rotate, rpy
 from so101.web.settings import page_address
-from so101.web.view import angles_markdown, recording_html
+from so101.web.view import WebView, angles_markdown, recording_html
 
 pytestmark = pytest.mark.slow
 
@@ -77,3 +79,20 @@ def test_the_recording_marker_names_the_episode_and_escapes_the_task():
 ])
 def test_the_printed_address_is_one_to_open(host, address):
     assert page_address(host, 8101) == address
+
+
+def test_a_connection_closed_before_its_request_is_no_error(caplog):
+    # A browser's speculative connection, or a port scan: websockets would log each with a traceback.
+    import socket
+
+    view = WebView(load_urdf_scene(urdf_path(None)), "127.0.0.1", 8134)
+    try:
+        for _ in range(3):
+            socket.create_connection(("127.0.0.1", 8134)).close()
+        time.sleep(1)
+        view.show([10.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+    finally:
+        view.close()
+        view.close()  # safe twice
+    errors = [record for record in caplog.records if record.levelno >= logging.ERROR]
+    assert errors == [], [record.getMessage() for record in errors]

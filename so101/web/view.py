@@ -5,12 +5,14 @@ rotation per joint sent to every open page, and each browser works out the rest.
 viser's own orbit (drag), pan (right drag) and zoom (wheel); a panel with the joint angles as
 text, a rolling plot of the last seconds, the body's camera picture when it has one, and a
 marker while an episode records. viser serves its page from its installed package and the
-meshes from the model files: nothing comes from the internet. Read-only: the page has no control that sends anything to the arm.
+meshes from the model files: nothing comes from the internet. Read-only: the page has no
+control that sends anything to the arm.
 """
 
 from __future__ import annotations
 
 import html
+import logging
 import time
 from collections import deque
 from typing import Sequence
@@ -56,6 +58,9 @@ class WebView:
     """A viser server on host:port showing `scene`; `show(angles_deg)` poses the arm. `close()` is safe twice."""
 
     def __init__(self, scene: UrdfScene, host: str, port: int):
+        # A connection closed before its first request (a browser's speculative one, a port scan) is
+        # no failure of the view, but websockets logs it as an error with a traceback.
+        logging.getLogger("websockets.server").setLevel(logging.CRITICAL)
         self.server: viser.ViserServer | None = viser.ViserServer(host=host, port=port, verbose=False)
         server = self.server
         server.scene.set_up_direction("+z")
