@@ -20,6 +20,7 @@ from pathlib import Path
 from so101.runtime.processes import stop_process
 
 CHROMIUM = shutil.which("chromium")
+CALL_TIMEOUT_S = 60.0
 FLAGS = ("--headless=new", "--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
          "--window-size=1200,800", "--host-resolver-rules=MAP * ~NOTFOUND, EXCLUDE 127.0.0.1",
          # A headless page counts as hidden: without these its animation frames are throttled.
@@ -52,6 +53,7 @@ class Browser:
         self._ids = itertools.count(1)
 
     def _call(self, method: str, **params) -> dict:
+        """One DevTools call; TimeoutError after CALL_TIMEOUT_S (a page busy drawing in software can stall)."""
         import websockets  # viser's dependency; imported here so bench/web_candidates.py can read FLAGS without it
 
         async def call() -> dict:
@@ -62,7 +64,7 @@ class Browser:
                     message = json.loads(await socket.recv())
                     if message.get("id") == request:
                         return message.get("result", {})
-        return asyncio.run(call())
+        return asyncio.run(asyncio.wait_for(call(), CALL_TIMEOUT_S))
 
     def open(self, url: str) -> None:
         # A page of a headless browser counts as hidden and unfocused: some pages then stop animating.

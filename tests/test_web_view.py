@@ -120,6 +120,9 @@ def test_every_body_is_shown_posed_by_its_joint_state(tmp_path, body):
         browser = None
         try:
             dora.wait_for(f"web view: http://127.0.0.1:{web_port}/", timeout_s=60)
+            # The body up before the browser starts: the emulated arm is a thread of this process, and a
+            # starting Chromium once starved it through the arm's start-up checks (a fresh clone's run).
+            dora.wait_for("SO-101 loaded", timeout_s=60)
             browser = Browser(DEBUG_PORT + 3)
             browser.open(f"http://127.0.0.1:{web_port}/")
             browser.wait_for_text("shoulder_pan: ")
