@@ -47,6 +47,7 @@ from __future__ import annotations
 
 import math
 import random
+import threading
 from pathlib import Path
 from typing import NamedTuple, Sequence
 
@@ -124,6 +125,9 @@ class Kinematics:
 
         self._p = p = pybullet
         self.client = None
+        # One client, one caller at a time: the prompt's pump thread reads where `xyz` landed
+        # while its main thread may be solving the next.
+        self._lock = threading.Lock()
         client = p.connect(p.DIRECT)
         if client < 0:
             raise RuntimeError("PyBullet could not connect in DIRECT mode")
@@ -234,17 +238,19 @@ class Kinematics:
         shoulder_lift on and the tip (see _path_margin_mm), not the meshes around them.
         """
         start, goal = arm_angles_deg(start_deg), arm_angles_deg(goal_deg)
-        self._connected()
-        return self._path_margin_mm(
-            self._clamped([math.radians(angle) for angle in start] + [self._gripper_rad]),
-            self._clamped([math.radians(angle) for angle in goal] + [self._gripper_rad]),
-        ) >= -CLEAR_SLACK_MM
+        with self._lock:
+            self._connected()
+            return self._path_margin_mm(
+                self._clamped([math.radians(angle) for angle in start] + [self._gripper_rad]),
+                self._clamped([math.radians(angle) for angle in goal] + [self._gripper_rad]),
+            ) >= -CLEAR_SLACK_MM
 
     def tip_mm(self, arm_deg) -> tuple[float, float, float]:
         """Where five arm angles (degrees) put the tip, in mm in the base frame (forward kinematics)."""
         arm = arm_angles_deg(arm_deg)
-        self._connected()
-        tip_m = self._tip_m([math.radians(angle) for angle in arm] + [self._gripper_rad])
+        with self._lock:
+            self._connected()
+            tip_m = self._tip_m([math.radians(angle) for angle in arm] + [self._gripper_rad])
         return tuple(coordinate * 1000.0 for coordinate in tip_m)  # type: ignore[return-value]
 
     def solve(self, target_mm, seed_deg=None) -> Reach:
@@ -258,6 +264,10 @@ class Kinematics:
         """
         target_m = [coordinate / 1000.0 for coordinate in point_mm(target_mm)]
         seed = arm_angles_deg(seed_deg) if seed_deg is not None else (0.0,) * NUM_ARM_JOINTS
+        with self._lock:
+            return self._solve(target_m, seed)
+
+    def _solve(self, target_m: list[float], seed: Sequence[float]) -> Reach:
         self._connected()
         current = self._clamped([math.radians(angle) for angle in seed] + [self._gripper_rad])
         home = self._clamped([0.0] * NUM_ARM_JOINTS + [self._gripper_rad])
@@ -289,12 +299,13 @@ class Kinematics:
     # -- life cycle --------------------------------------------------------------------
     def close(self) -> None:
         """Disconnect the private client; safe to call twice."""
-        if self.client is not None:
-            try:
-                self._p.disconnect(physicsClientId=self.client)
-            except self._p.error:
-                pass
-            self.client = None
+        with self._lock:
+            if self.client is not None:
+                try:
+                    self._p.disconnect(physicsClientId=self.client)
+                except self._p.error:
+                    pass
+                self.client = None
 
     def __enter__(self) -> "Kinematics":
         return self

@@ -4,7 +4,10 @@ from __future__ import annotations
 
 import io
 import json
+import math
+import re
 import threading
+import types
 
 import pyarrow as pa
 import pytest
@@ -385,3 +388,66 @@ def test_the_readme_lists_the_settings_the_prompt_declares():
     section = readme.split("### keyboard_control (`nodes/keyboard_control.py`)")[1].split("\n### ")[0]
     listed = re.findall(r"^\| `(SO101_\w+)` \|", section, flags=re.MULTILINE)
     assert listed == [setting.env_var for setting in declared(PromptSettings)]
+
+
+# -- after xyz: where the tip landed, once the arm stopped ------------------------------------
+
+
+@pytest.mark.parametrize("lang, landed_line", [
+    ("en", r"  the tip settled at \({x}, {y}, {z}\) mm, {off} mm from \(200, 0, 150\): "
+           r"the servos hold the joints a little off their goals"),
+    ("zh", r"  末端停在 \({x}, {y}, {z}\) mm,离目标 \(200, 0, 150\) {off} mm:舵机没有把关节完全转到目标角度"),
+])
+def test_xyz_says_where_the_tip_landed_when_the_servos_stop_it_off_target(tmp_path, kinematics, monkeypatch, lang, landed_line):
+    clock = [100.0]
+    monkeypatch.setattr("so101.prompt.control.time", types.SimpleNamespace(monotonic=lambda: clock[0]))
+    node, control = make_control(tmp_path, lang, events=state_events())
+    news = []
+    control.show_news = news.append
+    control.handle_line("xyz 200 0 150")
+    (goal_deg,) = sent(node)
+    sagged_deg = [goal_deg[0], goal_deg[1] + 1.5, goal_deg[2] + 1.0, *goal_deg[3:]]  # shoulder and elbow give
+
+    def state(angles_deg, after_s):
+        clock[0] += after_s
+        control.on_event({"type": "INPUT", "id": "joint_state", "value": pa.array(angles_deg)})
+
+    for step in range(20):  # on its way: still moving, nothing said
+        state([angle * step / 20 + start * (1 - step / 20) for angle, start in zip(sagged_deg, STATE_DEG)], 0.02)
+    assert news == []
+    for _ in range(30):  # stopped off the goal: said once, after half a second still
+        state(sagged_deg, 0.02)
+    x, y, z = kinematics.tip_mm(sagged_deg)
+    off = math.dist((x, y, z), (200, 0, 150))
+    assert off > 2.0
+    assert len(news) == 1
+    assert re.fullmatch(landed_line.format(x=f"{x:.1f}", y=f"{y:.1f}", z=f"{z:.1f}", off=f"{off:.1f}"), news[0]), news
+
+
+def test_xyz_says_nothing_when_the_tip_lands_on_target_or_another_command_came(tmp_path, kinematics, monkeypatch):
+    clock = [100.0]
+    monkeypatch.setattr("so101.prompt.control.time", types.SimpleNamespace(monotonic=lambda: clock[0]))
+    node, control = make_control(tmp_path, "en", events=state_events())
+    news = []
+    control.show_news = news.append
+
+    def settle_at(angles_deg):
+        for _ in range(40):
+            clock[0] += 0.02
+            control.on_event({"type": "INPUT", "id": "joint_state", "value": pa.array(angles_deg)})
+
+    control.handle_line("xyz 200 0 150")
+    settle_at(sent(node)[-1])  # exactly on the goal: within 2 mm, not worth a line
+    control.handle_line("xyz 200 0 150")
+    control.handle_line("0 10")  # the next move is this one: the xyz's landing is not reported
+    settle_at([angle + 3.0 for angle in sent(node)[-2]])
+    assert news == []
+
+
+def test_a_settle_watch_gives_up_on_an_arm_that_keeps_moving():
+    from so101.prompt.landing import SETTLE_TIMEOUT_S, SettleWatch
+
+    watch = SettleWatch(started_s=0.0)
+    swinging = [watch.add(step * 0.02, [math.sin(step / 10.0)] * 5) for step in range(int(SETTLE_TIMEOUT_S / 0.02) + 10)]
+    assert swinging == [None] * len(swinging) and watch.done
+    assert watch.add(SETTLE_TIMEOUT_S + 1.0, [0.0] * 5) is None  # still, but too late

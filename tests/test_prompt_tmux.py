@@ -214,12 +214,25 @@ def test_teleop_drives_the_mujoco_body_with_the_same_prompt(tmp_path):
         assert abs(float(reached.group(1)) - 60.0) <= 1.0, terminal.screen()
         terminal.type_line("save m")
         end = terminal.wait_for(r"^  → pose 'm' saved: \[.*$", timeout_s=20, after=end).end()
+        # MuJoCo's servos sag under the arm's weight: once the arm stops, the prompt says where the tip is.
+        terminal.type_line("xyz 200 0 150")
+        landed = terminal.wait_for(r"^  the tip settled at \(([-\d.]+), ([-\d.]+), ([-\d.]+)\) mm, ([\d.]+) mm "
+                                   r"from \(200, 0, 150\): the servos hold the joints a little off their goals$",
+                                   timeout_s=60, after=end)
+        end = landed.end()
+        terminal.type_line("where")
+        where = terminal.wait_for(r"^> where\n  tip at \(([-\d.]+), ([-\d.]+), ([-\d.]+)\) mm \(base frame\)$",
+                                  timeout_s=20, after=end)
+        end = where.end()
         terminal.type_line("quit")
         terminal.wait_for(r"^TELEOP_EXIT=0$", timeout_s=60, after=end)
         screen = terminal.screen()
     finally:
         terminal.close()
     assert "Traceback" not in screen, screen
+    landed_mm = [float(value) for value in landed.groups()[:3]]
+    assert float(landed.group(4)) == pytest.approx(math.dist(landed_mm, (200, 0, 150)), abs=0.1) and float(landed.group(4)) > 2.0
+    assert [float(value) for value in where.groups()] == pytest.approx(landed_mm, abs=0.5)  # the arm stays where it settled
     assert "MuJoCo so101_new_calib.xml" in log_file.read_text()  # the MuJoCo node ran, not PyBullet's
     assert list(json.loads(poses_file.read_text())) == ["m"]
     spawned = [int(pid) for pid in re.findall(r"spawned node with pid (\d+)", log_file.read_text())]

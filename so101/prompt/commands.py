@@ -178,6 +178,7 @@ TEXT = {
         "xyz_form": "  xyz 命令格式:xyz X Y Z(末端目标点,单位毫米,基座坐标系:x 向前,y 向左,z 向上;如 'xyz 200 0 150')",
         "bad_mm": "  '{text}' 不是坐标:坐标是十进制数字,单位毫米(如 200、-35.5)",
         "sent_tip": "  → 末端 → ({x:g}, {y:g}, {z:g}) mm:关节 {angles}°",
+        "landed": "  末端停在 ({x:.1f}, {y:.1f}, {z:.1f}) mm,离目标 ({tx:g}, {ty:g}, {tz:g}) {off:.1f} mm:舵机没有把关节完全转到目标角度",
         "unreachable": "  够不到 ({x:g}, {y:g}, {z:g}) mm:最近能到的点是 ({nx:.0f}, {ny:.0f}, {nz:.0f}) mm(差 {error:.0f} mm),未发送",
         "below_floor": "  ({x:g}, {y:g}, {z:g}) mm 在地面以下(z < 0,基座底面是 z = 0),未发送",
         "through_floor": "  到 ({x:g}, {y:g}, {z:g}) mm 的直接移动会碰到地面,未发送(分几步走,或先 home)",
@@ -255,6 +256,8 @@ TEXT = {
         "e.g. 'xyz 200 0 150')",
         "bad_mm": "  '{text}' is not a coordinate: coordinates are decimal numbers in millimetres (e.g. 200, -35.5)",
         "sent_tip": "  → tip → ({x:g}, {y:g}, {z:g}) mm: joints {angles}°",
+        "landed": "  the tip settled at ({x:.1f}, {y:.1f}, {z:.1f}) mm, {off:.1f} mm from ({tx:g}, {ty:g}, {tz:g}): "
+        "the servos hold the joints a little off their goals",
         "unreachable": "  ({x:g}, {y:g}, {z:g}) mm is out of reach: the nearest point reached is ({nx:.0f}, {ny:.0f}, {nz:.0f}) mm "
         "({error:.0f} mm away); not sent",
         "below_floor": "  ({x:g}, {y:g}, {z:g}) mm is below the floor (z < 0; the base stands at z = 0): not sent",

@@ -7,6 +7,7 @@ and key jogging load on first use only, to keep the prompt's start-up quick.
 
 from __future__ import annotations
 
+import math
 import os
 import subprocess
 import sys
@@ -18,6 +19,7 @@ from so101.prompt.commands import (
     Batch, Empty, Episodes, GoPose, Help, Home, JogKeys, ListJoints, ListPoses, MoveTip, ParseError, Quit, SavePose, SetJoint,
     ShowState, Snapshot, Where, format_angle, format_angles, help_lines, joint_lines, parse_command, texts,
 )
+from so101.prompt.landing import SettleWatch, worth_saying
 from so101.prompt.poses import Pose, PoseStore
 from so101.prompt.recorder_link import REPLY_WAIT_S, RecorderLink
 from so101.robot import ACTUATED_JOINTS, NUM_ARM_JOINTS
@@ -41,7 +43,7 @@ class KeyboardControl:
 
     def __init__(self, send_joint_cmd: Callable[[Sequence[float]], None], poses: PoseStore, lang: str = "zh",
                  keys_fd: int | None = None, recorder: RecorderLink | None = None):
-        self.send_joint_cmd = send_joint_cmd
+        self._send_joint_cmd = send_joint_cmd
         self.poses = poses
         self.lang = lang
         self.text = texts(lang)
@@ -52,6 +54,8 @@ class KeyboardControl:
         self._last_state_at: float | None = None  # time.monotonic() of the latest joint_state
         self.stopped = False
         self._kinematics = None
+        # After `xyz`: (the watch over the states, the target in mm), until the arm stopped or another command.
+        self._landing: tuple[SettleWatch, tuple[float, float, float]] | None = None
         self.keys_fd = keys_fd
         self.recorder = recorder
         self.jogging = False  # `jog` has the terminal
@@ -74,14 +78,22 @@ class KeyboardControl:
                 self.show_news(f"  {line}")
         elif event["type"] == "INPUT" and event["id"] in ("joint_state", "gripper_state"):
             values = [float(angle) for angle in event["value"].to_pylist()]
+            landing, landed_deg = None, None
             with self._state_changed:
                 if event["id"] == "joint_state" and len(values) == NUM_ARM_JOINTS:
                     self.joint_state_deg = tuple(values)
                     self.states_seen += 1
                     self._last_state_at = time.monotonic()
                     self._state_changed.notify_all()
+                    landing = self._landing
+                    if landing is not None:
+                        landed_deg = landing[0].add(self._last_state_at, values)
+                        if landing[0].done:
+                            self._landing = None
                 elif event["id"] == "gripper_state" and len(values) == 1:
                     self.gripper_deg = values[0]
+            if landing is not None and landed_deg is not None:  # FK and a printed line: outside the lock
+                self._say_landing(landing[1], landed_deg)
 
     def wait_for_state(self, timeout_s: float) -> tuple[tuple[float, ...] | None, float | None]:
         """The latest arm angles and gripper angle, once a first joint_state (or STOP) came or
@@ -104,6 +116,22 @@ class KeyboardControl:
             if self.joint_state_deg is None:
                 return None
             return self.joint_state_deg + (self.gripper_deg or 0.0,)
+
+    def send_joint_cmd(self, angles_deg: Sequence[float]) -> None:
+        """Send joint_cmd; the arm's next move is this one, not the last `xyz`'s."""
+        self._landing = None
+        self._send_joint_cmd(angles_deg)
+
+    def _say_landing(self, target_mm: tuple[float, float, float], landed_deg: Sequence[float]) -> None:
+        """Where the tip came to rest after `xyz`, if that is off the target (the pump thread)."""
+        kinematics = self.kinematics()
+        if isinstance(kinematics, Exception) or self.show_news is None:
+            return
+        landed_mm = kinematics.tip_mm(landed_deg)
+        if worth_saying(target_mm, landed_mm):
+            x, y, z = (round(value, 1) + 0.0 for value in landed_mm)
+            tx, ty, tz = target_mm
+            self.show_news(self.text["landed"].format(x=x, y=y, z=z, tx=tx, ty=ty, tz=tz, off=math.dist(target_mm, landed_mm)))
 
     def kinematics(self):
         """so101.kinematics.Kinematics, made on first use (PyBullet stays out of the prompt's
@@ -264,6 +292,7 @@ class KeyboardControl:
         if joints_deg is not None and not kinematics.path_clear(joints_deg, reach.joints_deg):
             return self.text["through_floor"].format(x=x, y=y, z=z)
         self.send_joint_cmd(list(reach.joints_deg))  # the five arm joints; the gripper stays
+        self._landing = (SettleWatch(time.monotonic()), target_mm)
         return self.text["sent_tip"].format(x=x, y=y, z=z, angles=format_angles(reach.joints_deg))
 
     def _where(self, state_wait_s: float) -> str:
