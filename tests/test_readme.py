@@ -65,3 +65,26 @@ def test_the_benchmark_tables_in_the_readme_are_the_latest_results(body):
     table = {"real": real_bench.table, "cluster": cluster_bench.table}.get(body, run_bench.table)
     shown = "\n".join(("    " + line).rstrip() for line in table(result).splitlines())
     assert shown in README, f"README's benchmark figures differ from {latest.name} (so101 bench --show prints them)"
+
+
+SUITE_LINES = {  # the README's Tests section: each command's time and how many tests it ran
+    "": re.compile(r"python3\.11 bootstrap\.py test .*: [\d a-z]+ here \((\d+) tests\)"),
+    "not slow": re.compile(r"\.venv/bin/pytest -m \"not slow\" .*: [\d a-z]+ \((\d+) tests\)"),
+}
+
+
+@pytest.mark.parametrize("marks", list(SUITE_LINES))
+def test_the_suite_times_in_the_readme_are_from_a_run_of_about_todays_suite(marks):
+    """A time quoted for a suite of 544 tests, when it has 805, is a figure from another project."""
+    import subprocess
+    import sys
+
+    quoted = SUITE_LINES[marks].search(README)
+    assert quoted, f"README's Tests section has no time with its test count for {marks or 'the whole suite'!r}"
+    collected = subprocess.run(
+        [sys.executable, "-m", "pytest", "--collect-only", "-q", *(["-m", marks] if marks else [])],
+        cwd=ROOT, capture_output=True, text=True, check=True,
+    ).stdout
+    count = int(re.search(r"^(\d+)(?:/\d+)? tests? collected", collected, re.MULTILINE).group(1))
+    # Within a tenth: a few tests added since the timed run are fine, another era's figure is not.
+    assert abs(int(quoted.group(1)) - count) <= count / 10, (quoted.group(0), count)
