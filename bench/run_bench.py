@@ -69,12 +69,13 @@ TARGETS = {
     "sim_over_wall_error": 0.01,  # |sim/wall - 1|, at most
     "startup_s": 3.0,  # at most
     "peak_rss_mb": 250.0,  # at most
-    "fast_ratio": 0.70,  # fast-mode steps/s over raw steps/s, at least
+    "fast_ratio": 0.90,  # fast-mode steps/s over raw steps/s, at least, with FAST_TARGET_STEPS steps per state
     "save_60s_episode_s": 10.0,  # saving a 60 s episode with video, at most
     # The leader moved by hand -> the body's joint_state showing it, p99, at most: the leader's 10 ms
     # tick and read, the body's 4 ms tick, the transits (the same for MuJoCo's node as PyBullet's).
     "leader_latency_p99_ms": 25.0,
 }
+FAST_TARGET_STEPS = 100
 
 
 # -- targets ------------------------------------------------------------------------
@@ -127,9 +128,10 @@ def target_rows(figures: dict, body: str = "pybullet") -> list[dict]:
         from bench import web_bench
 
         rows += web_bench.targets(figures["web"], TARGETS["joint_state_per_s"], TARGETS["sim_over_wall_error"])
-    best = max(figures["fast_mode"]["runs"], key=lambda run: run["ratio_to_raw"])
-    row(f"fast mode steps/s / raw (SO101_FAST_STEPS={best['steps_per_state']})", best["ratio_to_raw"],
-        f">= {TARGETS['fast_ratio']}", best["ratio_to_raw"] >= TARGETS["fast_ratio"])
+    hundred = [run for run in figures["fast_mode"]["runs"] if run["steps_per_state"] == FAST_TARGET_STEPS]
+    for run in hundred:
+        row(f"fast mode steps/s / raw (SO101_FAST_STEPS={FAST_TARGET_STEPS})", run["ratio_to_raw"],
+            f">= {TARGETS['fast_ratio']}", run["ratio_to_raw"] >= TARGETS["fast_ratio"])
     return rows
 
 
@@ -229,7 +231,7 @@ way = sys.argv[1]
 stages = {"python": mb()}
 import pyarrow, dora, pybullet as p, pybullet_data
 from so101 import assets
-from so101.bodies import pybullet_sim as simulator
+from so101.bodies import pybullet_hulls, pybullet_sim as simulator
 stages["imports (numpy, pyarrow, dora, pybullet)"] = mb()
 if way == "node":
     simulator.release_freed_memory()
@@ -240,14 +242,15 @@ if way != "course":
 stages["DIRECT client"] = mb()
 p.setAdditionalSearchPath(pybullet_data.getDataPath(), physicsClientId=cid)
 p.loadURDF("plane.urdf", physicsClientId=cid)
-p.loadURDF(str(assets.urdf_path()), useFixedBase=True, physicsClientId=cid)
+urdf = assets.urdf_path()
+p.loadURDF(str(pybullet_hulls.urdf_to_load(urdf) if way == "node" else urdf), useFixedBase=True, physicsClientId=cid)
 stages["the arm loaded"] = mb()
 print(json.dumps(stages))
 """
 MEMORY_WAYS = {
     "course": "as the course loads it",
     "plugins": "without the renderer and file cache",
-    "node": "and glibc returns freed blocks (the node)",
+    "node": "and glibc returns freed blocks, and collides the hull files (the node)",
 }
 
 
@@ -288,6 +291,39 @@ def measure_gui(run_dir: Path, duration_s: float, probe_env: dict, body: str = "
     }
 
 
+# -- fast mode --------------------------------------------------------------------------
+# The raw step beside each fast-mode run takes this share of the first raw measurement's steps.
+FAST_RAW_SHARE = 4
+
+
+def measure_fast_mode(work_dir: Path, steps_per_state: int, duration_s: float, raw_steps: int, body: str) -> dict:
+    """The node's fast mode against the raw step taken just before and just after it.
+
+    This machine's speed drifts by up to 2x over minutes (the raw step has gone from 19 to
+    42 us between runs of this bench): a raw step measured at the bench's start made the
+    ratio 0.65-1.16 depending on the moment. Both sides are medians, so a preempted step or
+    batch does not count: the raw step's p50 beside the run, and the p50 of the time from one
+    batch's start to the next (its N steps, the state read and sent, the poll for input).
+    """
+    raw_before = measure_raw_step(raw_steps, 0, body)
+    print(f"dora run, fast mode SO101_FAST_STEPS={steps_per_state}, {duration_s:g} s ...", flush=True)
+    record = run_dataflow(
+        work_dir / f"fast{steps_per_state}", duration_s + WARMUP_S, {"SO101_FAST_STEPS": str(steps_per_state)},
+        {"PROBE_PERIOD_S": "0", "PROBE_COUNT_ONLY": "1"}, body=body,
+    )
+    raw_after = measure_raw_step(raw_steps, 0, body)
+    steady_from_ns = record["probe"]["first_state_ns"] + int(WARMUP_S * 1e9)
+    ticks = tick_figures([tick for tick in record["ticks"] if tick[0] >= steady_from_ns], TICK_PERIOD_S)
+    raw_step_us = (raw_before["us_per_step_p50"] + raw_after["us_per_step_p50"]) / 2
+    step_us = ticks["interval_ms"]["p50"] * 1e3 / steps_per_state
+    return {
+        "steps_per_state": steps_per_state, "steps_per_s": 1e6 / step_us, "ratio_to_raw": raw_step_us / step_us,
+        "raw_step_us_p50": {"before": raw_before["us_per_step_p50"], "after": raw_after["us_per_step_p50"]},
+        "mean_steps_per_s": ticks["steps_per_s"], "states_per_s": ticks["served_per_s"],
+        "sim_over_wall": ticks["steps_per_s"] * TICK_PERIOD_S, "measured_s": ticks["span_s"],
+    }
+
+
 # -- the run --------------------------------------------------------------------------
 def run_benchmark(duration_s: float, fast_s: float, fast_steps: list[int], raw_steps: int, node_ticks: int,
                   after_sleep_steps: int, body: str = "pybullet", saved_episode_s: float = 60.0,
@@ -310,22 +346,8 @@ def run_benchmark(duration_s: float, fast_s: float, fast_steps: list[int], raw_s
         from bench import web_bench
 
         figures["web"] = web_bench.run_web_benchmark(work_dir, duration_s, body, browsers=web_browsers)
-        runs = []
-        for steps in fast_steps:
-            print(f"dora run, fast mode SO101_FAST_STEPS={steps}, {fast_s:g} s ...", flush=True)
-            record = run_dataflow(
-                work_dir / f"fast{steps}", fast_s + WARMUP_S, {"SO101_FAST_STEPS": str(steps)},
-                {"PROBE_PERIOD_S": "0", "PROBE_COUNT_ONLY": "1"}, body=body,
-            )
-            steady_from_ns = record["probe"]["first_state_ns"] + int(WARMUP_S * 1e9)
-            ticks = tick_figures([tick for tick in record["ticks"] if tick[0] >= steady_from_ns], TICK_PERIOD_S)
-            runs.append({
-                "steps_per_state": steps, "steps_per_s": ticks["steps_per_s"],
-                "ratio_to_raw": ticks["steps_per_s"] / raw["steps_per_s"],
-                "states_per_s": ticks["served_per_s"], "sim_over_wall": ticks["steps_per_s"] * TICK_PERIOD_S,
-                "measured_s": ticks["span_s"],
-            })
-        figures["fast_mode"] = {"runs": runs}
+        figures["fast_mode"] = {"runs": [measure_fast_mode(work_dir, steps, fast_s, raw_steps // FAST_RAW_SHARE, body)
+                                         for steps in fast_steps]}
         from bench import record_bench
 
         figures["recording"] = record_bench.run_recording_benchmark(work_dir, duration_s, body, saved_episode_s)
@@ -416,6 +438,9 @@ def table(result: dict) -> str:
     for run in result["fast_mode"]["runs"]:
         label = f"fast mode, SO101_FAST_STEPS={run['steps_per_state']} (steps/s, x raw)"
         lines.append(f"{label:<52} {run['steps_per_s']:>10.0f} | {run['ratio_to_raw']:<9.2f}")
+        if "raw_step_us_p50" in run:  # results from before the raw step was taken beside each run have none
+            raw_us = run["raw_step_us_p50"]
+            lines.append(f"{'  raw step just before | after (us, p50)':<52} {raw_us['before']:>10.1f} | {raw_us['after']:<9.1f}")
     if "recording" in result:
         from bench import record_bench
 

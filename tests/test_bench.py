@@ -243,6 +243,9 @@ def test_quick_bench_writes_every_figure(tmp_path, body):
     assert [run["steps_per_state"] for run in runs] == [1, 100]
     for run in runs:
         assert _positive(run["steps_per_s"]) and _positive(run["ratio_to_raw"])
+        # The ratio is against the raw step taken beside the run, not at the bench's start.
+        beside_us = (run["raw_step_us_p50"]["before"] + run["raw_step_us_p50"]["after"]) / 2
+        assert run["ratio_to_raw"] == pytest.approx(beside_us * run["steps_per_s"] / 1e6)
     # Fewer publications per step can only help: 100 steps per state beat 1.
     assert runs[1]["steps_per_s"] > runs[0]["steps_per_s"]
 
