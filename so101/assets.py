@@ -45,6 +45,12 @@ def manifest() -> dict[str, str]:
     return entries
 
 
+def manifest_digest() -> str:
+    """One SHA-256 for the whole manifest: what files derived from the model are keyed to."""
+    lines = "\n".join(f"{digest} {relpath}" for relpath, digest in sorted(manifest().items()))
+    return hashlib.sha256(lines.encode()).hexdigest()
+
+
 def repo_root() -> Path | None:
     """The source checkout this package runs from, if any (an editable install)."""
     root = _PACKAGE_DIR.parent

@@ -9,6 +9,7 @@ its loop (README, difference 8): here the same call drives it too, as the node d
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pybullet as p
@@ -17,6 +18,7 @@ import pytest
 
 from so101 import assets
 from so101.runtime.dataflow import TICK_PERIOD_S
+from so101.bodies import pybullet_hulls
 from so101.bodies.pybullet_sim import SO101Sim
 
 pytestmark = pytest.mark.slow  # steps PyBullet through the course's motions: not in the fast subset
@@ -113,8 +115,9 @@ def contact_points(client: int, robot_id: int) -> list[tuple]:
 
 def test_leaving_out_the_renderer_and_the_file_cache_changes_no_physics():
     # The node's memory savings (renders=False unloads PyBullet's CPU renderer and its file
-    # cache before loading) against the course's plain loading, through ground contact:
-    # shoulder_lift at 90° presses the gripper into the floor, then the pan sweeps it along.
+    # cache before loading; the hull files stand for the full collision meshes) against the
+    # course's plain loading, through ground contact: shoulder_lift at 90° presses the
+    # gripper into the floor, then the pan sweeps it along.
     course = CourseArm()
     sim = SO101Sim(mode="direct", time_step_s=TICK_PERIOD_S, log=lambda message: None, renders=False)
     try:
@@ -134,6 +137,66 @@ def test_leaving_out_the_renderer_and_the_file_cache_changes_no_physics():
     finally:
         sim.close()
         course.close()
+
+
+HULL_TOLERANCE_RAD = 1e-6
+CONTACT_TOLERANCE_M = 1e-9
+ON_THE_GROUND = [[0.0, 90.0, 0.0, 0.0, 0.0, 30.0], [60.0, 90.0, 0.0, 0.0, 0.0, 30.0]]
+EXERCISE_2 = {"control_mode": "servo"}
+# (SO101Sim options, commands, whether the arm touches the ground): the course's motions (at 90°
+# the shoulder_lift and the elbow put the gripper on the floor), the arm pressed into the floor and
+# swept along it, and exercise 2: the course's arm without its link damping, and the servo,
+# swinging and on the ground.
+HULL_SCENARIOS = {
+    **{name: ({}, commands, name in ("1 90", "2 90")) for name, commands in SCENARIOS.items()},
+    "on the ground, swept along": ({}, ON_THE_GROUND, True),
+    "exercise 2: without link damping, 0 90": ({"link_damping": None}, SCENARIOS["0 90"], False),
+    **{
+        f"exercise 2: servo, zeta {zeta}, 0 90": ({**EXERCISE_2, "servo_damping_ratio": zeta}, SCENARIOS["0 90"], False)
+        for zeta in (0.2, 0.7)
+    },
+    "exercise 2: servo, on the ground": (EXERCISE_2, ON_THE_GROUND, True),
+}
+
+
+@pytest.mark.parametrize("options, commands, touches_the_ground", HULL_SCENARIOS.values(), ids=HULL_SCENARIOS.keys())
+def test_the_hull_files_move_the_arm_as_the_full_meshes_do(options, commands, touches_the_ground):
+    # The simulator collides the hull files derived from the model (so101.bodies.pybullet_hulls);
+    # the course's full meshes must give the same motion, step by step, and the same contacts.
+    made = [
+        SO101Sim(mode="direct", time_step_s=TICK_PERIOD_S, log=lambda message: None, renders=False,
+                 hull_collisions=hulls, **options)
+        for hulls in (False, True)
+    ]
+    full, hull = made
+    try:
+        assert Path(p.getCollisionShapeData(hull.robot_id, 3, physicsClientId=hull.client)[1][4].decode()).parent.name == (
+            pybullet_hulls.HULLS_DIR_NAME
+        )
+        contact_steps = 0
+        moved_rad = 0.0
+        for targets_deg in commands:
+            for sim in made:
+                sim.set_targets_deg(targets_deg)
+            for step in range(STEPS_PER_COMMAND):
+                for sim in made:
+                    sim.step()
+                expected_rad = np.radians(full.joint_angles_deg())
+                error_rad = np.max(np.abs(np.radians(hull.joint_angles_deg()) - expected_rad))
+                assert error_rad <= HULL_TOLERANCE_RAD, f"{targets_deg} step {step}: {error_rad} rad"
+                full_contacts = contact_points(full.client, full.robot_id)
+                hull_contacts = contact_points(hull.client, hull.robot_id)
+                assert [c[:3] for c in hull_contacts] == [c[:3] for c in full_contacts], f"{targets_deg} step {step}"
+                assert np.allclose([c[3:] for c in hull_contacts], [c[3:] for c in full_contacts],
+                                   rtol=0, atol=CONTACT_TOLERANCE_M), f"{targets_deg} step {step}"
+                contact_steps += bool(full_contacts)
+                moved_rad = max(moved_rad, float(np.max(np.abs(expected_rad))))
+        assert moved_rad > math.radians(40)  # a real move, not an arm at rest
+        # Where the arm goes down, the comparison covered it on the ground, not only in the air.
+        assert (contact_steps > 100) if touches_the_ground else (contact_steps == 0)
+    finally:
+        for sim in made:
+            sim.close()
 
 
 def test_a_simulator_without_its_renderer_refuses_pictures():

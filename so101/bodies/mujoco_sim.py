@@ -4,13 +4,13 @@ Targets and states in degrees, in `so101.robot.ACTUATED_JOINTS` order; `step(cou
 advances `count` periods of the node's tick; `render_rgb` draws offscreen; `close()` is
 safe twice. The model is TheRobotStudio's MJCF from `so101 assets`: position actuators
 of the STS3215 class (kp 17.8, force ±3.35 N·m) and joint damping 0.60 N·m·s/rad,
-armature and friction loss. This class adds what PyBullet's scene has: a ground plane
-at z = 0 and a light.
+armature and friction loss. The scene (so101.bodies.mujoco_model) adds what PyBullet's
+has, a ground plane at z = 0 and a light, and collides the meshes' convex hulls; a body
+that draws no pictures leaves the visual meshes out.
 """
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
@@ -19,34 +19,20 @@ import numpy.typing as npt
 
 from so101 import assets
 from so101.bodies.camera import DEFAULT_CAMERA, Camera, check_picture
+from so101.bodies.mujoco_model import collision_hulls, scene_model
 from so101.bodies.protocol import BodyName, RgbImage
 from so101.bodies.settings import MuJoCoSettings, NodeSettings
-from so101.gui.display import DisplayError, display_available, resolve_mode
+from so101.gui.display import DisplayError, resolve_mode
 from so101.robot import ACTUATED_JOINTS, HOME_POSE_DEG, goal_deg
 from so101.runtime.dataflow import TICK_PERIOD_S
 from so101.gui.viewer import WINDOW_SHOWING, Window
 
-# Offscreen drawing without a display needs an OpenGL back end: EGL, with Mesa's
-# software renderer where there is no GPU. MuJoCo reads this when it is imported.
-if not display_available():
-    os.environ.setdefault("MUJOCO_GL", "egl")
-
-import mujoco  # noqa: E402
+import mujoco  # after so101.bodies.mujoco_model, which chooses its OpenGL back end
 
 # The Debian packages EGL drawing needs (the README names them, .ci/run installs them).
 EGL_PACKAGES = "libegl1 libegl-mesa0 libgl1-mesa-dri"
 
 FloatArray = npt.NDArray[np.float64]
-
-
-def scene_model(mjcf: Path) -> Any:
-    """The MJCF's arm (a mujoco.MjModel) with what PyBullet's scene has too: a ground plane at z = 0 and a light."""
-    spec = mujoco.MjSpec.from_file(str(mjcf))
-    spec.worldbody.add_geom(
-        name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 0.05], rgba=[0.85, 0.87, 0.92, 1],
-    )
-    spec.worldbody.add_light(pos=[0.3, -0.3, 1.5], dir=[-0.2, 0.2, -1], type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL)
-    return spec.compile()
 
 
 class SO101MuJoCo:
@@ -57,6 +43,7 @@ class SO101MuJoCo:
     MJCF's 2 ms; a tick period is a whole number of those steps.
 
     `mode` is the display mode asked for (auto, gui, direct); `display_mode` the one it got.
+    `renders` False: a body that draws no pictures, compiled without the visual meshes.
     """
 
     kind: BodyName = "mujoco"
@@ -77,7 +64,9 @@ class SO101MuJoCo:
         self.display_mode, notice = resolve_mode(mode)
         if notice:
             log(notice)
-        self.model = scene_model(mjcf)
+        # Without pictures the visual meshes stay out: they are most of the model, and the
+        # window, when there is one, is another process with its own model.
+        self.model = scene_model(mjcf, collision_hulls(mjcf, log), visual=renders)
         self.data = mujoco.MjData(self.model)
         self.model_step_s = float(self.model.opt.timestep)
         self.joint_names = [self.model.joint(i).name for i in range(self.model.njnt)]
@@ -100,7 +89,7 @@ class SO101MuJoCo:
     @classmethod
     def from_settings(cls, settings: MuJoCoSettings, node: NodeSettings, log: Callable[[str], None] = print) -> "SO101MuJoCo":
         """The simulation node's body: the joint damping asked for, a window as `node` asks, the
-        offscreen renderer only when the node publishes pictures, and the tick's step."""
+        visual meshes and the offscreen renderer only when the node publishes pictures, and the tick's step."""
         return cls(
             mode=node.display_mode, time_step_s=TICK_PERIOD_S, assets_dir=settings.assets_dir, log=log,
             joint_damping_n_m_s=settings.joint_damping_n_m_s, renders=node.image_hz > 0,

@@ -18,6 +18,7 @@ import pybullet as p
 import pybullet_data
 
 from so101 import assets
+from so101.bodies import pybullet_hulls
 from so101.bodies.camera import DEFAULT_CAMERA, Camera, check_picture
 from so101.bodies.protocol import BodyName, RgbImage
 from so101.bodies.settings import NodeSettings, PyBulletSettings, check_control_mode
@@ -55,10 +56,11 @@ FloatArray = npt.NDArray[np.float64]
 def release_freed_memory() -> None:
     """Make glibc hand large freed blocks back to the system at once (a process-wide setting).
 
-    Loading the arm computes a convex hull per collision mesh and frees it: up to 79 MB
-    for the largest. glibc raises its mmap threshold as blocks are freed, so it keeps
-    them in its heap; with the threshold fixed at 64 KiB they are unmapped when freed,
-    and the next mesh does not pile on top. Elsewhere than glibc, nothing to do.
+    Loading the arm from its full meshes (deriving the hull files, or without them) computes
+    a convex hull per collision mesh and frees it: up to 79 MB for the largest. glibc raises
+    its mmap threshold as blocks are freed, so it keeps them in its heap; with the threshold
+    fixed at 64 KiB they are unmapped when freed, and the next mesh does not pile on top.
+    Elsewhere than glibc, nothing to do.
     """
     try:
         libc = ctypes.CDLL("libc.so.6")
@@ -96,6 +98,12 @@ class SO101Sim:
     renders=False leaves out PyBullet's CPU renderer (render_rgb then refuses): it keeps
     a copy of every visual mesh, 68 MB of this arm's, that only pictures need.
 
+    hull_collisions=True collides the arm through the hull files derived from the model
+    (so101.bodies.pybullet_hulls; derived now if missing): the same hulls PyBullet builds
+    from the full meshes, without loading those. False collides the full meshes, as the
+    course does; the arm moves the same (tests/test_course_motion.py). Pictures always
+    show the full meshes.
+
     `mode` is the display mode asked for (auto, gui, direct); `display_mode` the one it got.
     """
 
@@ -114,6 +122,7 @@ class SO101Sim:
         servo_natural_freq_rad_s: float = DEFAULT_NATURAL_FREQ_RAD_S,
         servo_torque_limit_nm: float = SERVO_TORQUE_LIMIT_NM,
         renders: bool = True,
+        hull_collisions: bool = True,
     ):
         check_control_mode(control_mode)
         if not servo_torque_limit_nm > 0:
@@ -126,6 +135,7 @@ class SO101Sim:
         self.servo_torque_limit_nm = float(servo_torque_limit_nm)
         # Resolve the model first: a missing file must give our message, not PyBullet's.
         urdf = assets.urdf_path(None if assets_dir is None else Path(assets_dir))
+        physics_urdf = pybullet_hulls.urdf_to_load(urdf, log) if hull_collisions else urdf
         self.display_mode, notice = resolve_mode(mode)
         if notice:
             log(notice)
@@ -149,7 +159,7 @@ class SO101Sim:
         p.setPhysicsEngineParameter(fixedTimeStep=self.time_step_s, physicsClientId=cid)
         self.plane_id: int = p.loadURDF("plane.urdf", physicsClientId=cid)
         self.robot_id: int = p.loadURDF(
-            str(urdf), basePosition=[0, 0, 0], baseOrientation=[0, 0, 0, 1],
+            str(physics_urdf), basePosition=[0, 0, 0], baseOrientation=[0, 0, 0, 1],
             useFixedBase=True, physicsClientId=cid,
         )
         if self.display_mode == "gui":

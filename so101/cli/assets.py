@@ -21,5 +21,11 @@ def run(args: argparse.Namespace) -> int:
         urdf = assets.urdf_path(args.dir)
         print(f"SO-101 model verified: {urdf.parent} ({len(assets.manifest())} files)")
         return 0
-    assets.fetch(args.dir)
+    urdf = assets.fetch(args.dir)
+    from so101.bodies.mujoco_model import collision_hulls  # imports MuJoCo: only here, not for --check
+
+    collision_hulls(urdf.with_name(assets.MJCF_NAME))  # MuJoCo's collision meshes, derived once
+    from so101.bodies.pybullet_hulls import collision_hulls_urdf
+
+    collision_hulls_urdf(urdf)  # PyBullet's: each collision mesh's hull points, derived once
     return 0

@@ -24,13 +24,13 @@ def run_viewer(shared_path: Path, mjcf: Path, fps: float) -> int:
     import mujoco
     import mujoco.viewer
 
-    from so101.bodies.mujoco_sim import scene_model
+    from so101.bodies.mujoco_model import collision_hulls, scene_model
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the process group: the physics closes this
     lowest_priority()
     parent = os.getppid()
     mapping, shared = shared_array(shared_path)
-    model = scene_model(mjcf)
+    model = scene_model(mjcf, collision_hulls(mjcf))  # the node's scene, with the visual meshes
     data = mujoco.MjData(model)
     qpos = [int(model.joint(joint.name).qposadr[0]) for joint in ACTUATED_JOINTS]
     frame_period_s = 1.0 / fps
