@@ -42,10 +42,11 @@ from so101.gui.display import MODES, resolve_mode
 from so101.web.settings import (
     DEFAULT_HOST as DEFAULT_WEB_HOST, DEFAULT_PORT as DEFAULT_WEB_PORT, EVERY_ADDRESS, LOCAL_HOSTS, page_address,
 )
-from so101.runtime.processes import alive, descendants, kill_until_gone, stop_process
+from so101.prompt.join import port_holder
+from so101.runtime.processes import DAEMON_PORT_TAKEN_MARK, alive, descendants, kill_until_gone, stop_process, who_runs
 from so101.cli.argtypes import add_language_option, whole_number
 from so101.runtime.venv import dora_executable, env_with_bin_first
-from so101.runtime.versions import dora_version_problem
+from so101.runtime.versions import DAEMON_DEFAULT_LOCAL_PORT, dora_version_problem
 
 DEFAULT_LOG = ROOT / "out" / "teleop-dora.log"
 START_TIMEOUT_S = 90.0
@@ -65,6 +66,8 @@ TEXT = {
         "exited": "dora run 提前退出(退出码 {code}),日志 {log} 最后几行:",
         "timeout": "{seconds:g} 秒内仿真未就绪,日志 {log} 最后几行:",
         "interrupted": "已中断",
+        "port_held": "本机已有一个数据流在运行,占着键盘控制加入数据流的端口({port},dora 1.1 的 `dora run` 只用这一个):"
+        "{holder};在这里启动的键盘控制会去驱动它。用那一个,或先停掉它(在它的终端按 Ctrl-C)再重新运行",
     },
     "en": {
         "starting": "starting the dataflow (dora run, {mode} mode), log in {log}",
@@ -76,6 +79,9 @@ TEXT = {
         "exited": "dora run exited early (exit code {code}); last lines of {log}:",
         "timeout": "the simulation was not ready within {seconds:g} s; last lines of {log}:",
         "interrupted": "interrupted",
+        "port_held": "another dataflow runs on this machine and holds the port a prompt joins by ({port}, the only one "
+        "dora 1.1's `dora run` takes): {holder}; a prompt started here would drive it. Use that one, or stop it "
+        "(Ctrl-C in its terminal) and run this again",
     },
 }
 
@@ -257,8 +263,19 @@ def prepare(args: argparse.Namespace, command: str, node_file: Path = PROMPT_NOD
     except ValueError as error:
         print(f"so101 {command}: {error}", file=sys.stderr)
         return None
+    port_problem = port_held_problem(TEXT[args.lang]["port_held"])
+    if port_problem:
+        print(f"so101 {command}: {port_problem}", file=sys.stderr)
+        return None
     env = env_with_bin_first(dict(os.environ, SO101_MODE=resolved_mode, SO101_LANG=args.lang))
     return Launch(body, resolved_mode, node_env, env, args.log.expanduser().resolve())
+
+
+def port_held_problem(template: str) -> str | None:
+    """Why a dataflow started now would have its prompt join another one (`template`: TEXT's "port_held"),
+    in one line; None if no dataflow holds dora's port."""
+    holder = port_holder()
+    return template.format(port=DAEMON_DEFAULT_LOCAL_PORT, holder=who_runs(holder)) if holder else None
 
 
 def run(args: argparse.Namespace) -> int:
@@ -367,6 +384,11 @@ def _run_node(dataflow: Dataflow, node_file: Path, env: dict[str, str], text: di
         refusal = _refusal(log) if ready is False else None
         if refusal:  # a node said why in one line: that line, not dora's backtraces of the others
             print(f"so101 teleop: {refusal} ({log})", file=sys.stderr, flush=True)
+            return 1
+        # Another dataflow took dora's port between the check in `prepare` and this start.
+        if ready and DAEMON_PORT_TAKEN_MARK in log.read_text(encoding="utf-8", errors="replace"):
+            problem = port_held_problem(text["port_held"]) or DAEMON_PORT_TAKEN_MARK
+            print(f"so101 teleop: {problem}", file=sys.stderr, flush=True)
             return 1
         if not ready:
             message = (text["exited"].format(code=dataflow.process.returncode, log=log) if ready is False

@@ -21,7 +21,12 @@ import sys
 from pathlib import Path
 from typing import Callable
 
+from so101.runtime.logs import keep_last_bytes
+
 log = logging.getLogger(__name__)
+
+# Every session appends dora's log lines to the same file: each starts by cutting it to its last 256 KiB.
+LOG_KEPT_BYTES = 256 * 1024
 
 # The name of C's `stdout` variable: glibc, then macOS.
 _C_STDOUT_NAMES = ("stdout", "__stdoutp")
@@ -50,11 +55,13 @@ def _writes_to_descriptor_1(stream) -> bool:
 
 @contextlib.contextmanager
 def dora_logs_to(log_path: Path, restore: bool = True):
-    """Descriptor 1 goes to `log_path` (appended) inside the block; Python's prints and the
-    line editor go to the terminal as before. With restore=False it stays so after the block,
-    for a dora node that outlives it (its runtime logs until the process ends)."""
+    """Descriptor 1 goes to `log_path` (appended, once cut to its last LOG_KEPT_BYTES) inside the
+    block; Python's prints and the line editor go to the terminal as before. With restore=False it
+    stays so after the block, for a dora node that outlives it (its runtime logs until the process ends)."""
     sys.stdout.flush()
     log_path.parent.mkdir(parents=True, exist_ok=True)
+    with contextlib.suppress(OSError):  # a file that cannot be read or written: the open below says so
+        keep_last_bytes(log_path, LOG_KEPT_BYTES)
     log_fd = os.open(log_path, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
     terminal_fd = os.dup(1)
     os.dup2(log_fd, 1)

@@ -104,6 +104,20 @@ def dataflow_copy(node_env: dict[str, str], dataflow_file: Path = DATAFLOW_FILE,
     return descriptor
 
 
+def has_dynamic_node(dataflow_file: Path | None, node_id: str) -> bool:
+    """Whether the dataflow in `dataflow_file` waits for `node_id` to join it (`path: dynamic`);
+    False for a file that cannot be read as one."""
+    import yaml
+
+    if dataflow_file is None:
+        return False
+    try:
+        nodes = yaml.safe_load(dataflow_file.read_text(encoding="utf-8"))["nodes"]
+        return any(node.get("id") == node_id and node.get("path") == "dynamic" for node in nodes)
+    except (OSError, UnicodeDecodeError, yaml.YAMLError, TypeError, KeyError, AttributeError):
+        return False
+
+
 def dataflow_text(descriptor: dict, source: str = DATAFLOW_FILE.name) -> str:
     import yaml
 

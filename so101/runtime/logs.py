@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import logging
 import sys
+from pathlib import Path
 from typing import Literal, TextIO
 
 PROJECT_LOGGER = "so101"
@@ -43,3 +44,23 @@ def send_diagnostics_to(stream_name: Literal["stdout", "stderr"], level: int = l
     handler.stream_name = stream_name
     logger.setLevel(level)
     logger.propagate = False
+
+
+def keep_last_bytes(path: Path, max_bytes: int) -> None:
+    """Cut the file at `path` down to its last `max_bytes` at most, from the start of a line, in place
+    (a process appending to it meanwhile keeps appending): a log that every session appends to stays
+    bounded. A smaller or missing file is left as it is."""
+    try:
+        size = path.stat().st_size
+    except FileNotFoundError:
+        return
+    if size <= max_bytes:
+        return
+    with path.open("r+b") as log_file:
+        log_file.seek(size - max_bytes)
+        tail = log_file.read(max_bytes)
+        # The line cut in two is dropped whole (unless it is the only one).
+        tail = tail[tail.find(b"\n") + 1:]
+        log_file.seek(0)
+        log_file.write(tail)
+        log_file.truncate()

@@ -113,3 +113,67 @@ def yield_cpu_to_the_body() -> None:
     except (AttributeError, OSError):
         with contextlib.suppress(OSError):
             os.nice(19)
+
+
+# -- dora dataflows on this machine ----------------------------------------------------------
+# dora 1.1's `dora run` always listens for dynamic nodes (the prompt) on the daemon's default local
+# port (53291), whatever DORA_DAEMON_LOCAL_LISTEN_PORT or --local-listen-port say; a second one finds
+# the port taken, warns, and runs a dataflow no prompt can reach, while a prompt joins the first.
+
+# dora's warning when that port is taken (dora_daemon::local_listener), as its log carries it.
+DAEMON_PORT_TAKEN_MARK = "Daemon listen port already in use"
+
+
+def command_line(pid: int) -> list[str]:
+    """The arguments `pid` runs with ([] if gone or not ours)."""
+    try:
+        raw = Path(f"/proc/{pid}/cmdline").read_bytes()
+    except OSError:
+        return []
+    return [arg.decode(errors="replace") for arg in raw.split(b"\0") if arg]
+
+
+def _program_arguments(args: list[str], program: str) -> list[str] | None:
+    """What follows `program` in a command line (a pip-installed `dora` or `so101` is a Python script:
+    `python .../dora run ...`), or None if it runs another program."""
+    for index, arg in enumerate(args[:2]):
+        if os.path.basename(arg) == program:
+            return args[index + 1:]
+    return None
+
+
+def dora_run_dataflow(pid: int) -> Path | None:
+    """The dataflow file a `dora run FILE` process runs, or None if `pid` is not one."""
+    args = _program_arguments(command_line(pid), "dora")
+    if not args or args[0] != "run":
+        return None
+    files = [arg for arg in args[1:] if not arg.startswith("-")]
+    if not files:
+        return None
+    try:
+        return Path(os.readlink(f"/proc/{pid}/cwd")) / files[0]
+    except OSError:
+        return None
+
+
+def dora_runs() -> list[int]:
+    """The pids of the `dora run` processes of this machine that are ours, in pid order."""
+    pids = [int(entry.name) for entry in Path("/proc").iterdir() if entry.name.isdigit()]
+    return sorted(pid for pid in pids if dora_run_dataflow(pid) is not None and alive(pid))
+
+
+def who_runs(pid: int) -> str:
+    """A dora process as a person knows it: the `so101` command that started it if one did, else its
+    own command line and folder; with the pid to stop it by."""
+    with contextlib.suppress(OSError, IndexError, ValueError):
+        parent = int(Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[1])
+        so101_args = _program_arguments(command_line(parent), "so101")
+        if so101_args is not None:
+            return f"`so101 {' '.join(so101_args)}` (pid {parent})"
+    dora_args = _program_arguments(command_line(pid), "dora")
+    command = " ".join(["dora", *dora_args]) if dora_args is not None else " ".join(command_line(pid))
+    try:
+        folder = f" in {os.readlink(f'/proc/{pid}/cwd')}"
+    except OSError:
+        folder = ""
+    return f"`{command}`{folder} (pid {pid})"

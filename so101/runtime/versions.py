@@ -107,7 +107,7 @@ def _dora_of_process(pid: int) -> str | None:
     return None
 
 
-def _listening_process(port: int) -> int | None:
+def listening_process(port: int) -> int | None:
     """The process that listens on TCP `port` of this machine, or None."""
     sockets = set()
     for table in ("/proc/net/tcp", "/proc/net/tcp6"):
@@ -149,4 +149,4 @@ def spawning_daemon_version_problem() -> str | None:
 
 def joined_daemon_version_problem(daemon_port: int | None) -> str | None:
     """For a dynamic node: the daemon is the process listening on the local port it joins through."""
-    return daemon_version_problem(_listening_process(daemon_port or DAEMON_DEFAULT_LOCAL_PORT))
+    return daemon_version_problem(listening_process(daemon_port or DAEMON_DEFAULT_LOCAL_PORT))
