@@ -39,7 +39,7 @@ def main() -> int:
     except ValueError as error:
         return cannot_start(error, "arm")
     try:
-        arm = SO101Real.from_settings(arm_settings)
+        arm = SO101Real.from_settings(arm_settings, settings.lang)
     except (CalibrationError, ArmFailed) as error:
         return cannot_start(error, "arm")
     except KeyboardInterrupt:

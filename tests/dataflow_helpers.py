@@ -14,6 +14,7 @@ from pathlib import Path
 
 import pyarrow as pa
 
+from so101.lang import LOCALE_VARS
 from so101.runtime.dataflow import TICK_PERIOD_S, dataflow_copy, write_dataflow
 from so101.runtime.venv import BIN as VENV_BIN, env_with_bin_first
 
@@ -109,10 +110,10 @@ def prompt_env(tmp_path: Path, **extra: str) -> dict[str, str]:
 
 
 def run_so101(*args: str, **env: str) -> subprocess.CompletedProcess:
-    """`so101 ARGS` as a user runs it from this venv: no DISPLAY, no SO101_LANG or SO101_MODE
-    from the test's own shell, `env` on top."""
+    """`so101 ARGS` as a user runs it from this venv: no DISPLAY, no SO101_LANG, SO101_MODE or locale
+    from the test's own shell (so the language is zh, the course's), `env` on top."""
     environ = dora_env()
-    for name in ("SO101_LANG", "SO101_MODE"):
+    for name in ("SO101_LANG", "SO101_MODE", *LOCALE_VARS):
         environ.pop(name, None)
     environ.update(env)
     return subprocess.run([str(SO101), *args], capture_output=True, text=True, env=environ, timeout=120)

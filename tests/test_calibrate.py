@@ -19,9 +19,9 @@ from tests.dataflow_helpers import SO101, dora_env
 class Calibrate:
     """`so101 calibrate` as a person runs it: its output read as it comes, lines typed on its stdin."""
 
-    def __init__(self, *args: str):
+    def __init__(self, *args: str, lang: str = "en"):
         self.process = subprocess.Popen([str(SO101), "calibrate", *args], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                        stderr=subprocess.PIPE, env=dora_env())
+                                        stderr=subprocess.PIPE, env=dora_env(SO101_LANG=lang))
         self.output = b""
 
     def wait_for(self, text: str, timeout_s: float = 20) -> None:
@@ -100,7 +100,7 @@ def test_an_existing_file_is_kept_unless_forced_and_then_backed_up(tmp_path):
     out.write_text('{"kept": true}')
     with FakeArm() as arm:
         refused = subprocess.run([str(SO101), "calibrate", "--port", arm.port, "--out", str(out)],
-                                 capture_output=True, text=True, env=dora_env(), timeout=30)
+                                 capture_output=True, text=True, env=dora_env(SO101_LANG="en"), timeout=30)
         assert refused.returncode == 2
         assert refused.stderr == f"so101 calibrate: {out} exists: pass --force to replace it (the old one is kept as arm.json.bak)\n"
         calibrate = Calibrate("--port", arm.port, "--out", str(out), "--force")
@@ -138,7 +138,7 @@ def test_failures_write_nothing_and_say_so_in_one_line(tmp_path, ids, ending, me
 
 def test_a_missing_port_is_one_line(tmp_path):
     result = subprocess.run([str(SO101), "calibrate", "--port", "/dev/no-such-adapter", "--out", str(tmp_path / "a.json")],
-                            capture_output=True, text=True, env=dora_env(), timeout=30)
+                            capture_output=True, text=True, env=dora_env(SO101_LANG="en"), timeout=30)
     assert result.returncode == 1
     assert result.stderr.strip().startswith("so101 calibrate: cannot open the serial port /dev/no-such-adapter")
     assert len(result.stderr.strip().splitlines()) == 1

@@ -725,6 +725,7 @@ def start_cli():
     def start(*options, stdin=subprocess.PIPE):
         process = subprocess.Popen(
             [str(SO101), "fake-arm", *options], stdin=stdin, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+            env=dict(os.environ, SO101_LANG="en"),
         )
         started.append(process)
         lines = Lines(process.stdout)
@@ -816,6 +817,7 @@ def cli_session(tmp_path_factory):
     (folder / "bad.keyframes").write_text(BAD_KEYFRAMES)
     process = subprocess.Popen(
         [str(SO101), "fake-arm"], stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=folder,
+        env=dict(os.environ, SO101_LANG="en"),
     )
     lines = Lines(process.stdout)
     port_path = lines.next()

@@ -244,11 +244,12 @@ def calibrate_in_tmux(fake_arm: Terminal, calibration_file: Path, *options: str)
     printed, as a person does it: Enter, `sweep` in the emulator's terminal, Enter. Returns the port."""
     port = fake_arm.wait_for(r"^(/dev/\S+)$", timeout_s=30).group(1)
     calibrate = Terminal(f"{SO101} calibrate --port {port} --out {calibration_file} {' '.join(options)}",
-                         {"PATH": os.environ["PATH"]})
+                         {"PATH": os.environ["PATH"], "SO101_LANG": "en"})
     try:
         calibrate.wait_for(r"Then press Enter\.", timeout_s=30)
         calibrate.type_line("")
         calibrate.wait_for(r"Press Enter when done\.", timeout_s=30)
+        fake_arm.wait_for(r"a calibration has begun on this bus: .* type sweep here", timeout_s=10)  # the emulator's hint
         fake_arm.type_line("sweep 2")  # the emulated hand takes each joint to both of its stops
         time.sleep(2.5)
         calibrate.type_line("")
@@ -263,7 +264,7 @@ def test_a_person_without_an_arm_calibrates_the_emulated_one_and_drives_it(tmp_p
     """The real arm's "done when": `so101 fake-arm`, `so101 calibrate` with its printed port, then
     `so101 teleop --body real` typed at as in the course; torque off after quit."""
     calibration_file = tmp_path / "my_arm.json"
-    fake_arm = Terminal(f"{SO101} fake-arm", {"PATH": os.environ["PATH"]})
+    fake_arm = Terminal(f"{SO101} fake-arm", {"PATH": os.environ["PATH"], "SO101_LANG": "en"})
     terminal = None
     try:
         port = calibrate_in_tmux(fake_arm, calibration_file)

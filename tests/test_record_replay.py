@@ -171,7 +171,7 @@ def test_a_person_drives_the_simulation_from_the_emulated_leader_records_and_rep
     follows it, an episode is recorded and replayed."""
     calibration_file = tmp_path / "leader.json"
     dataset_dir = tmp_path / "leader-demos"
-    leader = Terminal(f"{SO101} fake-arm", {"PATH": os.environ["PATH"]})
+    leader = Terminal(f"{SO101} fake-arm", {"PATH": os.environ["PATH"], "SO101_LANG": "en"})
     terminal = None
     try:
         port = calibrate_in_tmux(leader, calibration_file, "--leader")

@@ -20,6 +20,7 @@ import time
 from array import array
 from typing import NoReturn, Sequence
 
+from so101.bodies.node_loop import TAGS
 from so101.bodies.protocol import BodyFailed, BodyName
 from so101.bodies.settings import CALIBRATE_HINT, DEFAULT_BUS_RETRIES, DEFAULT_MAX_SPEED_DEG_S, ArmSettings, NodeSettings
 from so101.feetech.bus import BusError, FeetechBus, ServoSilent
@@ -44,6 +45,28 @@ PROBE_READS = 20
 # Reads of Torque_Enable after torque off before a servo that says "on" is believed, and the gap between.
 TORQUE_OFF_READS = 3
 TORQUE_OFF_READ_GAP_S = 0.02
+
+# The log's lines, in the node's language; {tag} is the arm node's (so101.bodies.node_loop.TAGS).
+TEXT = {
+    "zh": {
+        "retrying": "{tag} {error};重试,最多 {retries} 次",
+        "again": "{tag} {count} 次读取失败后,舵机恢复应答",
+        "still_on": "{tag} 有舵机仍报告扭矩开着:请关掉机械臂的电源",
+        "torque_off": "{tag} 舵机 1-6 扭矩已关闭;本次运行的总线往返:{summary}",
+        "unconfirmed": "{tag} 无法确认扭矩已关闭({error}):请关掉机械臂的电源",
+        "no_reads": "没有读数",
+    },
+    "en": {
+        "retrying": "{tag} {error}; retrying, up to {retries} times",
+        "again": "{tag} the servos answer again after {count} failed read(s)",
+        "still_on": "{tag} a servo still reports torque on: switch the arm's power off",
+        "torque_off": "{tag} torque off on servos 1-6; bus round trip over the run: {summary}",
+        "unconfirmed": "{tag} could not confirm torque off ({error}): switch the arm's power off",
+        "no_reads": "no reads",
+    },
+}
+
+
 class ArmFailed(BodyFailed):
     """The arm cannot start or go on; the message is one line for the user."""
 
@@ -58,15 +81,15 @@ def check_node_settings(settings: NodeSettings) -> None:
         raise ValueError("the real arm has no fast mode (its goals ramp by the tick): set SO101_FAST_STEPS to 0")
 
 
-def _percentiles_ms(samples_s: Sequence[float]) -> str:
+def _percentiles_ms(samples_s: Sequence[float], no_reads: str) -> str:
     if not samples_s:
-        return "no reads"
+        return no_reads
     return (f"p50 {percentile(samples_s, 0.50) * 1000:.2f} ms, p99 {percentile(samples_s, 0.99) * 1000:.2f} ms, "
             f"max {max(samples_s) * 1000:.2f} ms")
 
 
 class SO101Real:
-    """The arm on `port`, with `calibration` (LeRobot's format). Raises ArmFailed if it must not start."""
+    """The arm on `port`, with `calibration` (LeRobot's format), logging in `lang`. Raises ArmFailed if it must not start."""
 
     kind: BodyName = "real"
     display_mode: None = None  # hardware: no window, no headless rendering
@@ -74,8 +97,9 @@ class SO101Real:
     def __init__(self, port: str, calibration: Calibration, *, calibration_name: str = "the calibration",
                  joint_signs: tuple[int, ...] = (1,) * 6, max_speed_deg_s: float = DEFAULT_MAX_SPEED_DEG_S,
                  torque_limit_percent: float = 100.0, retries: int = DEFAULT_BUS_RETRIES,
-                 time_step_s: float = 0.02):
+                 time_step_s: float = 0.02, lang: str = "en"):
         self.port = port
+        self.text = {key: line.replace("{tag}", TAGS["arm"][lang]) for key, line in TEXT[lang].items()}
         self._motors = [calibration[name] for name in MOTOR_NAMES]
         self._signs = joint_signs
         self.max_speed_deg_s = max_speed_deg_s
@@ -112,11 +136,11 @@ class SO101Real:
         self._sent_deg = self._targets_deg = self._start_deg = start_deg
 
     @classmethod
-    def from_settings(cls, settings: ArmSettings) -> "SO101Real":
+    def from_settings(cls, settings: ArmSettings, lang: str = "en") -> "SO101Real":
         return cls(
             settings.port, load_calibration(settings.calibration_file), calibration_name=str(settings.calibration_file),
             joint_signs=settings.joint_signs, max_speed_deg_s=settings.max_speed_deg_s,
-            torque_limit_percent=settings.torque_limit_percent, retries=settings.retries,
+            torque_limit_percent=settings.torque_limit_percent, retries=settings.retries, lang=lang,
         )
 
     # -- start-up checks ------------------------------------------------------------------
@@ -187,10 +211,10 @@ class SO101Real:
             if self._failed_reads > self.retries:
                 raise BusError(f"{error}; still failing after {self.retries} retries, torque off") from None
             if self._failed_reads == 1:
-                logger.warning(f"[arm] {error}; retrying, up to {self.retries} times")
+                logger.warning(self.text["retrying"].format(error=error, retries=self.retries))
             return
         if self._failed_reads:
-            logger.info(f"[arm] the servos answer again after {self._failed_reads} failed read(s)")
+            logger.info(self.text["again"].format(count=self._failed_reads))
             self._failed_reads = 0
         self._angles_deg = self._to_deg(present)
 
@@ -206,7 +230,7 @@ class SO101Real:
         raise ValueError("the real arm has no camera: set SO101_IMAGE_HZ to 0")
 
     def round_trip_summary(self) -> str:
-        return _percentiles_ms(self.round_trips_s)
+        return _percentiles_ms(self.round_trips_s, self.text["no_reads"])
 
     def close(self) -> None:
         """Torque off on every servo, then the port closed; safe twice."""
@@ -216,11 +240,11 @@ class SO101Real:
         try:
             bus.sync_write("Torque_Enable", {i: 0 for i in MOTOR_IDS})
             if not self._torque_confirmed_off(bus):
-                logger.error("[arm] a servo still reports torque on: switch the arm's power off")
+                logger.error(self.text["still_on"])
             else:
-                logger.info(f"[arm] torque off on servos 1-6; bus round trip over the run: {self.round_trip_summary()}")
+                logger.info(self.text["torque_off"].format(summary=self.round_trip_summary()))
         except BusError as error:
-            logger.error(f"[arm] could not confirm torque off ({error}): switch the arm's power off")
+            logger.error(self.text["unconfirmed"].format(error=error))
         finally:
             bus.close()
 

@@ -27,18 +27,20 @@ def number(accepted: Callable[[float], bool], expected: str) -> Callable[[str], 
 
 def _checked_language(text: str) -> str:
     # A `type`, not `choices`: argparse passes a string default through `type` but never checks it
-    # against `choices`, so a bad $SO101_LANG would crash later.
+    # against `choices`, so a bad $SO101_LANG would crash later. An empty one (unset) is the locale's.
     try:
-        return lang.language(text)
+        return lang.session_language(text, os.environ)
     except ValueError as error:
         raise argparse.ArgumentTypeError(str(error)) from None
 
 
 def add_language_option(parser: argparse.ArgumentParser, what: str) -> None:
-    """--lang zh|en, defaulting to $SO101_LANG, else zh (the course's); `what` says what it sets."""
+    """--lang zh|en, defaulting to $SO101_LANG, else the locale's (so101.lang.session_language); `what` says
+    what it sets."""
     parser.add_argument(
         "--lang", type=_checked_language, metavar="{zh,en}", default=os.environ.get(lang.ENV_VAR, ""),
-        help=f"language of {what} (default: ${lang.ENV_VAR}, else zh as in the course)",
+        help=f"language of {what} (default: ${lang.ENV_VAR}, else the locale's: zh for a Chinese, C or no "
+        "locale, en for another)",
     )
 
 

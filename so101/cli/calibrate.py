@@ -20,6 +20,7 @@ import shutil
 import sys
 from pathlib import Path
 
+from so101.cli.argtypes import add_language_option
 from so101.feetech.calibration import (
     MIN_RANGE_STEPS,
     MOTOR_IDS,
@@ -36,6 +37,40 @@ FULL_TURN_JOINT = "wrist_roll"
 POLL_S = 0.01  # how often positions are read while the person moves the joints
 WRITE_TRIES = 3
 
+TEXT = {
+    "zh": {
+        "middle": "扭矩已关闭。用手把机械臂摆到行程中间:大臂竖直向上,小臂和夹爪水平朝前,夹爪半开"
+                  "(课程的初始姿态:`so101 snapshot` 会画出来)。然后按 Enter。",
+        "ends": "现在把除 {full_turn} 以外的每个关节逐一慢慢转到行程的两端。完成后按 Enter。",
+        "short": "{names} 转动不足 {steps} 步({deg:.0f}°):把它们各自转到两端,再按 Enter(Ctrl-C 放弃,不写任何东西)。",
+        "exists": "{out} 已存在:加 --force 覆盖(旧文件保留为 {backup})",
+        "folder": "{out} 是文件夹:--out 需要一个文件名",
+        "bus": "{error};没有写入 {out}",
+        "interrupted": "已中断;没有写入 {out}",
+        "ended": "输入在校准完成前结束;没有写入 {out}",
+        "wrote": "已写入 {out}:",
+        "motor": "  {name:<14} id {id}  homing_offset {offset:>5}  范围 {low:>4}..{high:<4} ({span:.0f}°)",
+        "use": "使用它:{command}",
+    },
+    "en": {
+        "middle": "Torque is off. Move the arm by hand to the middle of its range: the upper arm straight up, "
+                  "the forearm and the gripper level, pointing forward, the gripper half open "
+                  "(the course's home pose: `so101 snapshot` draws it). Then press Enter.",
+        "ends": "Now move every joint except {full_turn} slowly to both ends of its travel, one at a time. "
+                "Press Enter when done.",
+        "short": "{names} moved less than {steps} steps ({deg:.0f}°): "
+                 "move each to both of its ends, then press Enter (Ctrl-C gives up, nothing is written).",
+        "exists": "{out} exists: pass --force to replace it (the old one is kept as {backup})",
+        "folder": "{out} is a folder: --out takes a file name",
+        "bus": "{error}; nothing was written to {out}",
+        "interrupted": "interrupted; nothing was written to {out}",
+        "ended": "the input ended before the calibration did; nothing was written to {out}",
+        "wrote": "Wrote {out}:",
+        "motor": "  {name:<14} id {id}  homing_offset {offset:>5}  range {low:>4}..{high:<4} ({span:.0f}°)",
+        "use": "Use it: {command}",
+    },
+}
+
 
 def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
     parser.add_argument("--port", required=True, metavar="PORT",
@@ -46,6 +81,7 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
                         help="the arm on PORT is a leader arm (torque stays off; the file is LeRobot's so101_leader one)")
     parser.add_argument("--force", action="store_true",
                         help="replace FILE if it exists (the old one is kept as FILE.bak)")
+    add_language_option(parser, "the instructions")
 
 
 def _say(line: str = "", end: str = "\n") -> None:
@@ -87,8 +123,9 @@ def _write_eeprom(bus: FeetechBus, name: str, values: dict[int, int]) -> None:
                     raise
 
 
-def calibrate(bus: FeetechBus) -> dict[str, MotorCalibration] | None:
-    """The interactive steps on an open bus; the calibration, or None if the input ended first."""
+def calibrate(bus: FeetechBus, lang: str = "en") -> dict[str, MotorCalibration] | None:
+    """The interactive steps on an open bus, told in `lang`; the calibration, or None if the input ended first."""
+    text = TEXT[lang]
     check_servos_answer(bus)
     lines = _Lines()
     everyone = dict.fromkeys(MOTOR_IDS, 0)
@@ -98,9 +135,7 @@ def calibrate(bus: FeetechBus) -> dict[str, MotorCalibration] | None:
     _write_eeprom(bus, "Min_Position_Limit", everyone)
     _write_eeprom(bus, "Max_Position_Limit", dict.fromkeys(MOTOR_IDS, MAX_STEP))
 
-    _say("Torque is off. Move the arm by hand to the middle of its range: the upper arm straight up, "
-         "the forearm and the gripper level, pointing forward, the gripper half open "
-         "(the course's home pose: `so101 snapshot` draws it). Then press Enter.")
+    _say(text["middle"])
     if not lines.wait_for_enter():
         return None
     raw = bus.sync_read("Present_Position", MOTOR_IDS)
@@ -128,16 +163,15 @@ def calibrate(bus: FeetechBus) -> dict[str, MotorCalibration] | None:
             _say("\r\x1b[K" + line, end="")
             shown[0] = line
 
-    _say(f"Now move every joint except {FULL_TURN_JOINT} slowly to both ends of its travel, one at a time. "
-         "Press Enter when done.")
+    _say(text["ends"].format(full_turn=FULL_TURN_JOINT))
     while True:
         if not lines.wait_for_enter(record):
             return None
         short = [name for name, servo_id in ranged if high[servo_id] - low[servo_id] < MIN_RANGE_STEPS]
         if not short:
             break
-        _say(f"\n{', '.join(short)} moved less than {MIN_RANGE_STEPS} steps ({MIN_RANGE_STEPS * 360 / 4096:.0f}°): "
-             "move each to both of its ends, then press Enter (Ctrl-C gives up, nothing is written).")
+        _say("\n" + text["short"].format(names=", ".join(short), steps=MIN_RANGE_STEPS,
+                                         deg=MIN_RANGE_STEPS * 360 / STEPS_PER_TURN))
 
     calibration = {}
     for name, servo_id in zip(MOTOR_NAMES, MOTOR_IDS):
@@ -150,39 +184,44 @@ def calibrate(bus: FeetechBus) -> dict[str, MotorCalibration] | None:
 
 
 def run(args: argparse.Namespace) -> int:
+    text = TEXT[args.lang]
     out = args.out.expanduser()
+
+    def refuse(key: str, after_prompts: bool = False, **values) -> None:
+        # Once the instructions have started, on a line of its own (the travel shown may end without one).
+        print("\n" * after_prompts + "so101 calibrate: " + text[key].format(out=out, **values), file=sys.stderr)
+
     if out.exists() and not args.force:
-        print(f"so101 calibrate: {out} exists: pass --force to replace it (the old one is kept as {out.name}.bak)",
-              file=sys.stderr)
+        refuse("exists", backup=f"{out.name}.bak")
         return 2
     if out.is_dir():
-        print(f"so101 calibrate: {out} is a folder: --out takes a file name", file=sys.stderr)
+        refuse("folder")
         return 2
     bus = FeetechBus(args.port)
     try:
         bus.open()
-        calibration = calibrate(bus)
+        calibration = calibrate(bus, args.lang)
     except BusError as error:
-        print(f"\nso101 calibrate: {error}; nothing was written to {out}", file=sys.stderr)
+        refuse("bus", True, error=error)
         return 1
     except KeyboardInterrupt:
-        print(f"\nso101 calibrate: interrupted; nothing was written to {out}", file=sys.stderr)
+        refuse("interrupted", True)
         return 130
     finally:
         bus.close()
     if calibration is None:
-        print(f"\nso101 calibrate: the input ended before the calibration did; nothing was written to {out}", file=sys.stderr)
+        refuse("ended", True)
         return 1
     if out.exists():
         out.replace(out.with_name(out.name + ".bak"))
     save_calibration(out, calibration)
-    _say(f"\nWrote {out}:")
+    _say("\n" + text["wrote"].format(out=out))
     for name, motor in calibration.items():
-        span_deg = (motor.range_max - motor.range_min) * 360 / 4096
-        _say(f"  {name:<14} id {motor.id}  homing_offset {motor.homing_offset:>5}  "
-             f"range {motor.range_min:>4}..{motor.range_max:<4} ({span_deg:.0f}°)")
+        _say(text["motor"].format(name=name, id=motor.id, offset=motor.homing_offset, low=motor.range_min,
+                                  high=motor.range_max, span=(motor.range_max - motor.range_min) * 360 / STEPS_PER_TURN))
     if args.leader:
-        _say(f"Use it: so101 teleop --leader {args.port} --leader-calibration {out}")
+        command = f"so101 teleop --leader {args.port} --leader-calibration {out}"
     else:
-        _say(f"Use it: so101 teleop --body real --port {args.port} --calibration {out}")
+        command = f"so101 teleop --body real --port {args.port} --calibration {out}"
+    _say(text["use"].format(command=command))
     return 0

@@ -30,6 +30,25 @@ from so101.runtime.dataflow import PROMPT_NODE_FILE, ROOT, dataflow_text
 from so101.runtime.venv import dora_executable, env_with_bin_first
 from so101.runtime.versions import dora_version_problem
 
+TEXT = {
+    "zh": {
+        "coordinator": "协调器在 127.0.0.1:{port},令牌认证已开启",
+        "daemon": "守护进程 {machine!r} 已加入(本地端口 {port})",
+        "starts": "仿真在守护进程 {body!r} 上启动;键盘控制通过守护进程 {prompt!r} 加入",
+        "stopping": "停止数据流、守护进程和协调器...",
+        "stopped": "集群已停止",
+        "wrote": "已写入 {output}:用 `dora start {output} --name {name} --detach` 启动它",
+    },
+    "en": {
+        "coordinator": "coordinator on 127.0.0.1:{port}, token authentication on",
+        "daemon": "daemon {machine!r} joined (local port {port})",
+        "starts": "the simulation starts on daemon {body!r}; the prompt joins through daemon {prompt!r}",
+        "stopping": "stopping the dataflow, the daemons and the coordinator...",
+        "stopped": "cluster stopped",
+        "wrote": "wrote {output}: start it with `dora start {output} --name {name} --detach`",
+    },
+}
+
 
 def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
     if name == "cluster-dataflow":
@@ -81,18 +100,19 @@ def run(args: argparse.Namespace) -> int:
 
 def _demo(work_dir: Path, mode: str, lang: str) -> int:
     cluster = Cluster(work_dir)
+    text = TEXT[lang]
     say = lambda line: print(line, flush=True)  # noqa: E731
     previous = signal.getsignal(signal.SIGINT)
     try:
-        say(f"coordinator on 127.0.0.1:{cluster.coordinator_port}, token authentication on")
+        say(text["coordinator"].format(port=cluster.coordinator_port))
         cluster.start_coordinator()
         for machine_id in (BODY_MACHINE, PROMPT_MACHINE):
             cluster.start_daemon(machine_id)
-            say(f"daemon {machine_id!r} joined (local port {cluster.daemon_ports[machine_id]})")
+            say(text["daemon"].format(machine=machine_id, port=cluster.daemon_ports[machine_id]))
         cluster.start_dataflow(cluster_dataflow(work_dir, {"SO101_MODE": mode, "SO101_LANG": lang}))
         # The prompt joins at once: daemon `desk` runs no other node, and the dataflow starts once
         # every daemon's nodes are there (`state` says when the first joint_state has arrived).
-        say(f"the simulation starts on daemon {BODY_MACHINE!r}; the prompt joins through daemon {PROMPT_MACHINE!r}")
+        say(text["starts"].format(body=BODY_MACHINE, prompt=PROMPT_MACHINE))
         env = env_with_bin_first(dict(os.environ, SO101_LANG=lang,
                                       SO101_DAEMON_PORT=str(cluster.daemon_ports[PROMPT_MACHINE])))
         prompt = subprocess.Popen([sys.executable, str(PROMPT_NODE_FILE)], env=env)
@@ -105,10 +125,10 @@ def _demo(work_dir: Path, mode: str, lang: str) -> int:
         return 130
     finally:
         signal.signal(signal.SIGINT, signal.SIG_IGN)  # a second Ctrl-C must not cut the clean-up short
-        say("stopping the dataflow, the daemons and the coordinator...")
+        say(text["stopping"])
         cluster.stop()
         signal.signal(signal.SIGINT, previous)
-        say("cluster stopped")
+        say(text["stopped"])
 
 
 def _write_placed_dataflow(args: argparse.Namespace) -> int:
@@ -131,5 +151,5 @@ def _write_placed_dataflow(args: argparse.Namespace) -> int:
         sys.stdout.write(text)
     else:
         args.output.write_text(text, encoding="utf-8")
-        print(f"wrote {args.output}: start it with `dora start {args.output} --name {DATAFLOW_NAME} --detach`")
+        print(TEXT[args.lang]["wrote"].format(output=args.output, name=DATAFLOW_NAME))
     return 0

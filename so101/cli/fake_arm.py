@@ -10,8 +10,10 @@ import signal
 import sys
 import threading
 import time
+import unicodedata
+from typing import Any
 
-from so101.cli.argtypes import number
+from so101.cli.argtypes import add_language_option, number
 from so101.feetech import sts3215
 from so101.feetech.fake_arm import ALL_IDS, DEFAULT_SPEED_STEPS_S, MECHANICS, FakeArm
 from so101.feetech.hand import FIGURE_EIGHT_EASE_S, FIGURE_EIGHT_PERIOD_S, Keyframes, figure_eight_deg, load_keyframes
@@ -35,6 +37,111 @@ commands (one per line):
   mute               no servo replies (a broken return line; they all still obey)
   close              the port goes away, as an unplugged USB adapter
   quit               stop the emulator (Ctrl-C and SIGTERM too)"""
+
+ACCEPTED = ("help, status, sweep [SECONDS], move ID STEPS, figure8 [PERIOD_S], play FILE, hold, "
+            "silent ID, corrupt ID, answer ID|all, mute, close, quit")
+
+# What the console says, in the session's language (--lang). The commands themselves are the same words in both.
+TEXT: dict[str, dict[str, Any]] = {
+    "zh": {
+        "help": """\
+命令(每行一条):
+  help               本列表
+  status             每个舵机:扭矩、目标、当前位置、零位偏移、限位、关节
+  sweep [SECONDS]    一只手把每个扭矩关闭的关节转到两端再转回(默认 4 秒)
+  move ID STEPS      一只手把关节 ID 移到物理编码器位置 STEPS(仅扭矩关闭时);
+                     +STEPS 或 -STEPS 表示移动这么多步
+  figure8 [PERIOD_S] 一只手移动每个扭矩关闭的关节,让末端画 8 字,每 PERIOD_S 秒一圈
+                     (默认 8 秒),直到 hold 或另一条手部命令:一个主臂
+  play FILE          一只手按 FILE 的定时关键帧播放一次,关节停在最后一帧;
+                     每行是秒数和六个角度(度)(examples/leader_wave.keyframes)
+  hold               手松开:每个关节停在原处
+  silent ID          舵机 ID 继续执行但不再应答
+  corrupt ID         舵机 ID 的应答校验和错误
+  answer ID|all      舵机 ID(或全部舵机,包括 mute)恢复正常应答
+  mute               所有舵机都不应答(回传线断了;它们仍执行命令)
+  close              端口消失,如同拔掉 USB 转接器
+  quit               停止模拟器(Ctrl-C 和 SIGTERM 也可以)""",
+        "about": "模拟的 SO-101 总线:{count} 个 STS3215 舵机,ID {ids},1,000,000 波特;模拟协议和寄存器,"
+                 "不模拟物理(无重力、无负载);输入 help 查看命令",
+        "unknown": "未知命令 {word!r};命令:{accepted}",
+        "usage": "用法:{usage};命令:{accepted}",
+        "no_servo": "总线上没有舵机 {text!r};ID:{ids}",
+        "sweep_bad": "sweep 需要一个秒数,大于 0 且不超过 600;收到 {got!r}",
+        "sweeping": "正在 {seconds:g} 秒内转动关节 {ids}{note}",
+        "sweeping_none": "没有可转动的关节{note}",
+        "holds_note": ";扭矩保持 {ids}",
+        "move_bad": "move 的 STEPS 是物理位置 0-4095,或 +N / -N 表示移动 N 步;收到 {got!r}",
+        "move_held": "舵机 {id} 扭矩开着:保持在 {reached};手推不动它",
+        "moved": "舵机 {id} 被手从 {before} 移到 {reached}",
+        "figure8_bad": "figure8 需要一个周期(秒),从 {low:g} 到 {high:g};收到 {got!r}",
+        "hand_none": "手:没有可移动的关节,扭矩保持 {held}",
+        "hand_moves": "手:{what},{ids}{note}(hold 让它停下)",
+        "joint": "关节", "joints": "关节",
+        "figure_eight": "8 字,每圈 {period:g} 秒",
+        "playing": "播放 {name} 一次,{count} {keyframes},共 {seconds:g} 秒",
+        "keyframe": "个关键帧", "keyframes": "个关键帧",
+        "let_go_one": "手:松开关节 {id},它停在原处",
+        "let_go_many": "手:松开关节 {ids},它们停在原处",
+        "let_go_none": "手:没有被手移动的关节;它们停在原处",
+        "all_answer": "所有舵机恢复正常应答",
+        "fault": "舵机 {id}:{state}",
+        "states": {"answers": "正常应答", "silent": "不应答", "corrupt": "校验和错误", "muted": "全部静默"},
+        "muted": "所有舵机静默:它们执行命令,但都不应答(answer all 撤销)",
+        "closed": "端口 {port} 已关闭,如同拔掉转接器;输入 quit 结束",
+        "closed_after": "端口 {port} 在 {seconds:g} 秒后关闭,如同拔掉转接器",
+        "faults_on": "故障开启:不应答 {silent},校验和错误 {corrupt}",
+        "none": "无",
+        "not_on_bus": "注意:{ids} 不在此总线上(--ids);它们没有故障",
+        "end_of_input": "输入结束:模拟器继续运行,直到 Ctrl-C 或 SIGTERM",
+        "calibrating": "此总线上开始了一次校准:当它要求把每个关节转到行程两端时,在这里输入 sweep"
+                       "(一只手在 4 秒内把它们带到两端再回来),然后在校准的终端按 Enter",
+        "columns": ("关节", "扭矩", "目标", "当前", "偏移", "限位", "物理", "止挡", "应答"),
+        "on": "开", "off": "关", "free": "自由",
+        "port_closed": "端口 {port} 已关闭(拔掉了):没有主机能访问这些舵机",
+    },
+    "en": {
+        "help": COMMANDS_HELP,
+        "about": "an emulated SO-101 bus: {count} STS3215 servos, ids {ids}, 1,000,000 baud; it emulates the protocol "
+                 "and the registers, not the physics (no gravity, no load); type help for its commands",
+        "unknown": "unknown command {word!r}; commands: {accepted}",
+        "usage": "usage: {usage}; commands: {accepted}",
+        "no_servo": "no servo {text!r} on this bus; ids: {ids}",
+        "sweep_bad": "sweep takes a duration in seconds, more than 0 and at most 600; got {got!r}",
+        "sweeping": "sweeping {ids} over {seconds:g} s{note}",
+        "sweeping_none": "sweeping no joint{note}",
+        "holds_note": "; torque holds {ids}",
+        "move_bad": "move takes STEPS as a physical position 0-4095, or +N / -N to move by N steps; got {got!r}",
+        "move_held": "servo {id} has torque on: it holds at {reached}; the hand cannot move it",
+        "moved": "servo {id} moved by hand from {before} to {reached}",
+        "figure8_bad": "figure8 takes a period in seconds, from {low:g} to {high:g}; got {got!r}",
+        "hand_none": "hand: no joint to move, torque holds {held}",
+        "hand_moves": "hand: {what}, {ids}{note} (hold stops it)",
+        "joint": "joint", "joints": "joints",
+        "figure_eight": "figure eight, {period:g} s a loop",
+        "playing": "playing {name} once, {count} {keyframes} over {seconds:g} s",
+        "keyframe": "keyframe", "keyframes": "keyframes",
+        "let_go_one": "hand: let go of joint {id} where it stands",
+        "let_go_many": "hand: let go of joints {ids} where they stand",
+        "let_go_none": "hand: no joint was moving by hand; they stand where they are",
+        "all_answer": "every servo replies normally",
+        "fault": "servo {id}: {state}",
+        "states": {"answers": "answers", "silent": "silent", "corrupt": "corrupt", "muted": "muted"},
+        "muted": "every servo muted: they obey, none replies (answer all undoes it)",
+        "closed": "port {port} closed, as an unplugged adapter; quit to end",
+        "closed_after": "port {port} closed after {seconds:g} s, as an unplugged adapter",
+        "faults_on": "faults on: silent {silent}, corrupt {corrupt}",
+        "none": "none",
+        "not_on_bus": "note: {ids} not on this bus (--ids); no fault for them",
+        "end_of_input": "end of input: the emulator keeps running until Ctrl-C or SIGTERM",
+        "calibrating": "a calibration has begun on this bus: when it asks you to move every joint to both ends of "
+                       "its travel, type sweep here (a hand takes them there and back in 4 s), then press Enter in "
+                       "the calibration's terminal",
+        "columns": ("joint", "torque", "goal", "present", "offset", "limits", "physical", "stops", "replies"),
+        "on": "on", "off": "off", "free": "free",
+        "port_closed": "port {port} is closed (unplugged): no host can reach these servos",
+    },
+}
 
 
 def _ids(text: str) -> tuple[int, ...]:
@@ -67,6 +174,7 @@ _speed = number(lambda value: 0 < value <= 100_000,
 # A figure eight faster than a loop a second is no hand's; slower than 10 minutes looks still.
 MIN_PERIOD_S, MAX_PERIOD_S = 1.0, 600.0
 FIGURE_EIGHT = "figure8"
+PROMPT = "fake-arm> "
 
 
 def _hand_script(text: str) -> tuple[str, Keyframes | None]:
@@ -118,6 +226,7 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
         "--close-after", type=_seconds, default=None, metavar="SECONDS",
         help="close the port this long after start-up, as an unplugged USB adapter (the emulator keeps running)",
     )
+    add_language_option(parser, "the console's replies")
 
 
 class _Stop(Exception):
@@ -127,16 +236,24 @@ class _Stop(Exception):
 class _Output:
     """Lines for a person; a reader that went away (`| head -1`) silences it, not the emulator."""
 
-    def __init__(self) -> None:
+    def __init__(self, prompt: str = "") -> None:
         self._lock = threading.Lock()
         self._gone = False
+        self.prompt = prompt  # shown again after a line that came while a person was at it
 
     def say(self, text: str) -> None:
+        self._print(text)
+
+    def say_aside(self, text: str) -> None:
+        """A line the emulator says by itself (a calibration noticed, a timed fault), on a line of its own."""
+        self._print(f"\n{text}\n{self.prompt}" if self.prompt else text, end="" if self.prompt else "\n")
+
+    def _print(self, text: str, end: str = "\n") -> None:
         with self._lock:
             if self._gone:
                 return
             try:
-                print(text, flush=True)
+                print(text, end=end, flush=True)
             except (BrokenPipeError, ValueError, OSError):
                 self._gone = True
                 try:  # later writes (and the interpreter's own flush at exit) go nowhere
@@ -147,23 +264,30 @@ class _Output:
                     pass
 
 
-def _status_table(arm: FakeArm) -> str:
-    def span(pair) -> str:
-        return "free" if pair[0] is None else f"{pair[0]}..{pair[1]}"
+def _padded(text: str, width: int, right: bool = False) -> str:
+    """`text` padded to `width` terminal columns (a Chinese character takes two)."""
+    room = " " * max(0, width - sum(2 if unicodedata.east_asian_width(c) in "WF" else 1 for c in text))
+    return room + text if right else text + room
 
+
+def _status_table(arm: FakeArm, text: dict) -> str:
+    def span(pair) -> str:
+        return text["free"] if pair[0] is None else f"{pair[0]}..{pair[1]}"
+
+    joint, torque, goal, present, offset, limits, physical, stops, replies = text["columns"]
     lines = [
-        f"{'id':>2}  {'joint':<13} {'torque':<6} {'goal':>5} {'present':>7} {'offset':>6}  "
-        f"{'limits':<9}  {'physical':>8}  {'stops':<10}  replies"
+        f"{'id':>2}  {_padded(joint, 13)} {_padded(torque, 6)} {_padded(goal, 5, True)} {_padded(present, 7, True)} "
+        f"{_padded(offset, 6, True)}  {_padded(limits, 9)}  {_padded(physical, 8, True)}  {_padded(stops, 10)}  {replies}"
     ]
     for row in arm.status_rows():
         ident = str(row["id"]) if row["bus_id"] == row["id"] else f"{row['id']}>{row['bus_id']}"
         lines.append(
-            f"{ident:>2}  {row['joint']:<13} {'on' if row['torque'] else 'off':<6} {row['goal']:>5} "
-            f"{row['present']:>7} {row['homing_offset']:>6}  {span(row['limits']):<9}  {row['physical']:>8}  "
-            f"{span(row['stops']):<10}  {row['replies']}"
+            f"{ident:>2}  {row['joint']:<13} {_padded(text['on'] if row['torque'] else text['off'], 6)} {row['goal']:>5} "
+            f"{row['present']:>7} {row['homing_offset']:>6}  {_padded(span(row['limits']), 9)}  {row['physical']:>8}  "
+            f"{_padded(span(row['stops']), 10)}  {text['states'][row['replies']]}"
         )
     if not arm.port_open:
-        lines.append(f"port {arm.port} is closed (unplugged): no host can reach these servos")
+        lines.append(text["port_closed"].format(port=arm.port))
     return "\n".join(lines)
 
 
@@ -178,55 +302,52 @@ def _ids_text(ids) -> str:
     return ", ".join(f"{run[0]}-{run[-1]}" if len(run) > 2 else ", ".join(map(str, run)) for run in runs)
 
 
-def _hand_reply(arm: FakeArm, what: str, moved: tuple[int, ...]) -> str:
+def _hand_reply(arm: FakeArm, what: str, moved: tuple[int, ...], text: dict) -> str:
     held = [servo_id for servo_id in arm.ids if servo_id not in moved]
     if not moved:
-        return f"hand: no joint to move, torque holds {_ids_text(held)}"
-    note = f"; torque holds {_ids_text(held)}" if held else ""
-    return f"hand: {what}, joint{'s' if len(moved) > 1 else ''} {_ids_text(moved)}{note} (hold stops it)"
+        return text["hand_none"].format(held=_ids_text(held))
+    note = text["holds_note"].format(ids=_ids_text(held)) if held else ""
+    joints = text["joints" if len(moved) > 1 else "joint"]
+    return text["hand_moves"].format(what=what, ids=f"{joints} {_ids_text(moved)}", note=note)
 
 
-def _play_figure_eight(arm: FakeArm, period_s: float) -> str:
+def _play_figure_eight(arm: FakeArm, period_s: float, text: dict) -> str:
     moved = arm.play_hand(lambda t_s: figure_eight_deg(t_s, period_s), None, ease_s=FIGURE_EIGHT_EASE_S)
-    return _hand_reply(arm, f"figure eight, {period_s:g} s a loop", moved)
+    return _hand_reply(arm, text["figure_eight"].format(period=period_s), moved, text)
 
 
-def _play_keyframes(arm: FakeArm, keyframes: Keyframes, name: str) -> str:
+def _play_keyframes(arm: FakeArm, keyframes: Keyframes, name: str, text: dict) -> str:
     # The hand reaches the first keyframe at its time, from where the joints stand (at once if it is 0).
     moved = arm.play_hand(keyframes.at, keyframes.duration_s, ease_s=keyframes.times_s[0])
     count = len(keyframes.times_s)
-    return _hand_reply(
-        arm, f"playing {name} once, {count} keyframe{'s' if count > 1 else ''} over {keyframes.duration_s:g} s", moved
-    )
+    what = text["playing"].format(name=name, count=count, keyframes=text["keyframes" if count > 1 else "keyframe"],
+                                  seconds=keyframes.duration_s)
+    return _hand_reply(arm, what, moved, text)
 
 
-def _command(arm: FakeArm, line: str, say) -> bool:
-    """Carry out one typed command; False for quit."""
+def _command(arm: FakeArm, line: str, say, text: dict) -> bool:
+    """Carry out one typed command, replying in `text`'s language; False for quit."""
     words = line.split()
     if not words:
         return True
     verb, rest = words[0].lower(), words[1:]
-    accepted = (
-        "help, status, sweep [SECONDS], move ID STEPS, figure8 [PERIOD_S], play FILE, hold, "
-        "silent ID, corrupt ID, answer ID|all, mute, close, quit"
-    )
 
-    def servo_of(text: str) -> int | None:
-        if text.isdigit() and int(text) in arm.ids:
-            return int(text)
-        say(f"no servo {text!r} on this bus; ids: {', '.join(map(str, arm.ids))}")
+    def servo_of(typed: str) -> int | None:
+        if typed.isdigit() and int(typed) in arm.ids:
+            return int(typed)
+        say(text["no_servo"].format(text=typed, ids=", ".join(map(str, arm.ids))))
         return None
 
     def wrong_arguments(usage: str) -> bool:
-        say(f"usage: {verb}{' ' + usage if usage else ''}; commands: {accepted}")
+        say(text["usage"].format(usage=verb + (" " + usage if usage else ""), accepted=ACCEPTED))
         return True
 
     if verb in ("quit", "exit"):
         return False
     if verb == "help":
-        say(COMMANDS_HELP)
+        say(text["help"])
     elif verb == "status":
-        say(_status_table(arm))
+        say(_status_table(arm, text))
     elif verb == "sweep":
         if len(rest) > 1:
             return wrong_arguments("[SECONDS]")
@@ -235,30 +356,33 @@ def _command(arm: FakeArm, line: str, say) -> bool:
         except ValueError:
             duration = float("nan")
         if not 0 < duration <= 600:
-            say(f"sweep takes a duration in seconds, more than 0 and at most 600; got {rest[0]!r}")
+            say(text["sweep_bad"].format(got=rest[0]))
             return True
         swept = arm.sweep(duration)
         held = [i for i in arm.ids if i not in swept]
-        note = f"; torque holds {', '.join(map(str, held))}" if held else ""
-        say(f"sweeping {', '.join(map(str, swept)) or 'no joint'} over {duration:g} s{note}")
+        note = text["holds_note"].format(ids=", ".join(map(str, held))) if held else ""
+        if swept:
+            say(text["sweeping"].format(ids=", ".join(map(str, swept)), seconds=duration, note=note))
+        else:
+            say(text["sweeping_none"].format(note=note))
     elif verb == "move":
         if len(rest) != 2:
             return wrong_arguments("ID STEPS")
         servo_id = servo_of(rest[0])
         if servo_id is None:
             return True
-        text = rest[1]
-        relative = text[:1] in "+-"
-        digits = text[1:] if relative else text
+        steps = rest[1]
+        relative = steps[:1] in "+-"
+        digits = steps[1:] if relative else steps
         if not digits.isdigit() or (not relative and int(digits) > sts3215.MAX_STEP):
-            say(f"move takes STEPS as a physical position 0-4095, or +N / -N to move by N steps; got {text!r}")
+            say(text["move_bad"].format(got=steps))
             return True
         before = arm.physical_position(servo_id)
-        reached = arm.move_by_hand(servo_id, int(text), relative=relative)
+        reached = arm.move_by_hand(servo_id, int(steps), relative=relative)
         if arm.read_register(servo_id, "Torque_Enable"):
-            say(f"servo {servo_id} has torque on: it holds at {reached}; the hand cannot move it")
+            say(text["move_held"].format(id=servo_id, reached=reached))
         else:
-            say(f"servo {servo_id} moved by hand from {before} to {reached}")
+            say(text["moved"].format(id=servo_id, before=before, reached=reached))
     elif verb == FIGURE_EIGHT:
         if len(rest) > 1:
             return wrong_arguments("[PERIOD_S]")
@@ -267,9 +391,9 @@ def _command(arm: FakeArm, line: str, say) -> bool:
         except ValueError:
             period_s = float("nan")
         if not MIN_PERIOD_S <= period_s <= MAX_PERIOD_S:
-            say(f"figure8 takes a period in seconds, from {MIN_PERIOD_S:g} to {MAX_PERIOD_S:g}; got {rest[0]!r}")
+            say(text["figure8_bad"].format(low=MIN_PERIOD_S, high=MAX_PERIOD_S, got=rest[0]))
             return True
-        say(_play_figure_eight(arm, period_s))
+        say(_play_figure_eight(arm, period_s, text))
     elif verb == "play":
         name = line.strip()[len(words[0]):].strip()  # the rest as typed: a file name may hold spaces
         if not name:
@@ -279,37 +403,37 @@ def _command(arm: FakeArm, line: str, say) -> bool:
         except ValueError as error:
             say(str(error))
             return True
-        say(_play_keyframes(arm, keyframes, name))
+        say(_play_keyframes(arm, keyframes, name, text))
     elif verb == "hold":
         if rest:
             return wrong_arguments("")
         let_go = arm.stop_hand()
         if len(let_go) == 1:
-            say(f"hand: let go of joint {let_go[0]} where it stands")
+            say(text["let_go_one"].format(id=let_go[0]))
         elif let_go:
-            say(f"hand: let go of joints {_ids_text(let_go)} where they stand")
+            say(text["let_go_many"].format(ids=_ids_text(let_go)))
         else:
-            say("hand: no joint was moving by hand; they stand where they are")
+            say(text["let_go_none"])
     elif verb in ("silent", "corrupt", "answer"):
         if len(rest) != 1:
             return wrong_arguments("ID" if verb != "answer" else "ID|all")
         if verb == "answer" and rest[0].lower() == "all":
             arm.answer_all()
-            say("every servo replies normally")
+            say(text["all_answer"])
             return True
         servo_id = servo_of(rest[0])
         if servo_id is None:
             return True
         {"silent": arm.silence, "corrupt": arm.corrupt, "answer": arm.answer}[verb](servo_id)
-        say(f"servo {servo_id}: {arm.faults()[servo_id]}")
+        say(text["fault"].format(id=servo_id, state=text["states"][arm.faults()[servo_id]]))
     elif verb == "mute":
         arm.mute_all()
-        say("every servo muted: they obey, none replies (answer all undoes it)")
+        say(text["muted"])
     elif verb == "close":
         arm.close_port()
-        say(f"port {arm.port} closed, as an unplugged adapter; quit to end")
+        say(text["closed"].format(port=arm.port))
     else:
-        say(f"unknown command {words[0]!r}; commands: {accepted}")
+        say(text["unknown"].format(word=words[0], accepted=ACCEPTED))
     return True
 
 
@@ -318,16 +442,16 @@ def run(args: argparse.Namespace) -> int:
         raise _Stop
 
     previous = signal.signal(signal.SIGTERM, stop)
-    out = _Output()
+    interactive = sys.stdin is not None and sys.stdin.isatty()
+    out = _Output(PROMPT if interactive else "")
     timers: list[threading.Timer] = []
-    arm = FakeArm(ids=args.ids, speed_steps_s=args.speed).start()
+    text = TEXT[args.lang]
+    arm = FakeArm(ids=args.ids, speed_steps_s=args.speed)
+    arm.on_calibration = lambda: out.say_aside(text["calibrating"])
+    arm.start()
     try:
         out.say(arm.port)
-        out.say(
-            f"an emulated SO-101 bus: {len(arm.ids)} STS3215 servos, ids {', '.join(map(str, arm.ids))}, "
-            f"1,000,000 baud; it emulates the protocol and the registers, not the physics (no gravity, "
-            f"no load); type help for its commands"
-        )
+        out.say(text["about"].format(count=len(arm.ids), ids=", ".join(map(str, arm.ids))))
 
         def faults() -> None:
             for servo_id in args.silent:
@@ -337,22 +461,23 @@ def run(args: argparse.Namespace) -> int:
                 if servo_id in arm.ids:
                     arm.corrupt(servo_id)
             if args.fault_after:
-                out.say(f"faults on: silent {args.silent or 'none'}, corrupt {args.corrupt or 'none'}")
+                out.say_aside(text["faults_on"].format(silent=", ".join(map(str, args.silent)) or text["none"],
+                                                 corrupt=", ".join(map(str, args.corrupt)) or text["none"]))
 
         def unplug() -> None:
             arm.close_port()
-            out.say(f"port {arm.port} closed after {args.close_after:g} s, as an unplugged adapter")
+            out.say_aside(text["closed_after"].format(port=arm.port, seconds=args.close_after))
 
         if args.hand is not None:
             name, keyframes = args.hand
             if keyframes is None:
-                out.say(_play_figure_eight(arm, FIGURE_EIGHT_PERIOD_S))
+                out.say(_play_figure_eight(arm, FIGURE_EIGHT_PERIOD_S, text))
             else:
-                out.say(_play_keyframes(arm, keyframes, name))
+                out.say(_play_keyframes(arm, keyframes, name, text))
 
         missing = [i for i in args.silent + args.corrupt if i not in arm.ids]
         if missing:
-            out.say(f"note: {', '.join(map(str, missing))} not on this bus (--ids); no fault for them")
+            out.say(text["not_on_bus"].format(ids=", ".join(map(str, missing))))
         if args.silent or args.corrupt:
             if args.fault_after:
                 timers.append(threading.Timer(args.fault_after, faults))
@@ -364,16 +489,15 @@ def run(args: argparse.Namespace) -> int:
             timer.daemon = True
             timer.start()
 
-        interactive = sys.stdin is not None and sys.stdin.isatty()
         while True:
             if interactive:
-                print("fake-arm> ", end="", flush=True)
+                print(PROMPT, end="", flush=True)
             line = sys.stdin.readline() if sys.stdin is not None else ""
             if not line:
-                out.say("end of input: the emulator keeps running until Ctrl-C or SIGTERM")
+                out.say(text["end_of_input"])
                 while True:
                     time.sleep(3600)
-            if not _command(arm, line, out.say):
+            if not _command(arm, line, out.say, text):
                 break
     except (KeyboardInterrupt, _Stop):
         pass

@@ -42,6 +42,9 @@ whose Baud_Rate register is set to anything but 0 (1,000,000 baud) no longer hea
 as a real one listening at another speed. A write to ID moves the servo to its new ID (it
 answers that write from the old one). Two servos that answer at once collide: the host gets
 one packet with a wrong checksum.
+
+A host that resets the first servo's Homing_Offset to 0 with torque off is starting a calibration:
+`on_calibration` is called then (`so101 fake-arm` tells the person to type `sweep`).
 """
 
 from __future__ import annotations
@@ -407,15 +410,19 @@ class _Servo:
             self.velocity = 0.0
         self.refresh()
 
-    def host_write(self, address: int, data: bytes) -> None:
-        """A write that came over the bus: logged for values_written, then taken as write() does."""
+    def host_write(self, address: int, data: bytes) -> dict[str, int]:
+        """A write that came over the bus: logged for values_written, then taken as write() does.
+        Returns the registers it covers whole, with the values sent (signed ones decoded)."""
         end = address + len(data)
+        sent = {}
         for name, (start, size) in sts3215.REGISTERS.items():
             if address <= start and start + size <= end:
                 raw = int.from_bytes(data[start - address : start - address + size], "little")
                 bit = sts3215.SIGN_BITS.get(name)
-                self.written[name].add(sts3215.decode_signed(raw, bit) if bit is not None else raw)
+                sent[name] = sts3215.decode_signed(raw, bit) if bit is not None else raw
+                self.written[name].add(sent[name])
         self.write(address, data)
+        return sent
 
     def calibrate_middle(self) -> None:
         bit = sts3215.SIGN_BITS["Homing_Offset"]
@@ -482,6 +489,8 @@ class FakeArm:
         self._thread: threading.Thread | None = None
         self._port_open = True
         self._buffer = bytearray()
+        # Called (from the bus thread, so briefly) when a host starts a calibration; see _host_wrote.
+        self.on_calibration: Callable[[], None] | None = None
 
     # -- life cycle
 
@@ -891,6 +900,14 @@ class FakeArm:
             with self._lock:
                 self._counts["dropped_bytes"] += count
 
+    def _host_wrote(self, servo: _Servo, sent: dict[str, int]) -> None:
+        # A calibration resets each servo's Homing_Offset to 0, torque off, in id order (so101 calibrate
+        # first thing, LeRobot's lerobot-calibrate once the middle pose is taken, before the ranges):
+        # that write to the first servo on the bus marks one. Driving an arm never writes Homing_Offset.
+        if (sent.get("Homing_Offset") == 0 and not servo.torque_on and servo.mechanics.servo_id == min(self._servos)
+                and self.on_calibration is not None):
+            self.on_calibration()
+
     def _handle(self, target: int, instruction: int, params: bytes) -> bytes:
         with self._lock:
             self._counts["packets"] += 1
@@ -919,7 +936,7 @@ class FakeArm:
                 if len(params) < 2:
                     return b""
                 for servo in servos:
-                    servo.host_write(params[0], params[1:])
+                    self._host_wrote(servo, servo.host_write(params[0], params[1:]))
             elif instruction == REG_WRITE:
                 if len(params) < 2:
                     return b""
@@ -928,7 +945,7 @@ class FakeArm:
             elif instruction == ACTION:
                 for servo in servos:
                     if servo.pending is not None:
-                        servo.host_write(*servo.pending)
+                        self._host_wrote(servo, servo.host_write(*servo.pending))
                         servo.pending = None
             else:
                 return b""  # an instruction the STS3215 does not know: no answer
@@ -975,7 +992,7 @@ class FakeArm:
             for servo in listening:
                 if servo.bus_id == servo_id:
                     servo.advance(now, self.speed_steps_s)
-                    servo.host_write(address, data)
+                    self._host_wrote(servo, servo.host_write(address, data))
 
 
 # -- a calibrated arm ---------------------------------------------------------------------------
