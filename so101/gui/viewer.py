@@ -4,8 +4,8 @@ In PyBullet's GUI mode every API call waits for the window's render thread, so o
 machine with slow graphics (software OpenGL, a virtual machine, WSL) the physics runs
 at the window's frame rate: 84 steps a second instead of 250 under Xvfb here. So the
 physics always runs in its own DIRECT client, and the window is a second PyBullet
-client, in another process and at a lower priority, that loads the same arm, never
-steps it, and sets its joints to the latest angles at most `fps` times a second.
+client, in another process (at the lowest priority once it shows the arm), that loads the
+same arm, never steps it, and sets its joints to the latest angles at most `fps` times a second.
 The window keeps PyBullet's own camera controls (Ctrl + left drag turns, the wheel
 zooms, Ctrl + middle drag pans).
 
@@ -18,6 +18,7 @@ viewer's state, and the six joint angles in radians (so101.robot.ACTUATED_JOINTS
 from __future__ import annotations
 
 import argparse
+import contextlib
 import mmap
 import os
 import signal
@@ -51,7 +52,7 @@ VIEWER_NICENESS = 19
 CAMERA = {"cameraDistance": 0.6, "cameraYaw": 45, "cameraPitch": -30, "cameraTargetPosition": [0, 0, 0.15]}
 
 
-# Logged once the window shows the arm: it opens a few seconds after the physics starts.
+# Logged once the window shows the arm, posed: a few seconds after the physics starts.
 WINDOW_SHOWING = "window open: it shows the arm as the physics moves it"
 
 
@@ -123,19 +124,39 @@ class Window:
         self._path.unlink(missing_ok=True)
 
 
+def process_threads() -> list[int]:
+    """This process's threads (Linux); elsewhere 0, the calling thread."""
+    try:
+        return [int(thread) for thread in os.listdir("/proc/self/task")]
+    except OSError:
+        return [0]
+
+
+def keep_to_one_cpu() -> None:
+    """Every thread of this process, and the threads started later, keeps to the last CPU,
+    leaving the others whole to the physics and dora (on 2 cores that cut the ticks dora
+    dropped from about 5% to 1%). Linux only; elsewhere the scheduler decides."""
+    if not hasattr(os, "sched_setaffinity"):
+        return
+    cpus = sorted(os.sched_getaffinity(0))
+    if len(cpus) < 2:
+        return
+    for thread in process_threads():
+        with contextlib.suppress(ProcessLookupError):  # a thread that has just ended
+            os.sched_setaffinity(thread, cpus[-1:])
+
+
 def lowest_priority() -> None:
     """The window runs only on CPU time nothing else wants: PyBullet's GUI keeps a thread
     spinning (its MotionThreadFunc polls with usleep(0)) and draws in software where there
-    is no GPU. On Linux it keeps to one CPU, leaving the others whole to the physics and
-    dora (on 2 cores that cut the ticks dora dropped from about 5% to 1%), in the SCHED_IDLE
-    class; elsewhere the highest niceness. Threads started later (PyBullet's, Mesa's)
-    inherit both."""
-    if hasattr(os, "sched_setaffinity"):
-        cpus = sorted(os.sched_getaffinity(0))
-        if len(cpus) > 1:
-            os.sched_setaffinity(0, cpus[-1:])
+    is no GPU. On Linux on one CPU (keep_to_one_cpu), every thread of the process in the
+    SCHED_IDLE class (PyBullet's and Mesa's start with the window, so each is set; threads
+    started later inherit it); elsewhere the highest niceness."""
+    keep_to_one_cpu()
     try:
-        os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
+        for thread in process_threads():
+            with contextlib.suppress(ProcessLookupError):
+                os.sched_setscheduler(thread, os.SCHED_IDLE, os.sched_param(0))
         return
     except (AttributeError, OSError):
         pass  # not Linux
@@ -146,42 +167,57 @@ def lowest_priority() -> None:
 
 
 def run_viewer(shared_path: Path, urdf: Path, fps: float) -> int:
-    """The viewer process: a GUI client that shows the angles the physics hands it."""
+    """The viewer process: a GUI client that shows the angles the physics hands it.
+
+    The window draws nothing until the arm stands at the physics' angles: drawn while
+    loading, its links showed one by one, loose at their origins, and drawing them took
+    most of the loading time. It loads at the priority it was started with, on one CPU,
+    and drops to the lowest once it shows the arm: at the lowest priority from the start,
+    a busy machine held the window back by 10 s and more.
+    """
     import pybullet as p
     import pybullet_data
 
     # Ctrl-C in a terminal reaches the whole process group: the physics closes this window.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    lowest_priority()
+    keep_to_one_cpu()
     parent = os.getppid()
     mapping, shared = shared_array(shared_path)
     frame_period_s = 1.0 / fps
-    # GUI_MAIN_THREAD: the window draws and reads the mouse only inside this process's
-    # PyBullet calls, so it draws when there is something new, not continuously.
-    client = p.connect(p.GUI_MAIN_THREAD)
-    if client < 0:
-        return 1
-    shared[STATUS] = OPEN
-    p.configureDebugVisualizer(p.COV_ENABLE_GUI, 0, physicsClientId=client)
-    p.resetDebugVisualizerCamera(**CAMERA, physicsClientId=client)
-    p.setAdditionalSearchPath(pybullet_data.getDataPath(), physicsClientId=client)
-    p.loadURDF("plane.urdf", physicsClientId=client)
-    # Nothing collides in a mirror: no collision shapes, which are most of the loading time.
-    robot_id = p.loadURDF(str(urdf), useFixedBase=True, flags=p.URDF_IGNORE_COLLISION_SHAPES, physicsClientId=client)
-    indices = [joint.index for joint in ACTUATED_JOINTS]
-    shared[STATUS] = SHOWING
-    shown_frame = -1.0
-    busy_until_s = drawn_at_s = 0.0
     try:
+        # GUI_MAIN_THREAD: the window draws and reads the mouse only inside this process's
+        # PyBullet calls, so it draws when there is something new, not continuously.
+        # --nogui: without the side panels from the first frame (COV_ENABLE_GUI 0 from the start).
+        client = p.connect(p.GUI_MAIN_THREAD, options="--nogui")
+        if client < 0:
+            return 1
+        shared[STATUS] = OPEN
+        p.configureDebugVisualizer(p.COV_ENABLE_RENDERING, 0, physicsClientId=client)
+        p.resetDebugVisualizerCamera(**CAMERA, physicsClientId=client)
+        p.setAdditionalSearchPath(pybullet_data.getDataPath(), physicsClientId=client)
+        p.loadURDF("plane.urdf", physicsClientId=client)
+        # Nothing collides in a mirror: no collision shapes, which are most of the loading time.
+        robot_id = p.loadURDF(str(urdf), useFixedBase=True, flags=p.URDF_IGNORE_COLLISION_SHAPES, physicsClientId=client)
+        indices = [joint.index for joint in ACTUATED_JOINTS]
+
+        def pose(slots: np.ndarray) -> float:
+            """The arm at the latest angles in the shared `slots`; returns the frame they belong to."""
+            frame = slots[FRAME]  # before the angles: the physics writes them, then counts the frame
+            p.resetJointStatesMultiDof(
+                robot_id, indices, [[angle] for angle in slots[ANGLES:].tolist()], physicsClientId=client,
+            )
+            return frame
+
+        shown_frame = pose(shared)
+        p.configureDebugVisualizer(p.COV_ENABLE_RENDERING, 1, physicsClientId=client)  # draws the posed arm
+        shared[STATUS] = SHOWING
+        lowest_priority()
+        busy_until_s = drawn_at_s = 0.0
         # Ends with the physics: its close() terminates this process; if it died, the parent changes.
         while os.getppid() == parent:
             now_s = time.monotonic()
-            frame = shared[FRAME]
-            if frame != shown_frame:  # the arm moved
-                shown_frame = frame
-                p.resetJointStatesMultiDof(
-                    robot_id, indices, [[angle] for angle in shared[ANGLES:].tolist()], physicsClientId=client,
-                )
+            if shared[FRAME] != shown_frame:  # the arm moved
+                shown_frame = pose(shared)
                 busy_until_s, drawn_at_s = now_s + BUSY_FOR_S, now_s
             elif now_s < busy_until_s or now_s - drawn_at_s >= IDLE_PERIOD_S:
                 # Draws, and takes the mouse's camera moves; a mouse in use keeps the full frame rate.
