@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import os
 import sys
-from typing import Any, Callable, Protocol, Sequence
+from typing import Any, Protocol, Sequence
 
 from dataclasses import replace
 
@@ -28,7 +28,8 @@ class JogPrompt(Protocol):
     text: dict[str, str]
     states_seen: int
     news_shown: int  # lines printed over the status line meanwhile (the recorder's news)
-    send_joint_cmd: Callable[[Sequence[float]], None]
+
+    def send_joint_cmd(self, angles_deg: Sequence[float]) -> None: ...
 
     def wait_for_state(self, timeout_s: float) -> tuple[tuple[float, ...] | None, float | None]: ...
 
