@@ -8,7 +8,6 @@ within HULL_TOLERANCE_DEG after it (the hull's frame moves, so its vertices roun
 
 from __future__ import annotations
 
-import mujoco
 import numpy as np
 import pytest
 
@@ -18,6 +17,10 @@ from so101.bodies.mujoco_model import HULL_TOLERANCE_DEG, HULLS_NAME, collision_
 from so101.bodies.mujoco_sim import SO101MuJoCo
 from so101.robot import ACTUATED_JOINTS
 from tests.test_course_motion import SCENARIOS, STEPS_PER_COMMAND
+
+# MuJoCo as so101 imports it: imported here first, without the OpenGL back end mujoco_model
+# chooses, it could not draw offscreen for the tests that come after (an abort, in the suite).
+mujoco = mujoco_model.mujoco
 
 pytestmark = pytest.mark.slow  # steps MuJoCo through the course's motions: not in the fast subset
 
