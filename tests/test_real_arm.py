@@ -285,3 +285,33 @@ def test_a_signal_to_the_running_node_switches_torque_off(tmp_path, signal_numbe
     assert "torque off on servos 1-6" in node_log
     assert "Traceback" not in dora.log() and "Traceback" not in node_log
     assert left == []
+
+
+def test_a_ping_or_read_at_start_is_tried_again_after_a_lost_or_cut_short_reply(monkeypatch):
+    from so101.feetech import checks
+    from so101.feetech.bus import BusLost, NoPort, ServoSilent
+    from so101.feetech.checks import START_PINGS, at_start
+
+    monkeypatch.setattr(checks, "START_PATIENCE_S", 0.0)  # tries, not time: START_PINGS of them
+
+    def answers_after(failures):
+        tries = []
+
+        def ask():
+            tries.append(1)
+            if len(tries) <= len(failures):
+                raise failures[len(tries) - 1]
+            return 2048
+        return ask, tries
+
+    ask, tries = answers_after([ServoSilent(2, False, "a read of Homing_Offset"), BusLost("cut short")])
+    assert at_start(ask) == 2048 and len(tries) == 3
+    ask, tries = answers_after([ServoSilent(2, False, "a read")] * START_PINGS)
+    with pytest.raises(ServoSilent):
+        at_start(ask)
+    assert len(tries) == START_PINGS
+    ask, tries = answers_after([NoPort("cannot open the serial port /dev/ttyACM0")])
+    with pytest.raises(NoPort):  # no port is no lost packet: said at once
+        at_start(ask)
+    assert len(tries) == 1
+    assert at_start(lambda: None) is None  # a ping nobody answers, START_PINGS times: None stands

@@ -23,7 +23,7 @@ from typing import NoReturn, Sequence
 from so101.bodies.node_loop import TAGS
 from so101.bodies.protocol import BodyFailed, BodyName
 from so101.bodies.settings import CALIBRATE_HINT, DEFAULT_BUS_RETRIES, DEFAULT_MAX_SPEED_DEG_S, ArmSettings, NodeSettings
-from so101.feetech.bus import BusError, FeetechBus, ServoSilent
+from so101.feetech.bus import BusError, BusLost, FeetechBus, ServoSilent
 from so101.feetech.calibration import (
     MOTOR_IDS,
     MOTOR_NAMES,
@@ -34,7 +34,7 @@ from so101.feetech.calibration import (
     step_toward,
     steps_to_deg,
 )
-from so101.feetech.checks import check_calibration_on_servos, check_servos_answer
+from so101.feetech.checks import at_start, check_calibration_on_servos, check_servos_answer
 from so101.robot import ACTUATED_JOINTS, goal_deg
 from so101.stats import percentile
 
@@ -113,7 +113,7 @@ class SO101Real:
         try:
             bus = self.bus = FeetechBus(port).open()
             self._check_servos(bus, calibration_name)
-            present = self._read_present(bus)
+            present = at_start(lambda: self._read_present(bus))
             start_deg = self._to_deg(present)
             self._check_in_range(present, start_deg)
             # Torque on with each goal where the joint stands: the arm holds still.
@@ -123,8 +123,8 @@ class SO101Real:
             for _ in range(PROBE_READS):
                 try:
                     self._read_present(bus)
-                except ServoSilent:  # one lost reply is a missing sample, not an arm that cannot start
-                    continue
+                except (ServoSilent, BusLost):  # a lost or cut-short reply is a missing sample, not an arm that
+                    continue                        # cannot start (a port really gone fails the first tick's read)
         except BusError as error:
             self.close()
             raise ArmFailed(str(error)) from None

@@ -3,24 +3,47 @@ the leader's (so101/leader/arm.py) and `so101 calibrate`'s. Each check raises wi
 
 from __future__ import annotations
 
-from typing import Sequence
+import time
+from typing import Callable, Sequence, TypeVar
 
-from so101.feetech.bus import BusError, FeetechBus
+from so101.feetech.bus import BusError, FeetechBus, NoPort
 from so101.feetech.calibration import MOTOR_IDS, MOTOR_NAMES, CalibrationError, MotorCalibration
 from so101.feetech.sts3215 import MODEL_NUMBER, SIGN_BITS, decode_signed
 
-# Pings of each servo at start before it is called silent: one lost packet must not refuse the arm.
+# A ping or read at start is tried again while the bus errs or nothing answers, for this long and
+# at least START_PINGS times, before a servo is called silent: a lost or cut-short reply, or a
+# moment the machine was too busy to read the port, must not refuse the arm (pings and reads
+# change nothing on a servo, so trying again is safe; a servo that is really missing costs a second).
 START_PINGS = 3
+START_PATIENCE_S = 1.0
+
+Answer = TypeVar("Answer")
+
+
+def at_start(ask: Callable[[], Answer]) -> Answer:
+    """`ask()` (a ping or a read), tried again while it raises BusError or answers None; the last error
+    or answer stands. No port at all is said at once."""
+    deadline = time.monotonic() + START_PATIENCE_S
+    attempt = 0
+    while True:
+        attempt += 1
+        patience_left = attempt < START_PINGS or time.monotonic() < deadline
+        try:
+            answer = ask()
+        except NoPort:
+            raise
+        except BusError:
+            if not patience_left:
+                raise
+            continue
+        if answer is not None or not patience_left:
+            return answer
 
 
 def check_servos_answer(bus: FeetechBus) -> None:
     """Every servo of an SO-101 answers at its ID and is an STS3215; BusError names the first that is not."""
     for name, servo_id in zip(MOTOR_NAMES, MOTOR_IDS):
-        model = None
-        for _ in range(START_PINGS):
-            model = bus.ping(servo_id)
-            if model is not None:
-                break
+        model = at_start(lambda: bus.ping(servo_id))
         if model is None:
             raise BusError(f"servo {servo_id} ({name}) does not answer on {bus.port_name}: "
                            f"check its power and cable, and that it has ID {servo_id}")
@@ -35,14 +58,15 @@ def check_calibration_on_servos(bus: FeetechBus, motors: Sequence[MotorCalibrati
     "leader", as the line calls it."""
     for name, servo_id, motor in zip(MOTOR_NAMES, MOTOR_IDS, motors):
         on_servo = {
-            "homing_offset": decode_signed(bus.read(servo_id, "Homing_Offset"), SIGN_BITS["Homing_Offset"]),
-            "range_min": bus.read(servo_id, "Min_Position_Limit"),
-            "range_max": bus.read(servo_id, "Max_Position_Limit"),
+            "homing_offset": decode_signed(at_start(lambda: bus.read(servo_id, "Homing_Offset")),
+                                           SIGN_BITS["Homing_Offset"]),
+            "range_min": at_start(lambda: bus.read(servo_id, "Min_Position_Limit")),
+            "range_max": at_start(lambda: bus.read(servo_id, "Max_Position_Limit")),
         }
         for field_name, value in on_servo.items():
             if value != getattr(motor, field_name):
                 raise CalibrationError(
                     f"{calibration_name} does not match the {which_arm} on {bus.port_name}: servo {servo_id} ({name}) "
                     f"has {field_name} {value}, the file says {getattr(motor, field_name)}; {remedy}")
-        if bus.read(servo_id, "Operating_Mode") != 0:
+        if at_start(lambda: bus.read(servo_id, "Operating_Mode")) != 0:
             raise CalibrationError(f"servo {servo_id} ({name}) is not in position mode (Operating_Mode 0)")
