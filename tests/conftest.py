@@ -109,3 +109,20 @@ def course_printed_table(course_joint_table) -> list[tuple[int, str, str]]:
 def course_step_b_deg() -> list[float]:
     """Course step B's targets, [0.5, -0.5, 0.5, -0.5, 0.5] rad, in degrees: 0.5 rad = 28.65°."""
     return [28.65, -28.65, 28.65, -28.65, 28.65]
+
+
+@pytest.fixture(autouse=True)
+def no_real_time_threads_after_the_test():
+    """SVT-AV1 makes the thread that opens it SCHED_FIFO where it may (as root): tests that encode
+    in their own thread (tests/lerobot_written.py writes as LeRobot does) left this process's main
+    thread real-time, and every later test's emulated arm (a thread here) and window (a child,
+    inheriting it) starved behind it. Each test starts as the last one began."""
+    yield
+    if not hasattr(os, "sched_getscheduler"):
+        return
+    for task in os.listdir("/proc/self/task"):
+        try:
+            if os.sched_getscheduler(int(task)) in (os.SCHED_FIFO, os.SCHED_RR):
+                os.sched_setscheduler(int(task), os.SCHED_OTHER, os.sched_param(0))
+        except OSError:
+            pass

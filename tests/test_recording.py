@@ -376,3 +376,23 @@ def test_a_body_publishes_its_targets_only_where_the_dataflow_declares_them(monk
     code, node = run_simulation_node(monkeypatch, events, node_config=config)
     targets = [message.to_pylist() for message in node.outputs["joint_target"]]
     assert targets == [[0.0] * 6, [45.0, 0, 0, 0, 0, 0]]  # the first tick's, then the change's; not the third tick's
+
+
+def test_encoding_a_video_leaves_no_thread_of_this_process_real_time(tmp_path):
+    """SVT-AV1 sets real-time policies where it may (as root), the encoding process's main thread
+    included: left so, this test process's main thread starved every later test's emulated arm."""
+    import os
+
+    from so101.dataset.video import StreamingEncoder
+
+    encoder = StreamingEncoder(tmp_path / "episode.mp4", 30, 64, 48)
+    for value in range(10):
+        encoder.add(np.full((48, 64, 3), value * 20, dtype=np.uint8))
+    assert encoder.finish().frames == 10
+    policies = {}
+    for task in os.listdir("/proc/self/task"):
+        try:
+            policies[task] = os.sched_getscheduler(int(task))
+        except ProcessLookupError:
+            pass
+    assert not set(policies.values()) & {os.SCHED_FIFO, os.SCHED_RR}, policies

@@ -45,15 +45,24 @@ QUEUE_FRAMES = 60
 Image = npt.NDArray[np.uint8]
 
 
-def _no_realtime_threads() -> None:
-    """Every thread of this process that runs under a real-time policy goes back under the main
-    thread's: SVT-AV1 starts its threads SCHED_FIFO when it can (as root), and a real-time encoder
-    thread pre-empts the physics loop on the same cores (measured: the simulation's per-tick work
-    reached 18 ms at p99, and 15% of its ticks were missed, while an episode with video recorded)."""
-    if not hasattr(os, "sched_getscheduler"):
+def scheduling_policy() -> int | None:
+    """The calling thread's scheduling policy (None off Linux): what the encoder's side effects are undone to."""
+    try:
+        return os.sched_getscheduler(0)
+    except (AttributeError, OSError):
+        return None
+
+
+def _no_realtime_threads(policy: int | None) -> None:
+    """Every thread of this process that runs under a real-time policy goes back under `policy`, the
+    one its creator had before the encoder started: SVT-AV1 sets real-time policies when it can (as
+    root), on its own threads and on the process's main thread, and a real-time thread pre-empts the
+    physics loop on the same cores (measured: the simulation's per-tick work reached 18 ms at p99,
+    and 15% of its ticks were missed, while an episode with video recorded; in the test process, a
+    main thread left SCHED_FIFO starved every later test's emulated arm and window)."""
+    if policy is None or policy in (os.SCHED_FIFO, os.SCHED_RR):
         return
     try:
-        policy = os.sched_getscheduler(os.getpid())
         tasks = os.listdir("/proc/self/task")
     except OSError:
         return
@@ -98,6 +107,7 @@ class StreamingEncoder:
         self.path = path
         self.fps = fps
         self.width, self.height = width, height
+        self._policy = scheduling_policy()  # the creator's, before SVT-AV1 changes any
         self._inspect = inspect
         self._threads = threads
         self._queue: queue.Queue[Image | None] = queue.Queue(maxsize=QUEUE_FRAMES)
@@ -159,10 +169,11 @@ class StreamingEncoder:
                 frame.pts, frame.time_base = self._frames_written, time_base
                 container.mux(stream.encode(frame))
                 if self._frames_written == 0:  # the encoder's threads exist once it took its first frame
-                    _no_realtime_threads()
+                    _no_realtime_threads(self._policy)
                 self._frames_written += 1
             if not self._cancelled.is_set():
                 container.mux(stream.encode(None))
+            _no_realtime_threads(self._policy)
         except Exception as error:  # noqa: BLE001 - reported by finish(), never lost in the thread
             self._error = error
             while True:  # unblock a caller waiting on a full queue
