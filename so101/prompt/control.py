@@ -161,6 +161,7 @@ class KeyboardControl:
 
     def handle_line(self, line: str, state_wait_s: float = FIRST_STATE_WAIT_S) -> tuple[list[str], bool]:
         """Run one typed line: returns (reply lines, whether to quit)."""
+        self._landing = None  # any other line ends the watch after `xyz`: its news would cut into the replies
         command = parse_command(line, self.lang)
         text = self.text
         if isinstance(command, ParseError):
