@@ -17,7 +17,6 @@ This module imports mujoco first in this package: it chooses the OpenGL back end
 
 from __future__ import annotations
 
-import hashlib
 import os
 import zipfile
 from pathlib import Path
@@ -48,8 +47,7 @@ Hulls = dict[str, tuple[npt.NDArray[np.float32], npt.NDArray[np.int32]]]
 
 def hulls_key() -> str:
     """What the saved hulls were derived with: this MuJoCo (its hull code) and the model files (their manifest)."""
-    manifest = "\n".join(f"{digest} {relpath}" for relpath, digest in sorted(assets.manifest().items()))
-    return f"mujoco {mujoco.__version__}; model {hashlib.sha256(manifest.encode()).hexdigest()}"
+    return f"mujoco {mujoco.__version__}; model {assets.manifest_digest()}"
 
 
 def scene_model(mjcf: Path, hulls: Hulls | None, visual: bool = True) -> Any:
