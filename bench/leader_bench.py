@@ -28,7 +28,7 @@ from pathlib import Path
 from bench.common import MOVED_THRESHOLD_DEG, WARMUP_S, reflecting_states, run_dataflow, target_row
 from so101.bodies.registry import BODIES
 from so101.feetech.calibration import MOTOR_IDS, MOTOR_NAMES, DEG_PER_STEP, Calibration, save_calibration
-from so101.feetech.fake_arm import FakeArm, calibrate_as_at_the_factory
+from so101.feetech.fake_arm import FakeArmProcess, calibrate_as_at_the_factory
 from so101.leader.command import leader_values
 from so101.runtime.dataflow import LEADER_READY_MARKS, LEADER_TICK, timer_period_s, with_leader
 from so101.stats import summary
@@ -48,7 +48,7 @@ class Hand:
     """A person's hand on the emulated leader: a move every MOVE_PERIOD_S, each noted as
     [monotonic ns, joint, the leader's new angle in the follower's degrees]."""
 
-    def __init__(self, arm: FakeArm, calibration: Calibration, dora_log: Path):
+    def __init__(self, arm: FakeArmProcess, calibration: Calibration, dora_log: Path):
         self.arm = arm
         self.motors = [calibration[name] for name in MOTOR_NAMES]
         self.dora_log = dora_log
@@ -107,7 +107,7 @@ def leader_latency(states: list, moves: list, joints: list[int], tick_starts_ns:
 def run_leader_benchmark(work_dir: Path, duration_s: float, body: str, body_env: dict) -> dict:
     """`body` (its node's settings in `body_env`) driven by an emulated leader for `duration_s` of moves."""
     run_dir = work_dir / "leader"
-    with FakeArm() as arm:
+    with FakeArmProcess() as arm:
         calibration = calibrate_as_at_the_factory(arm)
         calibration_file = work_dir / "so101_leader.json"
         save_calibration(calibration_file, calibration)

@@ -28,7 +28,7 @@ from bench.common import (
 )
 from so101.bodies.real_arm import SO101Real
 from so101.feetech.calibration import save_calibration
-from so101.feetech.fake_arm import FakeArm, calibrate_as_at_the_factory
+from so101.feetech.fake_arm import FakeArmProcess, calibrate_as_at_the_factory
 from so101.stats import summary
 
 TICK_S = 0.02  # dataflow_real.yml's timer
@@ -46,7 +46,7 @@ TARGETS = {
 PROBE_PERIOD_S = "0.3"  # a 4° probe at 90°/s takes 45 ms: each probe is done before the next
 
 
-def measure_bus(arm: FakeArm, calibration, exchanges: int) -> dict:
+def measure_bus(arm: FakeArmProcess, calibration, exchanges: int) -> dict:
     body = SO101Real(arm.port, calibration, time_step_s=TICK_S)
     try:
         body.round_trips_s = type(body.round_trips_s)("d")
@@ -63,7 +63,7 @@ def measure_bus(arm: FakeArm, calibration, exchanges: int) -> dict:
 
 def run_real_benchmark(duration_s: float, exchanges: int) -> dict:
     load_start = os.getloadavg()
-    with tempfile.TemporaryDirectory(prefix="so101-bench-real-") as tmp, FakeArm() as arm:
+    with tempfile.TemporaryDirectory(prefix="so101-bench-real-") as tmp, FakeArmProcess() as arm:
         work_dir = Path(tmp)
         calibration = calibrate_as_at_the_factory(arm)
         calibration_file = work_dir / "so101_follower.json"

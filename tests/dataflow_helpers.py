@@ -33,23 +33,19 @@ TICK = ("tick", pa.array([], type=pa.null()))
 def body_environment(body: str, tmp_path: Path):
     """What a body's node needs besides its dataflow file: (environment, emulated arm or None).
     Nothing for a simulation; for the real arm, `so101 fake-arm`'s emulated bus, calibrated,
-    its calibration file, a goal speed that keeps the tests' waits short, and patient retries."""
+    its calibration file and a goal speed that keeps the tests' waits short; the arm's own retries."""
     from so101.bodies.registry import BODIES
 
     if BODIES[body].simulated:
         yield {}, None
         return
     from so101.feetech.calibration import save_calibration
-    from so101.feetech.fake_arm import FakeArm, calibrate_as_at_the_factory
+    from so101.feetech.fake_arm import FakeArmProcess, calibrate_as_at_the_factory
 
-    with FakeArm() as arm:
+    with FakeArmProcess() as arm:
         calibration_file = tmp_path / "so101_follower.json"
         save_calibration(calibration_file, calibrate_as_at_the_factory(arm))
-        # More bus retries than an arm needs: the emulator is a thread of the test's own process,
-        # and a test that reads a growing log there (the GIL held through each regex) under a
-        # loaded CI machine once kept it from answering for 5 ticks (a fresh clone's run).
-        yield {"SO101_PORT": arm.port, "SO101_CALIBRATION": str(calibration_file), "SO101_MAX_SPEED_DEG_S": "180",
-               "SO101_BUS_RETRIES": "25"}, arm
+        yield {"SO101_PORT": arm.port, "SO101_CALIBRATION": str(calibration_file), "SO101_MAX_SPEED_DEG_S": "180"}, arm
 
 
 def run_simulation_node(monkeypatch, events, node_config=TICK_TIMER_CONFIG, body="pybullet", **env):

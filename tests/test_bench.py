@@ -102,7 +102,7 @@ def test_leader_latency_is_the_move_to_the_first_state_showing_it_split_at_the_b
 
 
 def test_the_hand_moves_each_leader_joint_a_few_degrees_each_way_in_turn(tmp_path, monkeypatch):
-    from so101.feetech.fake_arm import FakeArm, calibrate_as_at_the_factory
+    from so101.feetech.fake_arm import FakeArmProcess, calibrate_as_at_the_factory
     from so101.runtime.dataflow import LEADER_READY_MARKS
 
     monkeypatch.setattr(leader_bench, "WARMUP_S", 0.0)
@@ -110,7 +110,7 @@ def test_the_hand_moves_each_leader_joint_a_few_degrees_each_way_in_turn(tmp_pat
     monkeypatch.setattr(leader_bench, "LEADER_TICK_S", 0.0)
     dora_log = tmp_path / "dora.log"
     dora_log.write_text(f"[leader] {LEADER_READY_MARKS[0]}, /dev/pts/9\n")
-    with FakeArm() as arm:
+    with FakeArmProcess() as arm:
         hand = leader_bench.Hand(arm, calibrate_as_at_the_factory(arm), dora_log)
         hand.move(0.035)  # a move at 0, 10, 20 and 30 ms of the 35 asked for, however late each comes
     half = leader_bench.HAND_STEP_DEG / 2

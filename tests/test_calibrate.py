@@ -10,10 +10,12 @@ import time
 import pytest
 
 from so101.feetech.calibration import MOTOR_IDS, MOTOR_NAMES, load_calibration
-from so101.feetech.fake_arm import FakeArm
+from so101.feetech.fake_arm import FakeArmProcess
 from so101.bodies.real_arm import SO101Real
 from so101.leader.arm import SO101Leader
 from tests.dataflow_helpers import SO101, dora_env
+
+pytestmark = pytest.mark.emulated_hardware  # the under-load check (tools/under_load.py) runs exactly these
 
 
 class Calibrate:
@@ -48,7 +50,7 @@ class Calibrate:
 @pytest.mark.parametrize("role", ["follower", "leader"])
 def test_a_scripted_calibration_finds_the_emulated_arms_offsets_and_ranges(tmp_path, role):
     out = tmp_path / "arm.json"
-    with FakeArm() as arm:
+    with FakeArmProcess() as arm:
         arm.write_register(1, "Torque_Enable", 1)  # left on by an earlier program: calibrate switches it off
         calibrate = Calibrate("--port", arm.port, "--out", str(out), *(["--leader"] if role == "leader" else []))
         calibrate.wait_for("Then press Enter.")
@@ -98,7 +100,7 @@ def test_a_scripted_calibration_finds_the_emulated_arms_offsets_and_ranges(tmp_p
 def test_an_existing_file_is_kept_unless_forced_and_then_backed_up(tmp_path):
     out = tmp_path / "arm.json"
     out.write_text('{"kept": true}')
-    with FakeArm() as arm:
+    with FakeArmProcess() as arm:
         refused = subprocess.run([str(SO101), "calibrate", "--port", arm.port, "--out", str(out)],
                                  capture_output=True, text=True, env=dora_env(SO101_LANG="en"), timeout=30)
         assert refused.returncode == 2
@@ -122,7 +124,7 @@ def test_an_existing_file_is_kept_unless_forced_and_then_backed_up(tmp_path):
 ])
 def test_failures_write_nothing_and_say_so_in_one_line(tmp_path, ids, ending, message):
     out = tmp_path / "arm.json"
-    with FakeArm(ids=ids) as arm:
+    with FakeArmProcess(ids=ids) as arm:
         calibrate = Calibrate("--port", arm.port, "--out", str(out))
         if ending == "eof":
             calibrate.wait_for("Then press Enter.")

@@ -1,6 +1,6 @@
-"""The emulated SO-101 bus (so101/feetech/fake_arm.py), driven through Feetech's own SDK as a driver would.
+"""The emulated SO-101 bus (so101/feetech/fake_arm/), driven through Feetech's own SDK as a driver would.
 
-Every test talks to the emulator over its pseudo-terminal with scservo_sdk (PortHandler,
+The emulator runs in a process of its own (FakeArmProcess). Every test talks to it over its pseudo-terminal with scservo_sdk (PortHandler,
 PacketHandler(0), GroupSyncRead/GroupSyncWrite) and checks values: the numbers a real
 STS3215 would give, the timing of its motion, what the SDK reports for each fault.
 `arm.read_register` / `physical_position` look inside where the bus cannot.
@@ -8,6 +8,7 @@ STS3215 would give, the timing of its motion, what the SDK reports for each faul
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 import select
@@ -25,7 +26,7 @@ import scservo_sdk as scs
 from so101.feetech.bus import FeetechBus
 from so101.feetech.calibration import MOTOR_NAMES, steps_to_deg
 from so101.feetech.fake_arm import (
-    MECHANICAL_TABLE, MECHANICS, FakeArm, calibrate_as_at_the_factory, joint_deg, physical_steps,
+    MECHANICAL_TABLE, MECHANICS, FakeArmProcess, calibrate_as_at_the_factory, joint_deg, physical_steps,
 )
 from so101.feetech.hand import eased_in, figure_eight_deg, parse_keyframes
 from so101.feetech.sts3215 import decode_signed
@@ -42,10 +43,12 @@ MODEL_NUMBER, ID, BAUD_RATE, MIN_LIMIT, MAX_LIMIT, HOMING_OFFSET, OPERATING_MODE
 TORQUE_ENABLE, ACCELERATION, GOAL_POSITION, GOAL_VELOCITY, LOCK = 40, 41, 42, 46, 55
 PRESENT_POSITION, PRESENT_VELOCITY, PRESENT_VOLTAGE, PRESENT_TEMPERATURE, MOVING = 56, 58, 62, 63, 66
 
+pytestmark = pytest.mark.emulated_hardware  # the under-load check (tools/under_load.py) runs exactly these
+
 
 @pytest.fixture
 def arm():
-    fake = FakeArm().start()
+    fake = FakeArmProcess()
     yield fake
     fake.close()
 
@@ -140,7 +143,7 @@ def test_angles_are_placed_on_the_encoder_as_the_factory_calibrated_arm_reads_th
 
 
 def test_degrees_agree_with_the_calibration_maths_over_the_bus():
-    with FakeArm() as fake:
+    with FakeArmProcess() as fake:
         calibration = calibrate_as_at_the_factory(fake)
         poses = ((40.0, -60.0, 75.0, -20.0, 120.0, 80.0), (-100.0, 90.0, -90.0, 90.0, -150.0, -10.0))
         bus = FeetechBus(fake.port).open()
@@ -183,16 +186,16 @@ def test_power_up_registers(arm, bus):
 
 
 def test_start_positions_choose_where_the_joints_rest():
-    with FakeArm(start_positions={1: 1500, 5: 10}) as fake:
+    with FakeArmProcess(start_positions={1: 1500, 5: 10}) as fake:
         port, packets = open_bus(fake.port)
         result, values, _ = sync_read(port, packets, PRESENT_POSITION, 2)
         port.closePort()
     assert result == scs.COMM_SUCCESS
     assert values == {1: 1500, 2: 1628, 3: 2238, 4: 1773, 5: 10, 6: 1688}
     with pytest.raises(ValueError, match="outside its travel"):
-        FakeArm(start_positions={2: 100})  # below shoulder_lift's stop
+        FakeArmProcess(start_positions={2: 100})  # below shoulder_lift's stop
     with pytest.raises(ValueError):
-        FakeArm(ids=(1, 7))
+        FakeArmProcess(ids=(1, 7))
 
 
 def test_single_register_writes_are_acknowledged_and_read_back(arm, bus):
@@ -223,7 +226,7 @@ def test_sync_read_of_all_six_present_positions(bus):
 
 def test_sync_written_goals_are_reached_at_the_servo_speed():
     speed = 2000.0
-    with FakeArm(speed_steps_s=speed) as fake:
+    with FakeArmProcess(speed_steps_s=speed) as fake:
         port, packets = open_bus(fake.port)
         start = {i: MECHANICS[i].centre for i in IDS}
         goals = {i: start[i] + (400 if i % 2 else -400) for i in IDS}
@@ -536,7 +539,7 @@ def read_angles(bus: FeetechBus, calibration) -> tuple[tuple[float, ...], float,
 @pytest.fixture
 def leader():
     """An emulated arm calibrated as at the factory, a FeetechBus on it, and the calibration."""
-    with FakeArm() as fake:
+    with FakeArmProcess() as fake:
         calibration = calibrate_as_at_the_factory(fake)
         bus = FeetechBus(fake.port).open()
         try:
@@ -551,7 +554,7 @@ def test_torque_off_joints_follow_the_figure_eight_read_over_the_bus_and_a_held_
     period_s, ease_s = 2.0, 0.3
     script = eased_in(lambda t_s: figure_eight_deg(t_s, period_s), (0.0, 0.0, 0.0, 0.0, 0.0, 45.0), ease_s)
     started_before = time.monotonic()
-    assert fake.play_hand(lambda t_s: figure_eight_deg(t_s, period_s), None, ease_s=ease_s) == (1, 3, 4, 5, 6)
+    assert fake.play_hand(functools.partial(figure_eight_deg, period_s=period_s), None, ease_s=ease_s) == (1, 3, 4, 5, 6)
     started_after = time.monotonic()
     samples, velocities = 0, 0
     pan_seen = []
@@ -610,8 +613,7 @@ def test_keyframes_start_where_the_joints_stand_and_the_last_is_held(leader):
 
 def test_hold_lets_go_where_the_joints_stand(leader):
     fake, bus, calibration = leader
-    def script(t_s):
-        return figure_eight_deg(t_s, 2.0)
+    script = functools.partial(figure_eight_deg, period_s=2.0)
 
     started_before = time.monotonic()
     fake.play_hand(script, None, ease_s=0.0)
@@ -632,12 +634,20 @@ def test_hold_lets_go_where_the_joints_stand(leader):
     assert fake.stop_hand() == ()  # nothing left to let go
 
 
+def five_angles(t_s: float) -> tuple[float, ...]:
+    return (0.0,) * 5
+
+
+def a_nan_angle(t_s: float) -> tuple[float, ...]:
+    return (0.0, 0.0, 0.0, float("nan"), 0.0, 0.0)
+
+
 def test_a_new_hand_takes_over_and_a_script_must_give_six_finite_angles(arm):
     arm.play_hand(figure_eight_deg)
     assert arm.sweep(duration_s=0.2) == IDS  # the sweep takes the joints from the figure eight
     assert arm.wait_hand(timeout=1.0)
     assert [arm.physical_position(i) for i in IDS] == [MECHANICS[i].centre for i in IDS]  # the sweep's end
-    for script in (lambda t_s: (0.0,) * 5, lambda t_s: (0.0, 0.0, 0.0, float("nan"), 0.0, 0.0)):
+    for script in (five_angles, a_nan_angle):
         with pytest.raises(ValueError, match="expected 6 finite angles"):
             arm.play_hand(script)
     with pytest.raises(ValueError, match="duration_s must be 0 or more"):
@@ -802,6 +812,7 @@ KEYFRAME_LINE = (
     "a keyframe is SECONDS then 6 angles in degrees "
     "(shoulder_pan shoulder_lift elbow_flex wrist_flex wrist_roll gripper)"
 )
+
 BAD_KEYFRAMES = "# a good keyframe, then one short of an angle\n1 0 0 0 0 0 0\n2 0 0 0 0 0\n"
 
 

@@ -12,7 +12,7 @@ import pytest
 
 from so101.feetech.bus import FeetechBus
 from so101.feetech.calibration import MOTOR_IDS, MOTOR_NAMES, load_calibration
-from so101.feetech.fake_arm import FakeArm, calibrate_as_at_the_factory
+from so101.feetech.fake_arm import FakeArmProcess, calibrate_as_at_the_factory
 from so101.lang import LOCALE_VARS, session_language
 from tests.dataflow_helpers import SO101, TICK, body_environment, run_so101, run_simulation_node
 from tests.test_calibrate import Calibrate
@@ -152,26 +152,24 @@ def test_the_emulator_notices_each_calibration_once_and_nothing_else():
     from so101.bodies.real_arm import SO101Real
     from so101.leader.arm import SO101Leader
 
-    begun = []
-    with FakeArm() as arm:
-        arm.on_calibration = lambda: begun.append(arm.read_register(1, "Torque_Enable"))
+    with FakeArmProcess() as arm:  # calibrations_begun counts what on_calibration is told (torque off only)
         calibration = calibrate_as_at_the_factory(arm)  # a test's own writes, not the bus's
         with SO101Real(arm.port, calibration) as body:  # driven: torque on, goals, reads, torque off
             for _ in range(5):
                 body.step()
         with SO101Leader(arm.port, calibration):
             pass
-        assert begun == []
+        assert arm.calibrations_begun == 0
         bus = FeetechBus(arm.port).open()
         try:
             reset_as_a_calibration_does(bus)
-            assert begun == [0]  # once for six servos, torque off
+            assert (arm.calibrations_begun, arm.read_register(1, "Torque_Enable")) == (1, 0)  # once for six servos
             for servo_id in MOTOR_IDS:  # the middle pose taken, the ranges written, locked
                 bus.write(servo_id, "Homing_Offset", 300)
                 bus.write(servo_id, "Lock", 1)
-            assert begun == [0]
+            assert arm.calibrations_begun == 1
             reset_as_a_calibration_does(bus)  # the next calibration
-            assert begun == [0, 0]
+            assert arm.calibrations_begun == 2
         finally:
             bus.close()
 

@@ -12,12 +12,14 @@ import pytest
 
 from so101.bodies.registry import BODIES
 from so101.feetech.calibration import MOTOR_IDS, MotorCalibration, save_calibration
-from so101.feetech.fake_arm import FakeArm, calibrate_as_at_the_factory
+from so101.feetech.fake_arm import FakeArmProcess, calibrate_as_at_the_factory
 from so101.leader.arm import LeaderFailed, SO101Leader
 from so101.leader.command import MOVED_DEG, Takeover, leader_command_deg, leader_values
 from tests.dataflow_helpers import (
     PROMPT_COMMAND, DoraRun, body_environment, error_lines, prompt_env, run_so101, write_test_dataflow,
 )
+
+pytestmark = pytest.mark.emulated_hardware  # the under-load check (tools/under_load.py) runs exactly these
 
 STEPS_PER_DEG = 4096 / 360
 
@@ -78,13 +80,13 @@ def test_typed_before_the_leaders_first_reading_holds_from_that_reading():
 @contextmanager
 def emulated_leader(tmp_path):
     """An emulated SO-101 calibrated as a leader, and its calibration file."""
-    with FakeArm() as arm:
+    with FakeArmProcess() as arm:
         calibration_file = tmp_path / "so101_leader.json"
         save_calibration(calibration_file, calibrate_as_at_the_factory(arm))
         yield arm, calibration_file
 
 
-def start_leader(arm: FakeArm, calibration_file, retries: int = 5) -> tuple[SO101Leader, list[str]]:
+def start_leader(arm: FakeArmProcess, calibration_file, retries: int = 5) -> tuple[SO101Leader, list[str]]:
     from so101.feetech.calibration import load_calibration
 
     reports: list[str] = []
@@ -137,7 +139,7 @@ def test_a_calibration_of_another_leader_is_refused_in_one_line(tmp_path):
 
 
 def test_no_leader_on_the_port_is_one_line():
-    with FakeArm() as arm:
+    with FakeArmProcess() as arm:
         calibration = calibrate_as_at_the_factory(arm)
     with pytest.raises(LeaderFailed, match=r"^cannot open the serial port /nonexistent/ttyX: .*fake-arm"):
         SO101Leader("/nonexistent/ttyX", calibration)
@@ -213,13 +215,13 @@ SETTLE_S = 2.0
 FOLLOW_TOLERANCE_DEG = {"pybullet": 2.0, "mujoco": 3.0, "real": 0.5}
 
 
-def hand_pose(arm: FakeArm, angles_deg: dict[int, float]) -> None:
+def hand_pose(arm: FakeArmProcess, angles_deg: dict[int, float]) -> None:
     """The hand puts each joint (by servo ID) at an angle from the middle of its travel."""
     for servo_id, angle in angles_deg.items():
         arm.move_by_hand(servo_id, round(arm.mechanics(servo_id).centre + angle * STEPS_PER_DEG))
 
 
-def leader_reading(arm: FakeArm, calibration_file) -> tuple[float, ...]:
+def leader_reading(arm: FakeArmProcess, calibration_file) -> tuple[float, ...]:
     """What the leader node reads now, from a second look at the same servos."""
     from so101.feetech.calibration import MOTOR_NAMES, load_calibration
 
@@ -348,7 +350,7 @@ def test_teleop_refuses_a_leader_it_cannot_use_in_one_line_before_starting_anyth
     monkeypatch.chdir(tmp_path)
     (tmp_path / "not_json.json").write_text("{")
     for name in ("leader.json", "arm.json"):
-        with FakeArm() as arm:
+        with FakeArmProcess() as arm:
             save_calibration(tmp_path / name, calibrate_as_at_the_factory(arm))
     log_file = tmp_path / "dora.log"
     assert cli.main(["teleop", "--mode", "direct", "--lang", "en", "--log", str(log_file), *options]) == 2
@@ -361,7 +363,7 @@ def test_teleop_refuses_a_leader_it_cannot_use_in_one_line_before_starting_anyth
 def test_teleop_with_no_leader_on_the_port_says_so_in_one_line(tmp_path):
     """The leader node refuses before it joins; dora then fails the other nodes with backtraces, and
     teleop shows the node's one line, not those."""
-    with FakeArm() as arm:
+    with FakeArmProcess() as arm:
         save_calibration(tmp_path / "leader.json", calibrate_as_at_the_factory(arm))
     result = run_so101("teleop", "--leader", "/dev/pts/nonexistent", "--leader-calibration", str(tmp_path / "leader.json"),
                        "--mode", "direct", "--lang", "en", "--log", str(tmp_path / "dora.log"))

@@ -16,12 +16,14 @@ import uuid
 import pytest
 
 from so101.feetech.calibration import MOTOR_IDS, save_calibration
-from so101.feetech.fake_arm import FakeArm, calibrate_as_at_the_factory
+from so101.feetech.fake_arm import FakeArmProcess, calibrate_as_at_the_factory
 from so101.bodies.real_arm import SO101Real
 from tests.dataflow_helpers import TICK, DoraRun, body_environment, run_simulation_node, write_test_dataflow
 
+pytestmark = pytest.mark.emulated_hardware  # the under-load check (tools/under_load.py) runs exactly these
 
-def torque(arm: FakeArm) -> list[int]:
+
+def torque(arm: FakeArmProcess) -> list[int]:
     return [arm.read_register(servo_id, "Torque_Enable") for servo_id in MOTOR_IDS]
 
 
@@ -81,9 +83,9 @@ def test_a_calibration_of_another_arm_is_refused_and_torque_stays_off(monkeypatc
 
 
 def test_a_missing_servo_is_named_and_nothing_starts(monkeypatch, capsys, tmp_path):
-    with FakeArm(ids=(1, 2, 3, 4, 5)) as arm:
+    with FakeArmProcess(ids=(1, 2, 3, 4, 5)) as arm:
         calibration = calibrate_as_at_the_factory(arm)
-        with FakeArm() as full:  # the gripper's calibration, from an arm that has one
+        with FakeArmProcess() as full:  # the gripper's calibration, from an arm that has one
             calibration.update({"gripper": calibrate_as_at_the_factory(full)["gripper"]})
         save_calibration(tmp_path / "c.json", calibration)
         code, _ = run_arm(monkeypatch, [TICK], SO101_PORT=arm.port, SO101_CALIBRATION=str(tmp_path / "c.json"))
@@ -104,7 +106,7 @@ def test_a_port_that_does_not_exist_is_one_line(monkeypatch, capsys, fake_arm):
 
 
 def test_torque_goes_on_where_each_joint_stands_so_nothing_jumps(tmp_path):
-    with FakeArm() as arm:
+    with FakeArmProcess() as arm:
         calibration = calibrate_as_at_the_factory(arm)
         # A goal left in the registers by an earlier program, far from where the joints stand.
         for servo_id in MOTOR_IDS:
@@ -122,7 +124,7 @@ def test_torque_goes_on_where_each_joint_stands_so_nothing_jumps(tmp_path):
 
 
 def test_each_tick_moves_the_goal_by_at_most_the_speed_limit_times_the_tick(tmp_path):
-    with FakeArm() as arm:
+    with FakeArmProcess() as arm:
         calibration = calibrate_as_at_the_factory(arm)
         with SO101Real(arm.port, calibration, max_speed_deg_s=90, time_step_s=0.02) as body:
             body.set_targets_deg([90, 0, 0, 0, 0, 45])
@@ -140,7 +142,7 @@ def test_each_tick_moves_the_goal_by_at_most_the_speed_limit_times_the_tick(tmp_
 
 
 def test_goals_are_held_inside_the_calibrated_range_too(tmp_path):
-    with FakeArm() as arm:
+    with FakeArmProcess() as arm:
         calibration = calibrate_as_at_the_factory(arm)
         pan = calibration["shoulder_pan"]
         # A range narrower than the URDF's ±110°, with the same middle: this arm's pan turns ±60°.
@@ -203,7 +205,7 @@ def test_a_silent_servo_is_named_retried_and_not_published_as_fresh(monkeypatch,
         return event
 
     monkeypatch.setattr(MockNode, "__next__", silent_for_three_ticks)
-    code, node = run_arm(monkeypatch, [TICK] * 20, SO101_BUS_RETRIES="5")  # the arm's default (the tests' is higher)
+    code, node = run_arm(monkeypatch, [TICK] * 20, SO101_BUS_RETRIES="5")  # the arm's default, stated: the test counts on it
     out = capsys.readouterr().out
     assert code == 0
     assert len(node.outputs["joint_state"]) == 20 - 3  # ticks 6-8 published nothing
@@ -287,12 +289,9 @@ def test_a_signal_to_the_running_node_switches_torque_off(tmp_path, signal_numbe
     assert left == []
 
 
-def test_a_ping_or_read_at_start_is_tried_again_after_a_lost_or_cut_short_reply(monkeypatch):
-    from so101.feetech import checks
+def test_a_ping_or_read_at_start_is_tried_again_after_a_lost_or_cut_short_reply():
     from so101.feetech.bus import BusLost, NoPort, ServoSilent
-    from so101.feetech.checks import START_PINGS, at_start
-
-    monkeypatch.setattr(checks, "START_PATIENCE_S", 0.0)  # tries, not time: START_PINGS of them
+    from so101.feetech.checks import START_ATTEMPTS, at_start
 
     def answers_after(failures):
         tries = []
@@ -306,12 +305,12 @@ def test_a_ping_or_read_at_start_is_tried_again_after_a_lost_or_cut_short_reply(
 
     ask, tries = answers_after([ServoSilent(2, False, "a read of Homing_Offset"), BusLost("cut short")])
     assert at_start(ask) == 2048 and len(tries) == 3
-    ask, tries = answers_after([ServoSilent(2, False, "a read")] * START_PINGS)
+    ask, tries = answers_after([ServoSilent(2, False, "a read")] * START_ATTEMPTS)
     with pytest.raises(ServoSilent):
         at_start(ask)
-    assert len(tries) == START_PINGS
+    assert len(tries) == START_ATTEMPTS
     ask, tries = answers_after([NoPort("cannot open the serial port /dev/ttyACM0")])
     with pytest.raises(NoPort):  # no port is no lost packet: said at once
         at_start(ask)
     assert len(tries) == 1
-    assert at_start(lambda: None) is None  # a ping nobody answers, START_PINGS times: None stands
+    assert at_start(lambda: None) is None  # a ping nobody answers, START_ATTEMPTS times: None stands

@@ -16,6 +16,7 @@ from typing import Any
 from so101.cli.argtypes import add_language_option, number
 from so101.feetech import sts3215
 from so101.feetech.fake_arm import ALL_IDS, DEFAULT_SPEED_STEPS_S, MECHANICS, FakeArm
+from so101.feetech.fake_arm.process import raise_priority
 from so101.feetech.hand import FIGURE_EIGHT_EASE_S, FIGURE_EIGHT_PERIOD_S, Keyframes, figure_eight_deg, load_keyframes
 
 
@@ -447,6 +448,7 @@ def run(args: argparse.Namespace) -> int:
     timers: list[threading.Timer] = []
     text = TEXT[args.lang]
     arm = FakeArm(ids=args.ids, speed_steps_s=args.speed)
+    raise_priority()  # the servos' stand-in: a busy machine should starve the driver, not the servos
     arm.on_calibration = lambda: out.say_aside(text["calibrating"])
     arm.start()
     try:

@@ -3,31 +3,28 @@ the leader's (so101/leader/arm.py) and `so101 calibrate`'s. Each check raises wi
 
 from __future__ import annotations
 
-import time
 from typing import Callable, Sequence, TypeVar
 
 from so101.feetech.bus import BusError, FeetechBus, NoPort
 from so101.feetech.calibration import MOTOR_IDS, MOTOR_NAMES, CalibrationError, MotorCalibration
 from so101.feetech.sts3215 import MODEL_NUMBER, SIGN_BITS, decode_signed
 
-# A ping or read at start is tried again while the bus errs or nothing answers, for this long and
-# at least START_PINGS times, before a servo is called silent: a lost or cut-short reply, or a
-# moment the machine was too busy to read the port, must not refuse the arm (pings and reads
-# change nothing on a servo, so trying again is safe; a servo that is really missing costs a second).
-START_PINGS = 3
-START_PATIENCE_S = 1.0
+# A ping or read at start is asked up to START_ATTEMPTS times before a servo is called silent: real
+# Feetech buses lose the odd reply ("There is no status packet", LeRobot issue #1252, whose users
+# needed num_retry=3), and pings and reads change nothing on a servo, so asking again is safe. A
+# servo that is really missing costs three packet timeouts, about 0.1 s.
+START_ATTEMPTS = 3
 
 Answer = TypeVar("Answer")
 
 
 def at_start(ask: Callable[[], Answer]) -> Answer:
-    """`ask()` (a ping or a read), tried again while it raises BusError or answers None; the last error
-    or answer stands. No port at all is said at once."""
-    deadline = time.monotonic() + START_PATIENCE_S
+    """`ask()` (a ping or a read), asked up to START_ATTEMPTS times while it raises BusError or answers
+    None; the last error or answer stands. No port at all is said at once."""
     attempt = 0
     while True:
         attempt += 1
-        patience_left = attempt < START_PINGS or time.monotonic() < deadline
+        patience_left = attempt < START_ATTEMPTS
         try:
             answer = ask()
         except NoPort:

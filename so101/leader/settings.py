@@ -10,9 +10,9 @@ from so101.bodies.settings import read_language
 from so101.lang import DEFAULT_LANGUAGE, ENV_VAR as LANG_ENV_VAR
 from so101.runtime.settings import EnvironSettings, read_file_path, read_stripped_text, read_whole_number, setting
 
-# 250 ms at the 10 ms tick: a silence a person could notice. Shorter ones (a busy machine starving an
-# emulated leader for a few ticks) pass without a word; the body holds through them either way.
-DEFAULT_LEADER_RETRIES = 25
+# 50 ms at the 10 ms tick: a lost reply or two (real buses lose the odd one) passes without a word,
+# five in a row is a silence worth a line. The body holds through either.
+DEFAULT_LEADER_RETRIES = 5
 CALIBRATE_LEADER_HINT = "make one with `so101 calibrate --leader --port {port} --out FILE`, or use LeRobot's so101_leader calibration"
 
 
