@@ -35,6 +35,7 @@ from so101.gui.display import DisplayError  # noqa: E402
 from so101.robot import NUM_ARM_JOINTS  # noqa: E402
 from so101.runtime.dataflow import TICK_PERIOD_S, timer_period_s  # noqa: E402
 from so101.runtime.logs import send_diagnostics_to  # noqa: E402
+from so101.runtime.node_events import inputs_until_stop  # noqa: E402
 from so101.runtime.processes import yield_cpu_to_the_body  # noqa: E402
 
 NODE_ID = "camera"
@@ -70,33 +71,26 @@ def main() -> int:
     drawn_deg: np.ndarray | None = None
     node = Node()
     period_s = timer_period_s(node.node_config()) or 1.0 / DEFAULT_FPS  # a tick that is no timer: the usual rate
-    try:
-        for event in node:
-            if event["type"] == "INPUT":
-                if event["id"] == "joint_state":
-                    values = event["value"].to_pylist()
-                    if len(values) == NUM_ARM_JOINTS:
-                        arm_deg = values
-                elif event["id"] == "gripper_state":
-                    values = event["value"].to_pylist()
-                    if len(values) == 1:
-                        gripper_deg = values[0]
-                elif event["id"] == "tick" and arm_deg is not None:
-                    if stale(event["metadata"].get("timestamp"), period_s):  # waited while drawing: newer states came
-                        continue
-                    pose_deg = np.array(arm_deg + [gripper_deg])
-                    if drawn_deg is not None and np.all(np.abs(pose_deg - drawn_deg) < REDRAW_DEG):
-                        continue
-                    sim.show_pose_deg(pose_deg.tolist())
-                    rgb = sim.render_rgb(width, height)
-                    drawn_deg = pose_deg
-                    node.send_output("image", pa.array(rgb.ravel()), {"width": width, "height": height, "encoding": "rgb8"})
-            elif event["type"] == "STOP":
-                break
-    except KeyboardInterrupt:
-        pass
-    finally:
-        sim.close()
+    with inputs_until_stop(node, close=sim.close) as inputs:
+        for event in inputs:
+            if event["id"] == "joint_state":
+                values = event["value"].to_pylist()
+                if len(values) == NUM_ARM_JOINTS:
+                    arm_deg = values
+            elif event["id"] == "gripper_state":
+                values = event["value"].to_pylist()
+                if len(values) == 1:
+                    gripper_deg = values[0]
+            elif event["id"] == "tick" and arm_deg is not None:
+                if stale(event["metadata"].get("timestamp"), period_s):  # waited while drawing: newer states came
+                    continue
+                pose_deg = np.array(arm_deg + [gripper_deg])
+                if drawn_deg is not None and np.all(np.abs(pose_deg - drawn_deg) < REDRAW_DEG):
+                    continue
+                sim.show_pose_deg(pose_deg.tolist())
+                rgb = sim.render_rgb(width, height)
+                drawn_deg = pose_deg
+                node.send_output("image", pa.array(rgb.ravel()), {"width": width, "height": height, "encoding": "rgb8"})
     return 0
 
 

@@ -8,7 +8,8 @@ joins the running dataflow by its id. A thread pumps the node's events (the late
 joint_state and gripper_state, and STOP) while the main thread waits for the keyboard: an
 unread input queue would overflow, and dora would print a JSON warning per dropped event.
 A pipe on stdin runs its lines in order and exits at its end; dora's own log lines go to a
-file. What each command does is in so101/prompt/control.py; the settings in settings.py there.
+file. What each command does is in so101/prompt/control.py; the links to the other nodes (the
+recorder, the leader's news) in links.py there; the settings in settings.py.
 """
 
 from __future__ import annotations
@@ -27,8 +28,8 @@ if str(ROOT) not in sys.path:  # run as a script from anywhere: the so101 packag
 
 from so101.prompt.control import KeyboardControl  # noqa: E402
 from so101.prompt.join import join_dataflow  # noqa: E402
+from so101.prompt.links import link_other_nodes  # noqa: E402
 from so101.prompt.poses import PoseStore  # noqa: E402
-from so101.prompt.recorder_link import RecorderLink  # noqa: E402
 from so101.prompt.settings import PromptSettings, environment_help  # noqa: E402
 from so101.prompt.terminal import dora_logs_aside, line_editing  # noqa: E402
 from so101.runtime.logs import send_diagnostics_to  # noqa: E402
@@ -50,42 +51,6 @@ def joint_cmd_sender(node) -> Callable[[Sequence[float]], None]:
         node.send_output("joint_cmd", pa.array([float(angle) for angle in angles_deg], type=pa.float64()))
 
     return send
-
-
-def news_printer(control: KeyboardControl, interactive: bool) -> Callable[[str], None]:
-    """Prints news while the person types or jogs (the recorder's, the leader's): on a line of its
-    own, then the prompt (or jog's status line) drawn again below it."""
-
-    def show(line: str) -> None:
-        if not interactive:
-            say(line)
-            return
-        sys.stdout.write(f"\r\x1b[K{line}\n")
-        if control.jogging:
-            control.news_shown += 1  # the jog loop draws its status line again
-        else:
-            try:
-                import readline
-
-                typed = readline.get_line_buffer()
-            except ImportError:
-                typed = ""
-            sys.stdout.write(f"> {typed}")  # readline's own state is unchanged
-        sys.stdout.flush()
-
-    return show
-
-
-def recorder_link(node, show: Callable[[str], None]) -> RecorderLink | None:
-    """The line to the recorder, where the dataflow has one (`so101 teleop --record`)."""
-    if "record_cmd" not in (node.node_config() or {}).get("outputs", []):
-        return None
-    import pyarrow as pa
-
-    def send(record_cmd: str, request: str) -> None:
-        node.send_output("record_cmd", pa.array([record_cmd]), {"request": request})
-
-    return RecorderLink(send, show)
 
 
 class EventPump(threading.Thread):
@@ -171,8 +136,7 @@ def main(argv: list[str] | None = None) -> int:
         _KEPT_TO_EXIT.append(node)
         control = KeyboardControl(joint_cmd_sender(node), poses, settings.lang,
                                   keys_fd=sys.stdin.fileno() if interactive else None)  # `jog` reads keys there
-        control.show_news = news_printer(control, interactive)
-        control.recorder = recorder_link(node, control.show_news)
+        link_other_nodes(control, node, interactive)  # news as it comes; the recorder where there is one
         # On STOP, wake the main thread from input() or readline(): only a signal can.
         pump = EventPump(node, control, on_stop=lambda: os.kill(os.getpid(), signal.SIGINT))
         pump.start()

@@ -35,6 +35,7 @@ from so101.leader.command import MOVED_DEG, Takeover  # noqa: E402
 from so101.leader.settings import LeaderSettings  # noqa: E402
 from so101.runtime.dataflow import timer_period_s  # noqa: E402
 from so101.runtime.logs import send_diagnostics_to  # noqa: E402
+from so101.runtime.node_events import inputs_until_stop  # noqa: E402
 
 NODE_ID = "leader"
 # Marks a joint_cmd as a stream (one per tick): the body does not log each one.
@@ -86,31 +87,24 @@ def main() -> int:
     announce(text["ready"].format(port=leader.port, calibration=settings.calibration_file.name, tick_ms=tick_s * 1000))
     takeover = Takeover()
     last_sent_deg: tuple[float, ...] | None = None
-    try:
-        for event in node:
-            if event["type"] == "INPUT":
-                if event["id"] == "tick":
-                    command_deg = leader.poll()
-                    if command_deg is None or command_deg == last_sent_deg:
-                        continue  # silent, or unchanged: nothing stale is sent again
-                    was_typed = takeover.typed
-                    if not takeover.leader_drives(command_deg):
-                        continue
-                    if was_typed:
-                        report(text["back"])
-                    node.send_output("joint_cmd", pa.array(command_deg, type=pa.float64()), STREAM_METADATA)
-                    last_sent_deg = command_deg
-                elif event["id"] == "typed_cmd":
-                    node.send_output("joint_cmd", event["value"])
-                    last_sent_deg = None  # the body's targets are the typed ones now
-                    if takeover.on_typed(leader.latest_deg):
-                        report(text["typed"].format(moved=MOVED_DEG))
-            elif event["type"] == "STOP":
-                break
-    except KeyboardInterrupt:
-        pass
-    finally:
-        leader.close()
+    with inputs_until_stop(node, close=leader.close) as inputs:
+        for event in inputs:
+            if event["id"] == "tick":
+                command_deg = leader.poll()
+                if command_deg is None or command_deg == last_sent_deg:
+                    continue  # silent, or unchanged: nothing stale is sent again
+                was_typed = takeover.typed
+                if not takeover.leader_drives(command_deg):
+                    continue
+                if was_typed:
+                    report(text["back"])
+                node.send_output("joint_cmd", pa.array(command_deg, type=pa.float64()), STREAM_METADATA)
+                last_sent_deg = command_deg
+            elif event["id"] == "typed_cmd":
+                node.send_output("joint_cmd", event["value"])
+                last_sent_deg = None  # the body's targets are the typed ones now
+                if takeover.on_typed(leader.latest_deg):
+                    report(text["typed"].format(moved=MOVED_DEG))
     return 0
 
 

@@ -29,6 +29,7 @@ from so101.bodies.node_loop import announce, cannot_start  # noqa: E402
 from so101.dataset.messages import recording_from_metadata  # noqa: E402
 from so101.robot import NUM_ARM_JOINTS  # noqa: E402
 from so101.runtime.logs import send_diagnostics_to  # noqa: E402
+from so101.runtime.node_events import inputs_until_stop  # noqa: E402
 from so101.runtime.processes import yield_cpu_to_the_body  # noqa: E402
 from so101.web.settings import WebViewSettings, page_address  # noqa: E402
 from so101.web.urdf_scene import load_urdf_scene  # noqa: E402
@@ -67,38 +68,31 @@ def main() -> int:
     arm_deg: tuple[float, ...] | None = None
     gripper_deg = 0.0
     shown_at = picture_at = 0.0
-    try:
-        for event in Node():
-            if event["type"] == "INPUT":
-                if event["id"] == "joint_state":
-                    values = event["value"].to_pylist()
-                    if len(values) == NUM_ARM_JOINTS:
-                        arm_deg = tuple(float(angle) for angle in values)
-                elif event["id"] == "gripper_state":
-                    values = event["value"].to_pylist()
-                    if len(values) == 1:
-                        gripper_deg = float(values[0])
-                elif event["id"] == "image":
-                    now = time.monotonic()
-                    if now - picture_at >= 1.0 / PICTURE_HZ and (rgb := picture(event)) is not None:
-                        view.show_picture(rgb)
-                        picture_at = now
-                    continue
-                elif event["id"] == "record_status":
-                    view.show_recording(recording_from_metadata(event.get("metadata") or {}))
-                    continue
-                else:
-                    continue
+    with inputs_until_stop(Node(), close=view.close) as inputs:
+        for event in inputs:
+            if event["id"] == "joint_state":
+                values = event["value"].to_pylist()
+                if len(values) == NUM_ARM_JOINTS:
+                    arm_deg = tuple(float(angle) for angle in values)
+            elif event["id"] == "gripper_state":
+                values = event["value"].to_pylist()
+                if len(values) == 1:
+                    gripper_deg = float(values[0])
+            elif event["id"] == "image":
                 now = time.monotonic()
-                if arm_deg is not None and now - shown_at >= 1.0 / REDRAW_HZ:
-                    view.show(arm_deg + (gripper_deg,))
-                    shown_at = now
-            elif event["type"] == "STOP":
-                break
-    except KeyboardInterrupt:
-        pass
-    finally:
-        view.close()
+                if now - picture_at >= 1.0 / PICTURE_HZ and (rgb := picture(event)) is not None:
+                    view.show_picture(rgb)
+                    picture_at = now
+                continue
+            elif event["id"] == "record_status":
+                view.show_recording(recording_from_metadata(event.get("metadata") or {}))
+                continue
+            else:
+                continue
+            now = time.monotonic()
+            if arm_deg is not None and now - shown_at >= 1.0 / REDRAW_HZ:
+                view.show(arm_deg + (gripper_deg,))
+                shown_at = now
     return 0
 
 

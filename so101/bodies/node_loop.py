@@ -8,8 +8,8 @@ updates the targets, which the next tick applies; bad ones are logged and ignore
 commands, marked so in their metadata, is not logged command by command). Where the
 dataflow declares a `joint_target` output (`so101 teleop --record` does, for the recorder), the
 targets the body applies go out on it at the first tick, whenever they change, and once a second
-for a node that joined late. STOP or
-Ctrl-C closes the body and ends with 0. The real arm differs only where hardware must: it
+for a node that joined late. STOP or Ctrl-C closes the body and ends with 0, as every node's loop
+does (so101/runtime/node_events.py). The real arm differs only where hardware must: it
 starts from where it stands (`start_targets_deg`), a tick whose read failed publishes
 nothing (`joint_angles_deg` is None), and a bus past saving ends the node with one line and
 exit code 1 (BodyFailed).
@@ -24,7 +24,7 @@ import logging
 import sys
 import time
 from array import array
-from typing import TYPE_CHECKING, Any, Iterable, Iterator, Mapping, Protocol, cast
+from typing import TYPE_CHECKING, Iterable, Iterator, Mapping, Protocol, cast
 
 import numpy as np
 import pyarrow as pa
@@ -34,12 +34,10 @@ from so101.bodies.settings import NodeSettings
 from so101.joint_cmd import decode_joint_cmd
 from so101.robot import GRIPPER_COMMAND_INDEX, NUM_ARM_JOINTS
 from so101.runtime.dataflow import TICK_PERIOD_S, TickClock, timer_period_s
+from so101.runtime.node_events import Event, inputs_until_stop
 
 if TYPE_CHECKING:
     from dora import Node
-
-# A dora event: {"type": "INPUT", "id": ..., "value": ..., "metadata": {...}}, or STOP, ...
-Event = dict[str, Any]
 
 IMAGE_SIZE = (320, 240)
 # A joint_cmd whose metadata has this key is one of a stream (the leader node's, a tick each): not logged.
@@ -154,9 +152,16 @@ def run_body_node(body: Body, node: Node, settings: NodeSettings, identity: str,
     sends_targets = "joint_target" in (node.node_config() or {}).get("outputs", [])
     targets_sent_at_step: int | None = None  # body.steps when joint_target last went out; None: to send
     target_refresh_steps = max(1, round(TARGET_REFRESH_S / tick_s))
-    try:
-        for event in events:
-            if event["type"] == "INPUT":
+
+    def finish() -> None:  # however the loop ends: the window, the bus let go; the tick log kept
+        body.close()
+        if tick_log is not None:
+            with open(settings.tick_log_path, "wb") as tick_log_file:
+                tick_log.tofile(tick_log_file)
+
+    with inputs_until_stop(events, close=finish) as inputs:
+        try:
+            for event in inputs:
                 if event["id"] == "tick":
                     if tick_log is not None:
                         tick_log.append(time.monotonic_ns())
@@ -202,20 +207,11 @@ def run_body_node(body: Body, node: Node, settings: NodeSettings, identity: str,
                         logger.info(text["all"].format(angles=[round(a, 2) for a in joint_targets_deg[:NUM_ARM_JOINTS]]))
                         if joint_targets_deg[GRIPPER_COMMAND_INDEX] != previous_gripper_deg:
                             logger.info(text["one"].format(index=GRIPPER_COMMAND_INDEX, angle=joint_targets_deg[GRIPPER_COMMAND_INDEX]))
-            elif event["type"] == "STOP":
-                break
-    except KeyboardInterrupt:
-        pass  # Ctrl-C on a node run by hand: stop like STOP
-    except BodyFailed as failure:
-        # Closing the window ends the simulation, as in the course; the real arm's bus past its
-        # retries ends the driver. Exit code 1 makes dora stop the dataflow and say so, rather
-        # than leave a prompt driving nothing.
-        print(text["stopping"].format(reason=failure), file=sys.stderr, flush=True)
-        return 1
-    finally:
-        body.close()
-        if tick_log is not None:
-            with open(settings.tick_log_path, "wb") as tick_log_file:
-                tick_log.tofile(tick_log_file)
+        except BodyFailed as failure:
+            # Closing the window ends the simulation, as in the course; the real arm's bus past its
+            # retries ends the driver. Exit code 1 makes dora stop the dataflow and say so, rather
+            # than leave a prompt driving nothing. Said before the body closes (its close may log).
+            print(text["stopping"].format(reason=failure), file=sys.stderr, flush=True)
+            return 1
     return 0
 

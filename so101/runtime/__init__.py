@@ -1,1 +1,1 @@
-"""The plumbing: dataflow files, processes, dora versions, the virtual environment, a dora cluster."""
+"""The plumbing: dataflow files, a node's event loop, processes, dora versions, the virtual environment, a dora cluster."""

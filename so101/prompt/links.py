@@ -1,0 +1,61 @@
+"""The prompt's links to the dataflow's other nodes, each where the dataflow declares it.
+
+News (the recorder's, the leader's on `leader_status`, where the tip landed after `xyz`) is
+printed as it comes, between the person's lines; `record_cmd`, where the dataflow has a recorder,
+is the line to it. A command that talks to another node wires its output in `link_other_nodes`,
+so nodes/keyboard_control.py stays the course's file.
+"""
+
+from __future__ import annotations
+
+import sys
+from typing import Callable
+
+from so101.prompt.control import KeyboardControl
+from so101.prompt.recorder_link import RecorderLink
+
+
+def link_other_nodes(control: KeyboardControl, node, interactive: bool) -> None:
+    """Gives `control` what the joined `node`'s dataflow offers beyond joint_cmd and the states."""
+    control.show_news = news_printer(control, interactive)
+    control.recorder = recorder_link(node, control.show_news)
+
+
+def has_output(node, output_id: str) -> bool:
+    return output_id in (node.node_config() or {}).get("outputs", [])
+
+
+def news_printer(control: KeyboardControl, interactive: bool) -> Callable[[str], None]:
+    """Prints news while the person types or jogs: on a line of its own, then the prompt (or jog's
+    status line) drawn again below it."""
+
+    def show(line: str) -> None:
+        if not interactive:
+            print(line, flush=True)
+            return
+        sys.stdout.write(f"\r\x1b[K{line}\n")
+        if control.jogging:
+            control.news_shown += 1  # the jog loop draws its status line again
+        else:
+            try:
+                import readline
+
+                typed = readline.get_line_buffer()
+            except ImportError:
+                typed = ""
+            sys.stdout.write(f"> {typed}")  # readline's own state is unchanged
+        sys.stdout.flush()
+
+    return show
+
+
+def recorder_link(node, show: Callable[[str], None]) -> RecorderLink | None:
+    """The line to the recorder, where the dataflow has one (`so101 teleop --record`)."""
+    if not has_output(node, "record_cmd"):
+        return None
+    import pyarrow as pa
+
+    def send(record_cmd: str, request: str) -> None:
+        node.send_output("record_cmd", pa.array([record_cmd]), {"request": request})
+
+    return RecorderLink(send, show)
