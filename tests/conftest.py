@@ -7,6 +7,7 @@ No deadline in either: the suite has no timed tests, and a loaded CI machine
 must not turn a slow example into a failure.
 """
 
+import fcntl
 import os
 import shutil
 from pathlib import Path
@@ -19,11 +20,50 @@ settings.register_profile("soak", max_examples=10_000, deadline=None, suppress_h
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
 
 
+# -- in parallel (pytest-xdist: `-n auto --dist loadgroup`, pyproject's addopts) -------------------
+# dora 1.1's `dora run` (and `dora up`'s daemon) always listens on port 53291 for dynamic nodes, the
+# prompt among them: two at once and a prompt joins the wrong one. So every test that starts dora runs
+# in one xdist group, one after another on one worker, while the other tests share the other workers.
+# These modules start dora in some of their tests (dora run, dora up, so101 teleop, replay, cluster).
+DORA_MODULES = {
+    "test_cluster", "test_course_differences", "test_dataflow", "test_environment", "test_faults", "test_gui",
+    "test_leader", "test_log_noise", "test_prompt_tmux", "test_real_arm", "test_record_replay",
+    "test_two_dataflows", "test_two_machines", "test_web_view",
+}
+MAX_WORKERS = 4
+
+
+def pytest_xdist_auto_num_workers(config):
+    """One worker per core, at most MAX_WORKERS: the dora group is one worker's whatever the count."""
+    return max(1, min(os.cpu_count() or 1, MAX_WORKERS))
+
+
 def pytest_collection_modifyitems(items):
-    """A real dataflow or a person's session is slow too: `-m "not slow"` is the fast subset."""
+    """A real dataflow or a person's session is slow too: `-m "not slow"` is the fast subset. Tests
+    that start dora share one xdist group (DORA_MODULES)."""
     for item in items:
         if item.get_closest_marker("dataflow") or item.get_closest_marker("person"):
             item.add_marker(pytest.mark.slow)
+        if (item.get_closest_marker("dataflow") or item.get_closest_marker("person")
+                or item.module.__name__.rsplit(".", 1)[-1] in DORA_MODULES):
+            item.add_marker(pytest.mark.xdist_group("dora"))
+
+
+@pytest.fixture(autouse=True)
+def alone_when_marked(request, tmp_path_factory):
+    """A test marked `alone` runs with no other test beside it (a lock every test holds shared, an
+    `alone` one exclusive, in the session's shared temporary folder): it measures or loads the whole
+    machine, or would be disturbed by what runs beside it."""
+    if not hasattr(request.config, "workerinput"):  # not under xdist: nothing runs beside it anyway
+        yield
+        return
+    lock_file = tmp_path_factory.getbasetemp().parent / "so101-alone.lock"
+    with open(lock_file, "a") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX if request.node.get_closest_marker("alone") else fcntl.LOCK_SH)
+        try:
+            yield
+        finally:
+            fcntl.flock(lock, fcntl.LOCK_UN)
 
 
 # -- the model files -------------------------------------------------------------------

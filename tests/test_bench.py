@@ -185,6 +185,7 @@ def _positive(value):
 
 
 @pytest.mark.dataflow
+@pytest.mark.alone  # a benchmark loads the whole machine
 @pytest.mark.parametrize("body", ["pybullet", "mujoco"])
 def test_quick_bench_writes_every_figure(tmp_path, body):
     out = tmp_path / "bench.json"

@@ -1,8 +1,9 @@
-"""The web view in real headless browsers (bench/browser.py), every host but 127.0.0.1 unreachable:
-the page draws the arm, follows a typed command, its angle text matches joint_state; five pages at
-once follow it; a browser killed or a page reloaded mid-stream leaves the dataflow running; `so101
-teleop --web` shows the camera and marks a recording episode. (The body's pace with five viewers is
-`so101 bench --web`'s: no speed is asserted here.)"""
+"""The web view in a real headless browser (bench/browser.py), every host but 127.0.0.1 unreachable:
+the page draws the arm, follows a typed command, its angle text matches joint_state; a page reloaded
+and then its browser killed mid-stream leave the dataflow running; `so101 teleop --web` shows the
+camera and marks a recording episode. One browser at a time: five software-drawing browsers on a
+small machine measure the machine, and that is `so101 bench --web`'s (the body's pace with five
+viewers, pages and viewers elsewhere); no speed is asserted here."""
 
 from __future__ import annotations
 
@@ -18,12 +19,11 @@ import pytest
 from PIL import Image
 
 from bench.browser import CHROMIUM, Browser
+from so101.runtime.cluster import free_port
 from tests.dataflow_helpers import PROMPT_COMMAND, DoraRun, body_environment, prompt_env, write_test_dataflow
 
 pytestmark = [pytest.mark.dataflow, pytest.mark.skipif(CHROMIUM is None, reason="chromium is not installed (.ci/run installs it)")]
 
-WEB_PORT = 8131
-DEBUG_PORT = 9341
 # The page's right-hand panel (angles, plot) starts about here at 1200 px wide; the arm is drawn left of it.
 PANEL_LEFT_PX = 860
 # The arm drawn: this many pixels of the URDF's 3d_printed yellow, lit or shaded.
@@ -55,16 +55,17 @@ def the_arm_drawn(browser: Browser, path, timeout_s: float = 90) -> np.ndarray:
         assert time.monotonic() < deadline, f"the arm was not drawn within {timeout_s} s ({count} yellow pixels): {path}"
 
 
-def test_the_page_draws_the_arm_follows_0_90_and_outlives_its_browser(tmp_path):
+def test_the_page_draws_the_arm_follows_0_90_and_outlives_a_reload_and_its_browser(tmp_path):
     record_file = tmp_path / "joint_state.json"
+    web_port = free_port()
     dataflow = write_test_dataflow(tmp_path, {"SO101_LANG": "en"}, record_file=record_file,
-                                   web_env={"SO101_WEB_PORT": str(WEB_PORT)})
+                                   web_env={"SO101_WEB_PORT": str(web_port)})
     dora = DoraRun(dataflow, tmp_path / "dora.log", stop_after_s=300)
     browser = prompt = None
     try:
-        dora.wait_for(f"web view: http://127.0.0.1:{WEB_PORT}/", timeout_s=60)
-        browser = Browser(DEBUG_PORT)
-        browser.open(f"http://127.0.0.1:{WEB_PORT}/")
+        dora.wait_for(f"web view: http://127.0.0.1:{web_port}/", timeout_s=60)
+        browser = Browser(free_port())
+        browser.open(f"http://127.0.0.1:{web_port}/")
         browser.wait_for_text("shoulder_pan: 0.0°")
         # In this headless Chromium, viser's scene left at rest from the start stayed mid-fade-in (a
         # browser with a screen draws it at once: checked under Xvfb); a first move makes it draw, so
@@ -84,6 +85,8 @@ def test_the_page_draws_the_arm_follows_0_90_and_outlives_its_browser(tmp_path):
         after = the_arm_drawn(browser, tmp_path / "after.png")
         if os.environ.get("SO101_WEB_SCREENSHOT"):  # the README's picture: this test's own
             shutil.copyfile(tmp_path / "after.png", os.environ["SO101_WEB_SCREENSHOT"])
+        browser.open(f"http://127.0.0.1:{web_port}/")  # a reload mid-stream: the new page is served the pose
+        browser.wait_for_text("shoulder_pan: 9")
         browser.kill()
         killed_at = time.monotonic()
         browser = None
@@ -103,19 +106,18 @@ def test_the_page_draws_the_arm_follows_0_90_and_outlives_its_browser(tmp_path):
     last_state = samples[-1][1]
     assert angle_on_page(text, "shoulder_pan") == pytest.approx(last_state[0], abs=0.5)
     assert angle_on_page(text, "shoulder_pan") == pytest.approx(90.0, abs=0.5)
-    # The browser killed: states go on, and the web view did not fail.
+    # The page reloaded, then the browser killed: states go on, and the web view did not fail.
     assert any(t > killed_at + 1.5 for t, _ in samples)
     assert "Traceback" not in log and "web_view: daemon exited with code" not in log, log[-3000:]
 
 
-# PyBullet's: the test above. The real arm's page is the same URDF posed by its joint_state; it is not
-# run here: its emulated bus is a thread of this process, and beside a browser its start-up checks
-# went unanswered in a fresh clone's run (tests/test_record_replay.py replays onto it with --web).
-@pytest.mark.parametrize("body", ["mujoco"])
+# PyBullet's: the test above. The real arm's: its emulated bus runs in a process of its own, which a
+# starting browser cannot starve.
+@pytest.mark.parametrize("body", ["mujoco", "real"])
 def test_every_body_is_shown_posed_by_its_joint_state(tmp_path, body):
-    """MuJoCo's body: the URDF posed by the angles it publishes."""
+    """Each other body: the URDF posed by the angles it publishes."""
     record_file = tmp_path / "joint_state.json"
-    web_port = WEB_PORT + 3
+    web_port = free_port()
     with body_environment(body, tmp_path) as (body_env, _):
         dataflow = write_test_dataflow(tmp_path, {"SO101_LANG": "en", **body_env}, record_file=record_file, body=body,
                                        web_env={"SO101_WEB_PORT": str(web_port)})
@@ -123,10 +125,7 @@ def test_every_body_is_shown_posed_by_its_joint_state(tmp_path, body):
         browser = None
         try:
             dora.wait_for(f"web view: http://127.0.0.1:{web_port}/", timeout_s=60)
-            # The body up before the browser starts: the emulated arm is a thread of this process, and a
-            # starting Chromium once starved it through the arm's start-up checks (a fresh clone's run).
-            dora.wait_for("SO-101 loaded", timeout_s=60)
-            browser = Browser(DEBUG_PORT + 3)
+            browser = Browser(free_port())
             browser.open(f"http://127.0.0.1:{web_port}/")
             browser.wait_for_text("shoulder_pan: ")
             prompt = subprocess.run(PROMPT_COMMAND, input="0 -60\n", capture_output=True, text=True,
@@ -145,57 +144,20 @@ def test_every_body_is_shown_posed_by_its_joint_state(tmp_path, body):
     assert "Traceback" not in dora.log(), dora.log()[-3000:]
 
 
-def test_five_pages_follow_the_arm_and_one_reloaded_or_killed_disturbs_nothing(tmp_path):
-    record_file = tmp_path / "joint_state.json"
-    web_port = WEB_PORT + 2
-    dataflow = write_test_dataflow(tmp_path, {"SO101_LANG": "en"}, record_file=record_file,
-                                   web_env={"SO101_WEB_PORT": str(web_port)})
-    dora = DoraRun(dataflow, tmp_path / "dora.log", stop_after_s=400)
-    browsers: list[Browser] = []
-    try:
-        dora.wait_for(f"web view: http://127.0.0.1:{web_port}/", timeout_s=60)
-        for number in range(5):
-            # Idle priority: five pages drawing with SwiftShader would otherwise take the body's CPU.
-            browsers.append(Browser(DEBUG_PORT + 10 + number, idle=True))
-            browsers[-1].open(f"http://127.0.0.1:{web_port}/")
-        for browser in browsers:
-            browser.wait_for_text("shoulder_pan: 0.0°", timeout_s=180)
-        connected_at = time.monotonic()
-        prompt = subprocess.run(PROMPT_COMMAND, input="0 -45\n", capture_output=True, text=True,
-                                env=prompt_env(tmp_path), cwd=tmp_path, timeout=120)
-        assert prompt.returncode == 0, prompt.stdout + prompt.stderr
-        browsers[1].open(f"http://127.0.0.1:{web_port}/")  # a reload
-        browsers.pop(2).kill()  # a browser gone mid-stream
-        for browser in browsers:
-            browser.wait_for_text("shoulder_pan: -45.0°", timeout_s=180)
-        time.sleep(max(0.0, 30 - (time.monotonic() - connected_at)))
-        watched_s = time.monotonic() - connected_at
-    finally:
-        for browser in browsers:
-            browser.kill()
-        dora.stop()
-    log = dora.log()
-    assert "Traceback" not in log and "web_view: daemon exited with code" not in log, log[-3000:]
-    arrivals = [t for t, _ in json.loads(record_file.read_text())["samples"] if t >= connected_at]
-    gaps = np.diff(arrivals)
-    print(f"five pages for {watched_s:.0f} s: {len(arrivals) / watched_s:.1f} joint_state/s, longest gap {gaps.max() * 1e3:.0f} ms")
-    # The states went on the whole time (the pace is so101 bench --web's to measure).
-    assert arrivals[-1] - connected_at > watched_s - 2 and gaps.max() < 2.0
-
-
 def test_teleop_web_shows_the_camera_and_marks_an_episode_while_it_records(tmp_path):
     """`so101 teleop --record DIR --web` as a person runs it in a terminal: the page shows the camera's
     picture, and the marker from `record` to `stop`."""
     from so101.bodies.node_loop import IMAGE_SIZE
     from tests.test_prompt_tmux import start_teleop
 
-    terminal, _, log_file = start_teleop(tmp_path, "en", extra=f"--record {tmp_path / 'episodes'} --web --web-port {WEB_PORT + 1}")
+    web_port = free_port()
+    terminal, _, log_file = start_teleop(tmp_path, "en", extra=f"--record {tmp_path / 'episodes'} --web --web-port {web_port}")
     browser = None
     try:
         address = terminal.wait_for(r"^web view: (http://\S+)$", timeout_s=120).group(1)
-        assert address == f"http://127.0.0.1:{WEB_PORT + 1}/"
+        assert address == f"http://127.0.0.1:{web_port}/"
         terminal.seen = terminal.wait_for(r"^=+\n>$", timeout_s=60).start()
-        browser = Browser(DEBUG_PORT + 1)
+        browser = Browser(free_port())
         browser.open(address)
         browser.wait_for_text("shoulder_pan: 0.0°")
         assert "● recording" not in browser.text()

@@ -55,6 +55,7 @@ def test_the_window_benchmark_times_the_window_from_the_first_state_and_counts_t
 
 
 @gui_test
+@pytest.mark.alone  # screenshots a few times a second while a window loads: a busy machine starves both
 def test_the_window_shows_the_arm_only_once_it_is_posed(tmp_path, monkeypatch, xvfb_display):
     monkeypatch.setenv("DISPLAY", xvfb_display)
     window = Window(["so101.gui.viewer", "--urdf", str(assets.urdf_path())])
