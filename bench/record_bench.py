@@ -22,7 +22,7 @@ import numpy as np
 from bench.common import PACED_PROBE_ENV, WARMUP_S, run_dataflow, realtime_figures
 from so101.bodies.node_loop import IMAGE_SIZE
 from so101.bodies.registry import BODIES
-from so101.dataset.features import DEFAULT_FPS, to_lerobot
+from so101.dataset.features import ACTION_KEY, DEFAULT_FPS, IMAGE_KEY, STATE_KEY, to_lerobot
 from so101.runtime.dataflow import TICK_PERIOD_S, with_recorder
 from so101.stats import summary
 
@@ -56,7 +56,7 @@ def measure_in_loop(run_dir: Path, duration_s: float, body: str) -> dict:
 
 def measure_recording(run_dir: Path, duration_s: float, body: str) -> dict:
     """The body, the camera and the recorder, an episode with video recorded throughout."""
-    from so101.dataset.lerobot_v3 import Dataset
+    from so101.dataset.reader import Dataset
 
     dataset_dir = run_dir / "dataset"
     size = f"{IMAGE_SIZE[0]}x{IMAGE_SIZE[1]}"
@@ -90,7 +90,7 @@ def measure_recording(run_dir: Path, duration_s: float, body: str) -> dict:
 
 def measure_saving(body: str, seconds: float = SAVED_EPISODE_S) -> dict:
     """A `seconds` episode at 30 fps with video, frames added as the recorder adds them, then saved."""
-    from so101.dataset.lerobot_v3 import DatasetWriter
+    from so101.dataset.writer import DatasetWriter
 
     with BODIES[body].body_class()(mode="direct", time_step_s=TICK_PERIOD_S, log=lambda message: None) as sim:
         poses = [[40 * np.sin(index / 3), -20 + index, 30 - 2 * index, 10, 5 * index, 20 + 3 * index]
@@ -101,14 +101,15 @@ def measure_saving(body: str, seconds: float = SAVED_EPISODE_S) -> dict:
             pictures.append(sim.render_rgb(*IMAGE_SIZE))
     work = Path(tempfile.mkdtemp(prefix="so101-bench-save-"))
     try:
-        writer = DatasetWriter.open(work / "dataset", DEFAULT_FPS, IMAGE_SIZE)
+        writer = DatasetWriter.open(work / "dataset", DEFAULT_FPS, {IMAGE_KEY: IMAGE_SIZE})
         episode = writer.start_episode("so101 bench")
         frames = round(seconds * DEFAULT_FPS)
         add_ms = []
         for index in range(frames):
             pose = poses[(index // 3) % PICTURES]  # a new picture every 3 frames, as the camera's rate gives
             start = time.perf_counter()
-            episode.add_frame(to_lerobot(pose), to_lerobot(pose), pictures[(index // 3) % PICTURES])
+            episode.add_frame({STATE_KEY: to_lerobot(pose), ACTION_KEY: to_lerobot(pose),
+                               IMAGE_KEY: pictures[(index // 3) % PICTURES]})
             add_ms.append((time.perf_counter() - start) * 1e3)
         start = time.perf_counter()
         episode.save()

@@ -6,7 +6,7 @@ the dataset's rate, each with the latest `joint_state` + `gripper_state` (observ
 as video); `record_cmd` messages from the prompt start, stop, discard and list episodes, and
 each gets its reply on `record_status`, whose metadata also says which episode is recording (the
 web view's marker). Saving runs in the background. STOP saves an episode
-still recording. What it does is so101/dataset/recording.py; the files, lerobot_v3.py there.
+still recording. What it does is so101/dataset/recording.py; the files, writer.py there.
 Settings: so101.dataset.settings.RecorderSettings (SO101_RECORD_DIR, SO101_RECORD_FPS,
 SO101_RECORD_IMAGE_SIZE, SO101_LANG).
 """
@@ -28,10 +28,12 @@ import pyarrow as pa  # noqa: E402
 from dora import Node  # noqa: E402
 
 from so101.bodies.node_loop import cannot_start  # noqa: E402
-from so101.dataset.lerobot_v3 import DatasetError, DatasetWriter  # noqa: E402
+from so101.dataset.features import IMAGE_KEY  # noqa: E402
+from so101.dataset.layout import DatasetError  # noqa: E402
 from so101.dataset.messages import decode_record_cmd, recording_metadata  # noqa: E402
 from so101.dataset.recording import Recording  # noqa: E402
 from so101.dataset.settings import RecorderSettings  # noqa: E402
+from so101.dataset.writer import DatasetWriter  # noqa: E402
 from so101.runtime.logs import send_diagnostics_to  # noqa: E402
 from so101.runtime.processes import yield_cpu_to_the_body  # noqa: E402
 
@@ -56,7 +58,8 @@ def main() -> int:
     try:
         settings = RecorderSettings.from_environ(os.environ)
         # Opened before joining: a folder that is not this dataset stops the node in one line.
-        writer = DatasetWriter.open(settings.root, settings.fps, settings.image_size)
+        video_sizes = {IMAGE_KEY: settings.image_size} if settings.image_size else {}
+        writer = DatasetWriter.open(settings.root, settings.fps, video_sizes)
     except (ValueError, DatasetError) as error:
         return cannot_start(error, NODE_ID)
     yield_cpu_to_the_body()

@@ -26,7 +26,8 @@ import numpy as np  # noqa: E402
 import pyarrow as pa  # noqa: E402
 
 from so101.dataset.features import ACTION_KEY, from_lerobot  # noqa: E402
-from so101.dataset.lerobot_v3 import Dataset, DatasetError  # noqa: E402
+from so101.dataset.layout import DatasetError  # noqa: E402
+from so101.dataset.reader import Dataset  # noqa: E402
 from so101.dataset.replay import (  # noqa: E402
     RAMP_SPEED_DEG_S, SETTLE_TIMEOUT_S, ramp_deg, settled, tracking_errors_deg, tracking_line,
 )

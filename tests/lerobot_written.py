@@ -1,6 +1,6 @@
 """A LeRobotDataset v3.0 written the way LeRobot 0.4.x writes one, by code of its own.
 
-This is a test fixture: it does not import the project's writer (so101.dataset.lerobot_v3), so a
+This is a test fixture: it does not import the project's writer (so101.dataset.writer), so a
 test that reads its output with the project's reader checks the reader against LeRobot's format,
 not against the project's own idea of it. It needs only numpy, pyarrow and PyAV (no pandas, no
 `datasets`, no torch). Read from LeRobot 0.4.0-0.4.4 (src/lerobot/datasets/, identical in what

@@ -1,4 +1,4 @@
-"""The LeRobotDataset v3.0 files so101.dataset.lerobot_v3 writes, read back with plain pyarrow,
+"""The LeRobotDataset v3.0 files so101.dataset.writer writes, read back with plain pyarrow,
 json and PyAV (not with the project's reader, so these checks do not share its mistakes): names,
 types, indices, statistics, video; appending; refusals; a full disk and SIGKILL at any moment of
 a save; and `so101 dataset`.
@@ -28,13 +28,18 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
-from so101.dataset import lerobot_v3
-from so101.dataset.features import IMAGE_KEY, MOTOR_NAMES, ROBOT_TYPE
-from so101.dataset.lerobot_v3 import Dataset, DatasetError, DatasetWriter
+from so101.dataset import commit, video
+from so101.dataset.episode import EpisodeRecorder
+from so101.dataset.features import ACTION_KEY, IMAGE_KEY, MOTOR_NAMES, ROBOT_TYPE, STATE_KEY
+from so101.dataset.layout import DatasetError
+from so101.dataset.reader import Dataset
+from so101.dataset.stats import QUANTILE_BINS
+from so101.dataset.writer import DatasetWriter
 from tests.image_helpers import png_size
 
 FPS = 30
 SIZE = (128, 96)  # width, height: small, so that encoding takes milliseconds
+VIDEO = {IMAGE_KEY: SIZE}  # DatasetWriter.open's video sizes
 QUANTILES = {"q01": 0.01, "q10": 0.10, "q50": 0.50, "q90": 0.90, "q99": 0.99}
 STATS = ("min", "max", "mean", "std", "count", *QUANTILES)
 NUMERIC = ("action", "observation.state", "timestamp", "frame_index", "episode_index", "index", "task_index")
@@ -72,6 +77,12 @@ def picture(seed: int, i: int, size: tuple[int, int] | None = None) -> np.ndarra
     return np.clip(image, 0, 255).astype(np.uint8)
 
 
+def frame(seed: int, i: int, video: bool = True) -> dict[str, np.ndarray]:
+    """Episode `seed`'s frame i as add_frame takes it: joints(), and picture() with video."""
+    state, action = joints(seed, i)
+    return {STATE_KEY: state, ACTION_KEY: action, **({IMAGE_KEY: picture(seed, i)} if video else {})}
+
+
 def record_episodes(writer: DatasetWriter, episodes: list[tuple[str, int]], first_seed: int) -> list[int]:
     """Record and save (task, frames) episodes with seeds first_seed, first_seed+1, ...; their indices."""
     indices = []
@@ -79,8 +90,7 @@ def record_episodes(writer: DatasetWriter, episodes: list[tuple[str, int]], firs
         seed = first_seed + n
         episode = writer.start_episode(task)
         for i in range(length):
-            state, action = joints(seed, i)
-            episode.add_frame(state, action, picture(seed, i) if writer.image_size else None)
+            episode.add_frame(frame(seed, i, video=bool(writer.video_sizes)))
         indices.append(episode.save().index)
     return indices
 
@@ -88,7 +98,7 @@ def record_episodes(writer: DatasetWriter, episodes: list[tuple[str, int]], firs
 def record(root: Path, episodes: list[tuple[str, int]], first_seed: int = 0, video: bool = True,
            **limits: Any) -> None:
     """A writer session that records `episodes`; limits: DatasetWriter.open's file-size keywords."""
-    with DatasetWriter.open(root, FPS, SIZE if video else None, **limits) as writer:
+    with DatasetWriter.open(root, FPS, VIDEO if video else {}, **limits) as writer:
         record_episodes(writer, episodes, first_seed)
 
 
@@ -139,13 +149,13 @@ def psnr_db(a: np.ndarray, b: np.ndarray) -> float:
 def snapshot(root: Path) -> dict[str, str]:
     """Every file of the dataset (not the recorder's work folder) and a hash of its bytes."""
     return {str(path.relative_to(root)): hashlib.sha256(path.read_bytes()).hexdigest()
-            for path in sorted(root.rglob("*")) if path.is_file() and lerobot_v3.WORK_DIR not in path.parts}
+            for path in sorted(root.rglob("*")) if path.is_file() and commit.WORK_DIR not in path.parts}
 
 
 def lerobot_quantile_bounds(values: np.ndarray, q: float) -> tuple[float, float]:
     """Where LeRobot's histogram quantile (5000 bins between min and max) may land for data whose
     exact q-quantile lies between two neighbouring samples: within a bin of them."""
-    bin_width = (values.max() - values.min()) / lerobot_v3.QUANTILE_BINS + 2e-10
+    bin_width = (values.max() - values.min()) / QUANTILE_BINS + 2e-10
     low = np.quantile(values, q, method="lower")
     high = np.quantile(values, q, method="higher")
     return float(low - bin_width), float(high + bin_width)
@@ -354,6 +364,38 @@ def test_without_video(recorded_without_video: Path) -> None:
     assert pq.read_schema(recorded_without_video / "data/chunk-000/file-000.parquet").names == list(NUMERIC)
 
 
+def test_two_cameras_each_get_their_video(tmp_path: Path) -> None:
+    root = tmp_path / "demos"
+    wrist, wrist_size = "observation.images.wrist", (64, 48)
+    with DatasetWriter.open(root, FPS, {IMAGE_KEY: SIZE, wrist: wrist_size}) as writer:
+        for seed, length in [(0, 8), (1, 6)]:
+            episode = writer.start_episode("pick")
+            for i in range(length):
+                episode.add_frame({**frame(seed, i), wrist: picture(seed + 10, i, wrist_size)})
+            episode.save()
+    info = read_json(root / "meta/info.json")
+    assert list(info["features"]) == ["action", "observation.state", IMAGE_KEY, wrist, *NUMERIC[2:]]
+    assert info["features"][wrist]["shape"] == [48, 64, 3]
+    assert (info["features"][wrist]["info"]["video.width"], info["features"][IMAGE_KEY]["info"]["video.width"]) == (
+        64, 128)
+    assert {IMAGE_KEY, wrist} <= set(read_json(root / "meta/stats.json"))
+    rows = episode_rows(root)
+    for key in (IMAGE_KEY, wrist):
+        assert (root / f"videos/{key}/chunk-000/file-000.mp4").is_file()
+        assert [row[f"videos/{key}/from_timestamp"] for row in rows] == pytest.approx([0, 8 / FPS])
+        assert [row[f"stats/{key}/count"] for row in rows] == [[8], [6]]
+    dataset = Dataset.open(root)
+    assert dataset.video_keys == [IMAGE_KEY, wrist]
+    for episode_index, length in [(0, 8), (1, 6)]:
+        fronts = list(dataset.episode_images(episode_index, IMAGE_KEY))
+        wrists = list(dataset.episode_images(episode_index, wrist))
+        assert len(fronts) == len(wrists) == length
+        assert min(psnr_db(rgb, picture(episode_index, i)) for i, rgb in enumerate(fronts)) >= 30.0
+        assert min(psnr_db(rgb, picture(episode_index + 10, i, wrist_size)) for i, rgb in enumerate(wrists)) >= 30.0
+    with pytest.raises(DatasetError, match="has video \\(observation.images.wrist\\): record with its image size"):
+        DatasetWriter.open(root, FPS, VIDEO)
+
+
 # -- the reader -------------------------------------------------------------------------------------
 
 
@@ -395,17 +437,17 @@ def test_reader_says_which_episodes_exist(recorded: Path, ask: str) -> None:
 def test_a_second_session_continues_in_new_files(tmp_path: Path) -> None:
     root = tmp_path / "demos"
     record(root, [("pick", 10), ("place", 12)])
-    with DatasetWriter.open(root, FPS, SIZE) as writer:
+    with DatasetWriter.open(root, FPS, VIDEO) as writer:
         assert [e.index for e in writer.episodes] == [0, 1]
         # Saved in the background while the next episode records, as the recorder node does.
         first = writer.start_episode("place")
         for i in range(9):
-            first.add_frame(*joints(2, i), picture(2, i))
+            first.add_frame(frame(2, i))
         saving = threading.Thread(target=first.save)
         saving.start()
         second = writer.start_episode("stack")
         for i in range(11):
-            second.add_frame(*joints(3, i), picture(3, i))
+            second.add_frame(frame(3, i))
         saving.join()
         assert second.save().index == 3
         assert [e.index for e in writer.episodes] == [0, 1, 2, 3]
@@ -480,19 +522,19 @@ def _older_lerobot(root: Path) -> None:
     (root / "meta/info.json").write_text(json.dumps({"codebase_version": "v2.1", "fps": 30, "features": {}}))
 
 
-@pytest.mark.parametrize(("prepare", "fps", "image_size", "expected"), [
-    (_not_a_dataset, FPS, SIZE, "is not empty and is not a LeRobot dataset"),
-    (_a_file, FPS, SIZE, "is a file"),
-    (_older_lerobot, FPS, SIZE, "LeRobot v2.1 dataset: this reads and writes v3.0"),
-    ("video", 15, SIZE, "is recorded at 30 fps, not 15: record at 30 fps"),
-    ("video", FPS, None, "has video (observation.images.front): record with its image size"),
-    ("video", FPS, (320, 240), "video is 128x96, not 320x240: record at 128x96"),
-    ("no video", FPS, SIZE, "has no video (observation.images.front): record without an image size"),
-    (None, FPS, (63, 48), "use even width and height"),
-    (None, 0, SIZE, "use a whole number above 0"),
+@pytest.mark.parametrize(("prepare", "fps", "video_sizes", "expected"), [
+    (_not_a_dataset, FPS, VIDEO, "is not empty and is not a LeRobot dataset"),
+    (_a_file, FPS, VIDEO, "is a file"),
+    (_older_lerobot, FPS, VIDEO, "LeRobot v2.1 dataset: this reads and writes v3.0"),
+    ("video", 15, VIDEO, "is recorded at 30 fps, not 15: record at 30 fps"),
+    ("video", FPS, {}, "has video (observation.images.front): record with its image size"),
+    ("video", FPS, {IMAGE_KEY: (320, 240)}, "video is 128x96, not 320x240: record at 128x96"),
+    ("no video", FPS, VIDEO, "has no video (observation.images.front): record without an image size"),
+    (None, FPS, {IMAGE_KEY: (63, 48)}, "use even width and height"),
+    (None, 0, VIDEO, "use a whole number above 0"),
 ], ids=["not-a-dataset", "a-file", "v2.1", "other-fps", "video-vs-none", "other-size", "none-vs-video",
         "odd-size", "zero-fps"])
-def test_refusals_are_one_line(tmp_path: Path, prepare: object, fps: int, image_size: tuple[int, int] | None,
+def test_refusals_are_one_line(tmp_path: Path, prepare: object, fps: int, video_sizes: dict[str, tuple[int, int]],
                                expected: str) -> None:
     root = tmp_path / "demos"
     if callable(prepare):
@@ -501,7 +543,7 @@ def test_refusals_are_one_line(tmp_path: Path, prepare: object, fps: int, image_
         record(root, [("pick", 3)], video=prepare == "video")
     before = snapshot(root) if root.is_dir() else None
     with pytest.raises(DatasetError) as caught:
-        DatasetWriter.open(root, fps, image_size)
+        DatasetWriter.open(root, fps, video_sizes)
     message = str(caught.value)
     assert "\n" not in message and expected in message
     if before is not None:
@@ -509,49 +551,72 @@ def test_refusals_are_one_line(tmp_path: Path, prepare: object, fps: int, image_
 
 
 def test_a_second_writer_is_refused(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(lerobot_v3, "LOCK_WAIT_S", 0.2)
-    with DatasetWriter.open(tmp_path / "demos", FPS, SIZE):
+    monkeypatch.setattr(commit, "LOCK_WAIT_S", 0.2)
+    with DatasetWriter.open(tmp_path / "demos", FPS, VIDEO):
         with pytest.raises(DatasetError, match="another recorder is writing to"):
-            DatasetWriter.open(tmp_path / "demos", FPS, SIZE)
+            DatasetWriter.open(tmp_path / "demos", FPS, VIDEO)
 
 
 @pytest.mark.parametrize(("misuse", "expected"), [
-    ("short state", "the state has shape (5,): it must be 6 values"),
-    ("no picture", "this dataset has video: every frame needs its picture"),
-    ("other picture", "this dataset's video takes (96, 128, 3) uint8"),
+    ("short state", "observation.state has shape (5,) float32: it must be 6 values"),
+    ("no picture", "the frame has no 'observation.images.front'"),
+    ("other picture", "it must be (96, 128, 3) uint8"),
     ("no frames", "an episode of 0 frames is not saved"),
     ("no task", "an episode needs a task text"),
 ])
 def test_recorder_misuse_is_one_line(tmp_path: Path, misuse: str, expected: str) -> None:
-    with DatasetWriter.open(tmp_path / "demos", FPS, SIZE) as writer:
+    with DatasetWriter.open(tmp_path / "demos", FPS, VIDEO) as writer:
         with pytest.raises(DatasetError) as caught:
             if misuse == "no task":
                 writer.start_episode("  ")
             episode = writer.start_episode("pick")
             state, action = joints(0, 0)
             if misuse == "short state":
-                episode.add_frame(state[:5], action, picture(0, 0))
+                episode.add_frame({STATE_KEY: state[:5], ACTION_KEY: action, IMAGE_KEY: picture(0, 0)})
             elif misuse == "no picture":
-                episode.add_frame(state, action)
+                episode.add_frame({STATE_KEY: state, ACTION_KEY: action})
             elif misuse == "other picture":
-                episode.add_frame(state, action, picture(0, 0, (32, 24)))
+                episode.add_frame({STATE_KEY: state, ACTION_KEY: action, IMAGE_KEY: picture(0, 0, (32, 24))})
             else:
                 episode.save()
         assert "\n" not in str(caught.value) and expected in str(caught.value)
+
+
+@pytest.mark.parametrize(("change", "expected"), [
+    ({ACTION_KEY: None}, "the frame has no 'action': a frame holds action, observation.state, observation.images.front"),
+    ({"observation.images.wrist": picture(0, 0)},
+     "the frame has 'observation.images.wrist', which is not a feature of this dataset"),
+    ({STATE_KEY: np.zeros((6, 1), np.float32)}, "observation.state has shape (6, 1) float32: it must be 6 values "
+                                                "(shoulder_pan.pos, shoulder_lift.pos"),
+    ({ACTION_KEY: np.array(["up"] * 6)}, "action has shape (6,) <U2: it must be 6 values"),
+    ({IMAGE_KEY: picture(0, 0) / 255.0}, "observation.images.front has shape (96, 128, 3) float64: "
+                                         "it must be (96, 128, 3) uint8 (RGB)"),
+], ids=["missing", "extra", "shape", "dtype", "picture-dtype"])
+def test_a_frame_is_checked_against_the_features(tmp_path: Path, change: dict, expected: str) -> None:
+    with DatasetWriter.open(tmp_path / "demos", FPS, VIDEO) as writer:
+        episode = writer.start_episode("pick")
+        wrong = {key: value for key, value in {**frame(0, 0), **change}.items() if value is not None}
+        with pytest.raises(DatasetError) as caught:
+            episode.add_frame(wrong)
+        assert "\n" not in str(caught.value) and expected in str(caught.value)
+        assert episode.frames == 0  # nothing of a refused frame is kept: its picture neither
+        episode.add_frame(frame(0, 0))
+        assert episode.save().length == 1
+    assert len(list(Dataset.open(tmp_path / "demos").episode_images(0, IMAGE_KEY))) == 1
 
 
 def test_discard_leaves_nothing(tmp_path: Path) -> None:
     root = tmp_path / "demos"
     record(root, [("pick", 5)])
     before = snapshot(root)
-    with DatasetWriter.open(root, FPS, SIZE) as writer:
+    with DatasetWriter.open(root, FPS, VIDEO) as writer:
         episode = writer.start_episode("place")
         for i in range(7):
-            episode.add_frame(*joints(1, i), picture(1, i))
+            episode.add_frame(frame(1, i))
         episode.discard()
         assert writer.episodes[-1].index == 0
     assert snapshot(root) == before
-    assert not (root / lerobot_v3.WORK_DIR).exists()
+    assert not (root / commit.WORK_DIR).exists()
 
 
 # -- a full disk and interrupted commits --------------------------------------------------------------
@@ -571,10 +636,10 @@ def copy_of(base: Path, into: Path) -> Path:
     return into / "demos"
 
 
-def recording(writer: DatasetWriter, seed: int = 1, frames: int = 10) -> lerobot_v3.EpisodeRecorder:
+def recording(writer: DatasetWriter, seed: int = 1, frames: int = 10) -> EpisodeRecorder:
     episode = writer.start_episode("place")
     for i in range(frames):
-        episode.add_frame(*joints(seed, i), picture(seed, i))
+        episode.add_frame(frame(seed, i))
     return episode
 
 
@@ -593,7 +658,7 @@ def commit_calls(base: Path, into: Path, monkeypatch: pytest.MonkeyPatch) -> lis
         calls.append(("replace", str(target)))
         real_replace(source, target)
 
-    with DatasetWriter.open(root, FPS, SIZE) as writer:
+    with DatasetWriter.open(root, FPS, VIDEO) as writer:
         record_episodes(writer, [("pick", 6)], first_seed=5)
         episode = recording(writer)
         monkeypatch.setattr(os, "fsync", fsync)
@@ -607,7 +672,7 @@ def fsyncs_until_journal(calls: list[tuple[str, str]]) -> int:
     """How many fsyncs a save makes up to and with its journal's folder: a failure in any of them
     must leave the dataset as it was."""
     journal_at = next(i for i, (kind, target) in enumerate(calls) if kind == "replace" and
-                      target.endswith(lerobot_v3.JOURNAL_PATH))
+                      target.endswith(commit.JOURNAL_PATH))
     return sum(1 for kind, _ in calls[:journal_at] if kind == "fsync") + 1
 
 
@@ -619,10 +684,10 @@ def test_a_full_disk_at_any_write_leaves_the_dataset_as_it_was(one_episode: Path
     failures: list[tuple[str, int]] = [("fsync", k) for k in range(1, last + 1)]
     failures += [("parquet", 1), ("parquet", 2), ("concatenate", 1), ("json", 1), ("json", 3)]
     real: dict[str, Callable[..., Any]] = {"fsync": os.fsync, "parquet": pq.ParquetWriter.write_table,
-                                           "json": lerobot_v3.json.dump, "concatenate": lerobot_v3.videos.concatenate}
+                                           "json": json.dump, "concatenate": video.concatenate}
     for number, (where, k) in enumerate(failures):
         root = copy_of(one_episode, tmp_path / f"run{number}")
-        with DatasetWriter.open(root, FPS, SIZE) as writer:
+        with DatasetWriter.open(root, FPS, VIDEO) as writer:
             record_episodes(writer, [("pick", 6)], first_seed=5)  # this session's video file to join onto
             before = snapshot(root)
             episode = recording(writer)
@@ -635,7 +700,7 @@ def test_a_full_disk_at_any_write_leaves_the_dataset_as_it_was(one_episode: Path
                 return real[_where](*args, **kwargs)
 
             target = {"fsync": (os, "fsync"), "parquet": (pq.ParquetWriter, "write_table"),
-                      "json": (lerobot_v3.json, "dump"), "concatenate": (lerobot_v3.videos, "concatenate")}[where]
+                      "json": (json, "dump"), "concatenate": (video, "concatenate")}[where]
             monkeypatch.setattr(*target, failing)
             with pytest.raises(DatasetError) as caught:
                 episode.save()
@@ -667,7 +732,7 @@ def test_renames_cut_short_are_completed_on_open(one_episode: Path, tmp_path: Pa
         renamed.append(str(target))
         real_replace(source, target)
 
-    with DatasetWriter.open(root, FPS, SIZE) as writer:
+    with DatasetWriter.open(root, FPS, VIDEO) as writer:
         episode = recording(writer)
         monkeypatch.setattr(os, "replace", replace_twice)
         with pytest.raises(DatasetError, match="is saved but not yet in place") as caught:
@@ -678,26 +743,26 @@ def test_renames_cut_short_are_completed_on_open(one_episode: Path, tmp_path: Pa
         with pytest.raises(DatasetError, match="an earlier save is still to be completed"):
             recording(writer, seed=2).save()
     assert "\n" not in str(caught.value)
-    assert (root / lerobot_v3.JOURNAL_PATH).exists()
+    assert (root / commit.JOURNAL_PATH).exists()
     dataset = Dataset.open(root)  # completes the renames
-    assert not (root / lerobot_v3.JOURNAL_PATH).exists()
+    assert not (root / commit.JOURNAL_PATH).exists()
     assert [e.length for e in dataset.episodes] == [12, 10]
     assert np.array_equal(dataset.episode_frames(1)["action"], np.array([joints(1, i)[1] for i in range(10)]))
     assert read_json(root / "meta/info.json")["total_frames"] == 22
     assert len(list(dataset.episode_images(1, IMAGE_KEY))) == 10
-    assert not list(root.rglob("*" + lerobot_v3.TEMP_SUFFIX))
+    assert not list(root.rglob("*" + commit.TEMP_SUFFIX))
 
 
 def test_leftovers_without_a_journal_are_removed_on_open(one_episode: Path, tmp_path: Path) -> None:
     root = copy_of(one_episode, tmp_path)
     before = snapshot(root)
-    (root / ("data/chunk-000/file-000.parquet" + lerobot_v3.TEMP_SUFFIX)).write_bytes(b"half a file")
-    (root / ("meta/info.json" + lerobot_v3.TEMP_SUFFIX)).write_text("{")
-    (root / lerobot_v3.WORK_DIR).mkdir()
-    (root / lerobot_v3.WORK_DIR / "episode-1-1.mp4").write_bytes(b"\x00" * 100)
+    (root / ("data/chunk-000/file-000.parquet" + commit.TEMP_SUFFIX)).write_bytes(b"half a file")
+    (root / ("meta/info.json" + commit.TEMP_SUFFIX)).write_text("{")
+    (root / commit.WORK_DIR).mkdir()
+    (root / commit.WORK_DIR / "episode-1-1.mp4").write_bytes(b"\x00" * 100)
     assert [e.index for e in Dataset.open(root).episodes] == [0]
     assert snapshot(root) == before
-    assert not (root / lerobot_v3.WORK_DIR).exists()
+    assert not (root / commit.WORK_DIR).exists()
 
 
 # -- SIGKILL -------------------------------------------------------------------------------------------
@@ -706,18 +771,18 @@ def test_leftovers_without_a_journal_are_removed_on_open(one_episode: Path, tmp_
 CHILD = textwrap.dedent("""
     import random, sys, time
     sys.path[:0] = [{repo!r}, {tests!r}]
-    from test_dataset_format import FPS, SIZE, joints, picture
-    from so101.dataset.lerobot_v3 import DatasetWriter
+    from test_dataset_format import FPS, VIDEO, frame
+    from so101.dataset.writer import DatasetWriter
 
     root, seed = sys.argv[1], int(sys.argv[2])
     rng = random.Random(seed)
-    writer = DatasetWriter.open(root, FPS, SIZE)
+    writer = DatasetWriter.open(root, FPS, VIDEO)
     print("ready", flush=True)
     while True:
         episode = writer.start_episode("pick" if seed % 2 else "place")
         pause_s = rng.choice([0.0, 0.0, 0.0, 0.01])  # some episodes recorded slowly: killed mid-episode
         for i in range(rng.randint(3, 30)):
-            episode.add_frame(*joints(seed, i), picture(seed, i))
+            episode.add_frame(frame(seed, i))
             time.sleep(pause_s)
         summary = episode.save()
         print("saved", summary.index, seed, flush=True)
@@ -731,7 +796,7 @@ def save_and_die_at(root: Path, step: int) -> int:
     pid = os.fork()
     if pid == 0:  # the child: never returns into pytest
         try:
-            writer = DatasetWriter.open(root, FPS, SIZE)
+            writer = DatasetWriter.open(root, FPS, VIDEO)
             episode = recording(writer, seed=1000 + step, frames=10)
             calls = [0]
 
@@ -775,9 +840,9 @@ def check_whole(root: Path) -> Dataset:
     """The dataset after a crash: it opens, nothing of ours is left, every episode reads whole, and
     the files agree with each other."""
     dataset = Dataset.open(root)
-    assert not (root / lerobot_v3.JOURNAL_PATH).exists()
-    assert not list(root.rglob("*" + lerobot_v3.TEMP_SUFFIX))
-    assert not (root / lerobot_v3.WORK_DIR).exists()
+    assert not (root / commit.JOURNAL_PATH).exists()
+    assert not list(root.rglob("*" + commit.TEMP_SUFFIX))
+    assert not (root / commit.WORK_DIR).exists()
     info = read_json(root / "meta/info.json")
     rows = episode_rows(root)
     assert info["total_episodes"] == len(rows) == len(dataset.episodes)
@@ -811,7 +876,7 @@ def test_sigkill_at_every_step_of_a_save(one_episode: Path, tmp_path: Path) -> N
         assert len(dataset.episodes) in (1, 2)
     assert outcomes == {1, 2}
     # And recording goes on after a crash.
-    with DatasetWriter.open(root, FPS, SIZE) as writer:
+    with DatasetWriter.open(root, FPS, VIDEO) as writer:
         record_episodes(writer, [("pick", 4)], first_seed=7)
     check_whole(root)
 

@@ -17,7 +17,8 @@ import numpy as np
 import pytest
 
 from so101.dataset.features import ACTION_KEY, STATE_KEY, from_lerobot, to_lerobot
-from so101.dataset.lerobot_v3 import Dataset, DatasetWriter
+from so101.dataset.reader import Dataset
+from so101.dataset.writer import DatasetWriter
 from tests.dataflow_helpers import SO101, body_environment
 from so101.runtime.processes import processes_with_env
 from tests.test_prompt_tmux import Terminal, _keys, calibrate_in_tmux, start_teleop
@@ -108,10 +109,10 @@ def test_a_person_records_two_episodes_quits_and_replays_one_on_both_simulators(
 
 
 def recorded_episode(dataset_dir: Path, actions_deg: np.ndarray) -> None:
-    with DatasetWriter.open(dataset_dir, 30, None) as writer:
+    with DatasetWriter.open(dataset_dir, 30, {}) as writer:
         episode = writer.start_episode("a sweep")
         for action in actions_deg:
-            episode.add_frame(to_lerobot(action), to_lerobot(action))
+            episode.add_frame({STATE_KEY: to_lerobot(action), ACTION_KEY: to_lerobot(action)})
         episode.save()
 
 

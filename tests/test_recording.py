@@ -11,7 +11,7 @@ import numpy as np
 import pyarrow as pa
 import pytest
 
-from so101.dataset.features import MOTOR_NAMES, from_lerobot, to_lerobot
+from so101.dataset.features import ACTION_KEY, IMAGE_KEY, MOTOR_NAMES, STATE_KEY, from_lerobot, to_lerobot
 from so101.dataset.messages import (RecordCommand, decode_record_cmd, encode_record_cmd, recording_from_metadata,
                                     recording_metadata)
 from so101.dataset.recording import FrameClock, Recording
@@ -73,8 +73,8 @@ class FakeEpisode:
     def frames(self):
         return len(self.rows)
 
-    def add_frame(self, state, action, image=None):
-        self.rows.append((state.copy(), action.copy(), image))
+    def add_frame(self, frame):
+        self.rows.append((frame[STATE_KEY].copy(), frame[ACTION_KEY].copy(), frame.get(IMAGE_KEY)))
 
     def save(self):
         self.release.wait(5)

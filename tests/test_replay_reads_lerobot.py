@@ -71,13 +71,13 @@ def written(request, tmp_path_factory):
 
 
 def open_dataset(root: Path):
-    from so101.dataset.lerobot_v3 import Dataset
+    from so101.dataset.reader import Dataset
 
     return Dataset.open(root)
 
 
 def dataset_error():
-    from so101.dataset.lerobot_v3 import DatasetError
+    from so101.dataset.layout import DatasetError
 
     return DatasetError
 
@@ -340,13 +340,15 @@ def test_the_fixture_is_shaped_like_tmp_lerobot_made(tmp_path):
 def test_a_data_file_that_disagrees_with_the_metadata_is_one_line(tmp_path):
     import pyarrow.parquet as pq
 
-    from so101.dataset.features import to_lerobot
-    from so101.dataset.lerobot_v3 import Dataset, DatasetError, DatasetWriter
+    from so101.dataset.features import ACTION_KEY, STATE_KEY, to_lerobot
+    from so101.dataset.layout import DatasetError
+    from so101.dataset.reader import Dataset
+    from so101.dataset.writer import DatasetWriter
 
-    with DatasetWriter.open(tmp_path / "set", 30, None) as writer:
+    with DatasetWriter.open(tmp_path / "set", 30, {}) as writer:
         episode = writer.start_episode("t")
         for _ in range(5):
-            episode.add_frame(to_lerobot([0] * 6), to_lerobot([0] * 6))
+            episode.add_frame({STATE_KEY: to_lerobot([0] * 6), ACTION_KEY: to_lerobot([0] * 6)})
         episode.save()
     data_file = tmp_path / "set" / "data" / "chunk-000" / "file-000.parquet"
     pq.write_table(pq.read_table(data_file).slice(0, 3), data_file)

@@ -52,7 +52,7 @@ MAKE = """
 import sys
 import numpy as np
 from pathlib import Path
-from so101.dataset.lerobot_v3 import DatasetWriter
+from so101.dataset.writer import DatasetWriter
 root = Path(sys.argv[1])
 W, H = 320, 240
 def picture(seed, i):
@@ -63,7 +63,7 @@ def picture(seed, i):
     img = img * (1 - box[..., None]) + np.array([230, 200, 40]) * box[..., None]
     return np.clip(img, 0, 255).astype(np.uint8)
 for session, episodes in enumerate([[("pick the cube", 45), ("place the cube", 30)], [("pick the cube", 38)]]):
-    with DatasetWriter.open(root, 30, (W, H)) as writer:
+    with DatasetWriter.open(root, 30, {"observation.images.front": (W, H)}) as writer:
         for n, (task, length) in enumerate(episodes):
             seed = 10 * session + n
             episode = writer.start_episode(task)
@@ -71,7 +71,8 @@ for session, episodes in enumerate([[("pick the cube", 45), ("place the cube", 3
                 t = i / 30
                 action = np.array([seed + t, 40 * np.sin(t), -30 + 5 * t, 20 * np.cos(2 * t), 90 * np.sin(t / 2),
                                    50 + 40 * np.sin(3 * t)], dtype=np.float32)
-                episode.add_frame(action - np.float32(0.5), action, picture(seed, i))
+                episode.add_frame({"observation.state": action - np.float32(0.5), "action": action,
+                                   "observation.images.front": picture(seed, i)})
             episode.save()
 """
 
@@ -204,16 +205,19 @@ PROJECT_APPENDS = """
 import sys
 import numpy as np
 from pathlib import Path
-from so101.dataset.lerobot_v3 import Dataset, DatasetWriter
+from so101.dataset.reader import Dataset
+from so101.dataset.writer import DatasetWriter
 root = Path(sys.argv[1])
 dataset = Dataset.open(root)
 video = dataset.features.get("observation.images.front")
 size = (video["shape"][1], video["shape"][0]) if video else None
-with DatasetWriter.open(root, dataset.fps, size) as writer:
+with DatasetWriter.open(root, dataset.fps, {"observation.images.front": size} if size else {}) as writer:
     episode = writer.start_episode("appended by so101")
     for i in range(9):
-        picture = np.full((size[1], size[0], 3), 90, np.uint8) if size else None
-        episode.add_frame(np.full(6, i, np.float32), np.full(6, i, np.float32), picture)
+        frame = {"observation.state": np.full(6, i, np.float32), "action": np.full(6, i, np.float32)}
+        if size:
+            frame["observation.images.front"] = np.full((size[1], size[0], 3), 90, np.uint8)
+        episode.add_frame(frame)
     episode.save()
 dataset = Dataset.open(root)
 for e in dataset.episodes:
@@ -271,7 +275,7 @@ def main() -> int:
         if not roots:
             made = Path(scratch) / "made-by-so101"
             subprocess.run([str(args.project_python), "-c", MAKE, str(made)], check=True, cwd=REPO)
-            print(f"made {made} with so101.dataset.lerobot_v3 ({args.project_python})")
+            print(f"made {made} with so101.dataset.writer ({args.project_python})")
             roots = [made]
         for root in roots:
             check_items(root)

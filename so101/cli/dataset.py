@@ -1,6 +1,6 @@
 """`so101 dataset DIR`: what a LeRobot v3.0 dataset holds; `--plot N` draws episode N's joints.
 
-Reads any LeRobot v3.0 dataset (ours or LeRobot's own) with so101.dataset.lerobot_v3. The plot
+Reads any LeRobot v3.0 dataset (ours or LeRobot's own) with so101.dataset.reader. The plot
 shows, per joint, the action (what the arm was told) against observation.state (where it was),
 in LeRobot's units: degrees for the five arm joints, 0-100 for the gripper.
 """
@@ -15,7 +15,8 @@ import numpy as np
 
 from so101.cli import argtypes
 from so101.dataset.features import ACTION_KEY, GRIPPER_RANGE, STATE_KEY
-from so101.dataset.lerobot_v3 import Dataset, DatasetError
+from so101.dataset.layout import DatasetError
+from so101.dataset.reader import Dataset
 
 PLOT_SIZE_IN = (12.0, 8.0)
 PLOT_DPI = 100  # 1200 x 800 pixels

@@ -38,7 +38,8 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from so101.dataset.lerobot_v3 import Dataset, DatasetError
+    from so101.dataset.layout import DatasetError
+    from so101.dataset.reader import Dataset
 
     dataset_dir = args.dataset.expanduser().resolve()
     try:  # a wrong folder or episode is said here, before a dataflow starts

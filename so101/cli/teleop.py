@@ -33,7 +33,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from so101.bodies.registry import BODIES, DEFAULT_BODY, BodyKind, body_node_env
-from so101.dataset.features import DEFAULT_FPS
+from so101.dataset.features import DEFAULT_FPS, IMAGE_KEY
 from so101.runtime.dataflow import (
     LEADER_READY_MARKS, LOADED_MARKS, PROMPT_NODE_FILE, ROOT, WEB_VIEW_MARKS, dataflow_copy, with_leader, with_recorder,
     with_web_view, write_dataflow,
@@ -341,11 +341,12 @@ def add_recorder(descriptor: dict, body: BodyKind, dataset_dir: Path, fps: int, 
     """The recorder (and a simulation's camera) added to `descriptor`; or why DIR cannot take
     these episodes, in one line, before anything starts."""
     from so101.bodies.node_loop import IMAGE_SIZE
-    from so101.dataset.lerobot_v3 import DatasetError, DatasetWriter
+    from so101.dataset.layout import DatasetError
+    from so101.dataset.writer import DatasetWriter
 
     image_size = IMAGE_SIZE if body.simulated else None  # the real arm has no camera of its own
     try:  # checked now, and let go: the recorder node opens it again
-        DatasetWriter.open(dataset_dir, fps, image_size).close()
+        DatasetWriter.open(dataset_dir, fps, {IMAGE_KEY: image_size} if image_size else {}).close()
     except DatasetError as error:
         return str(error)
     size_text = f"{image_size[0]}x{image_size[1]}" if image_size else ""

@@ -14,12 +14,12 @@ from __future__ import annotations
 
 import threading
 import time
-from typing import Callable, Protocol, Sequence
+from typing import Any, Callable, Mapping, Protocol, Sequence
 
 import numpy as np
 import numpy.typing as npt
 
-from so101.dataset.features import to_lerobot
+from so101.dataset.features import ACTION_KEY, IMAGE_KEY, STATE_KEY, to_lerobot
 from so101.dataset.messages import COMMANDS, RecordCommand
 from so101.robot import ACTUATED_JOINTS, NUM_ARM_JOINTS
 
@@ -70,11 +70,11 @@ TEXT = {
 
 
 class Episode(Protocol):
-    """An episode being written (so101.dataset.lerobot_v3.EpisodeRecorder)."""
+    """An episode being written (so101.dataset.episode.EpisodeRecorder)."""
 
     frames: int
 
-    def add_frame(self, state: np.ndarray, action: np.ndarray, image: np.ndarray | None = None) -> None: ...
+    def add_frame(self, frame: Mapping[str, Any]) -> None: ...  # feature key -> value
 
     def save(self) -> object: ...
 
@@ -82,7 +82,7 @@ class Episode(Protocol):
 
 
 class Writer(Protocol):
-    """A dataset open for appending (so101.dataset.lerobot_v3.DatasetWriter)."""
+    """A dataset open for appending (so101.dataset.writer.DatasetWriter)."""
 
     episodes: list  # of EpisodeSummary: index, length, tasks, duration_s
 
@@ -169,10 +169,12 @@ class Recording:
         due = self._frame_clock.due(now_s)
         if due:
             # `action` is what the body was told to reach; until the body has said, where it stands.
-            action = to_lerobot(self.targets_deg if self.targets_deg is not None else state)
-            observation = to_lerobot(state)
+            frame: dict[str, Any] = {STATE_KEY: to_lerobot(state),
+                                     ACTION_KEY: to_lerobot(self.targets_deg if self.targets_deg is not None else state)}
+            if self.needs_image:
+                frame[IMAGE_KEY] = self.image
             for _ in range(due):
-                self.episode.add_frame(observation, action, self.image if self.needs_image else None)
+                self.episode.add_frame(frame)
         return due
 
     # -- commands ------------------------------------------------------------------------
