@@ -38,6 +38,7 @@ def pytest_xdist_auto_num_workers(config):
     return max(1, min(os.cpu_count() or 1, MAX_WORKERS))
 
 
+@pytest.hookimpl(tryfirst=True)  # before xdist's own, which reads the groups
 def pytest_collection_modifyitems(items):
     """A real dataflow or a person's session is slow too: `-m "not slow"` is the fast subset. Tests
     that start dora share one xdist group (DORA_MODULES)."""
@@ -47,6 +48,21 @@ def pytest_collection_modifyitems(items):
         if (item.get_closest_marker("dataflow") or item.get_closest_marker("person")
                 or item.module.__name__.rsplit(".", 1)[-1] in DORA_MODULES):
             item.add_marker(pytest.mark.xdist_group("dora"))
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_collection_finish(session):
+    """Under --dist loadgroup, xdist marks a grouped test's id with its group: without that mark the
+    groups are silently ignored (pytest 9.2 with pytest-xdist 3.8, xdist issue #1386), and dora's
+    tests would collide. Refuse to run then rather than fail at random."""
+    if not getattr(session.config.option, "loadgroup", False):
+        return
+    for item in session.items:
+        if item.get_closest_marker("xdist_group") and "@" not in item.nodeid.rsplit("]", 1)[-1]:
+            raise pytest.UsageError(
+                f"pytest-xdist does not group {item.nodeid} (pytest {pytest.__version__}): the tests that start "
+                "dora would run two at a time. Install the test extra's pytest (pip install -e '.[test]'), "
+                "or run with -n 0")
 
 
 @pytest.fixture(autouse=True)
