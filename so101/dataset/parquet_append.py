@@ -9,14 +9,15 @@ and the footer, not the file (the footer grows by about 1 kB per episode: its ro
 
 pyarrow's ParquetWriter encodes the row group, but it starts only at the beginning of its sink
 ("Appending to file not implemented") and counts the offsets its footer records from there. So
-it writes into a scratch memory file, seeked to where the row group will lie in the real file:
-its offsets are then the file's. The scratch file is sparse: only the pages written cost memory.
+it writes into a scratch file, seeked to where the row group will lie in the real file: its
+offsets are then the file's. The scratch file is sparse: only the pages written take room.
 """
 
 from __future__ import annotations
 
 import os
 import struct
+import tempfile
 from dataclasses import dataclass
 
 import pyarrow as pa
@@ -62,13 +63,13 @@ def _metadata(footer: bytes) -> pq.FileMetaData:
 def _row_group_at(table: pa.Table, offset: int) -> tuple[bytes, bytes]:
     """`table` encoded as the row group that starts `offset` bytes into a file, and the footer of
     a file that holds just it (offsets as in that file)."""
-    fd = os.memfd_create("so101-row-group")
-    try:
+    # A temporary file, not a memfd: the same on Linux and macOS.
+    with tempfile.NamedTemporaryFile(prefix="so101-row-group-") as scratch_file:
         # Room for the row group and its footer; untouched pages cost nothing, so a loose bound
         # will do: dictionary and snappy encodings do not grow data past twice its size, and the
         # footer and page headers take kilobytes.
-        os.ftruncate(fd, offset + 3 * table.nbytes + (1 << 20))
-        with pa.memory_map(f"/proc/self/fd/{fd}", "r+") as scratch:
+        os.ftruncate(scratch_file.fileno(), offset + 3 * table.nbytes + (1 << 20))
+        with pa.memory_map(scratch_file.name, "r+") as scratch:
             with pq.ParquetWriter(scratch, table.schema, compression="snappy", use_dictionary=True) as writer:
                 scratch.seek(offset)  # the writer wrote its MAGIC at 0
                 writer.write_table(table)
@@ -79,5 +80,3 @@ def _row_group_at(table: pa.Table, offset: int) -> tuple[bytes, bytes]:
             row_group = scratch.read(footer_start - offset)
             footer = scratch.read(end - footer_start)
         return row_group, footer
-    finally:
-        os.close(fd)
