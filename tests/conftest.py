@@ -10,10 +10,14 @@ must not turn a slow example into a failure.
 import fcntl
 import os
 import shutil
+import time
 from pathlib import Path
 
 import pytest
 from hypothesis import HealthCheck, settings
+
+# tests/helpers/ holds code moved out of the test modules: its asserts report as theirs do.
+pytest.register_assert_rewrite("tests.helpers")
 
 settings.register_profile("ci", max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 settings.register_profile("soak", max_examples=10_000, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -136,6 +140,36 @@ def make_sim():
         sim.close()
 
 
+# -- a display, and a machine free of other dataflows ------------------------------------
+
+
+@pytest.fixture
+def xvfb_display(tmp_path):
+    """A fresh Xvfb server, stopped after the test."""
+    from so101.gui.display import DisplayError, virtual_display
+
+    try:
+        with virtual_display(tmp_path / "xvfb.log") as display:
+            yield display
+    except DisplayError as error:
+        pytest.skip(str(error))
+
+
+OTHERS_WAIT_S = 180
+
+
+@pytest.fixture
+def no_other_dataflow():
+    """Another program's dataflow that takes a prompt (on a shared runner) would be the one named: wait for none."""
+    from so101.prompt.join import port_holder, unreachable_dataflows
+
+    deadline = time.monotonic() + OTHERS_WAIT_S
+    while port_holder() or unreachable_dataflows("keyboard_control", None):
+        if time.monotonic() > deadline:
+            pytest.skip(f"another dora dataflow kept running on this machine for {OTHERS_WAIT_S} s")
+        time.sleep(1)
+
+
 # -- the course's joint table --------------------------------------------------------------
 # The independent oracle for robot.JOINT_TABLE and every printed table: what the
 # course shows for step A, stated here once and not derived from the code.
@@ -170,7 +204,7 @@ def course_step_b_deg() -> list[float]:
 @pytest.fixture(autouse=True)
 def no_real_time_threads_after_the_test():
     """SVT-AV1 makes the thread that opens it SCHED_FIFO where it may (as root): tests that encode
-    in their own thread (tests/lerobot_written.py writes as LeRobot does) left this process's main
+    in their own thread (tests/helpers/lerobot_written.py writes as LeRobot does) left this process's main
     thread real-time, and every later test's emulated arm (a thread here) and window (a child,
     inheriting it) starved behind it. Each test starts as the last one began."""
     yield

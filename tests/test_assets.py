@@ -13,7 +13,7 @@ import pytest
 
 from so101 import assets
 from so101.bodies import pybullet_hulls
-from tests.dataflow_helpers import BROKEN_MESH, corrupt
+from tests.helpers.dataflow import BROKEN_MESH, corrupt
 
 
 @pytest.fixture

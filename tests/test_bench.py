@@ -19,7 +19,7 @@ import pytest
 
 from so101.bodies import node_loop as body_node
 from bench import common, leader_bench, real_bench, run_bench, web_bench
-from tests.dataflow_helpers import TICK, run_simulation_node
+from tests.helpers.dataflow import TICK, run_simulation_node
 
 MS = 1_000_000  # ns
 

@@ -16,7 +16,7 @@ import yaml
 from so101 import assets
 from so101.bodies.registry import BODIES, DEFAULT_BODY
 from so101.robot import ACTUATED_JOINTS
-from tests.dataflow_helpers import ROOT
+from tests.helpers.dataflow import ROOT
 
 
 def test_every_body_node_is_registered():

@@ -7,7 +7,7 @@ import sys
 
 import pytest
 
-from tests.dataflow_helpers import error_lines, run_so101
+from tests.helpers.dataflow import error_lines, run_so101
 
 pytestmark = pytest.mark.slow  # runs so101 inspect and so101 joints as processes: not in the fast subset
 

@@ -16,8 +16,9 @@ from so101.bodies.registry import BODIES
 from so101.runtime.cluster import (BODY_MACHINE, CLUSTER_DATAFLOW, PROMPT_MACHINE, Cluster, ClusterError, cluster_dataflow,
                           placed_dataflow)
 from so101.runtime.dataflow import LOADED_MARKS, dataflow_copy, write_dataflow
-from tests.dataflow_helpers import PROMPT_COMMAND, RECORDER, ROOT, error_lines, prompt_env, run_so101
-from tests.test_dataflow import check_the_record, type_the_script
+from tests.helpers.dataflow import (
+    PROMPT_COMMAND, RECORDER, ROOT, check_the_record, error_lines, prompt_env, run_so101, type_the_script,
+)
 
 pytestmark = pytest.mark.dataflow
 

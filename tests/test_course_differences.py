@@ -6,7 +6,7 @@ import subprocess
 
 import pytest
 
-from tests.dataflow_helpers import VENV_BIN, dora_env
+from tests.helpers.dataflow import VENV_BIN, dora_env
 
 pytestmark = pytest.mark.dataflow
 

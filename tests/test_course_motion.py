@@ -20,11 +20,11 @@ from so101 import assets
 from so101.runtime.dataflow import TICK_PERIOD_S
 from so101.bodies import pybullet_hulls
 from so101.bodies.pybullet_sim import SO101Sim
+from tests.helpers.course_motion import SCENARIOS, STEPS_PER_COMMAND, home_with
 
 pytestmark = pytest.mark.slow  # steps PyBullet through the course's motions: not in the fast subset
 
 TOLERANCE_DEG = 0.01
-STEPS_PER_COMMAND = 250  # 1 s: every move below ends and settles well within it
 COURSE_JOINTS = [0, 1, 2, 3, 4, 6]  # step C's ARM_JOINTS, and the gripper
 
 
@@ -54,19 +54,6 @@ class CourseArm:
 
     def close(self):
         p.disconnect(physicsClientId=self.client)
-
-
-def home_with(position: int, angle_deg: float) -> list[float]:
-    targets = [0.0] * 6
-    targets[position] = angle_deg
-    return targets
-
-
-SCENARIOS = {
-    **{f"{joint} 90": [home_with(joint, 90.0)] for joint in range(5)},
-    "gripper to 50": [home_with(5, 50.0)],
-    "batch -30 45 -60 30 0, then home": [[-30.0, 45.0, -60.0, 30.0, 0.0, 0.0], [0.0] * 6],
-}
 
 
 @pytest.mark.parametrize("commands", SCENARIOS.values(), ids=SCENARIOS.keys())

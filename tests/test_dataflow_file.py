@@ -9,7 +9,7 @@ import yaml
 from so101.leader.settings import LeaderSettings
 from so101.runtime.dataflow import TICK_PERIOD_S, timer_period_s, with_leader
 from so101.runtime.settings import declared
-from tests.dataflow_helpers import ROOT
+from tests.helpers.dataflow import ROOT
 
 DATAFLOW = yaml.safe_load((ROOT / "dataflow.yml").read_text(encoding="utf-8"))
 NODES = {node["id"]: node for node in DATAFLOW["nodes"]}

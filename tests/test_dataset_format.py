@@ -35,7 +35,7 @@ from so101.dataset.layout import DatasetError
 from so101.dataset.reader import Dataset
 from so101.dataset.stats import QUANTILE_BINS
 from so101.dataset.writer import DatasetWriter
-from tests.image_helpers import png_size
+from tests.helpers.images import png_size
 
 FPS = 30
 SIZE = (128, 96)  # width, height: small, so that encoding takes milliseconds

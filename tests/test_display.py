@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from so101.gui.display import DisplayError, display_available, resolve_mode
-from tests.dataflow_helpers import unused_display
+from tests.helpers.dataflow import unused_display
 
 
 def test_auto_without_display_is_direct_with_a_notice():

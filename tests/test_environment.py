@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from so101.runtime.versions import cli_version_from_output, dora_version_problem, version_mismatch
-from tests.dataflow_helpers import (
+from tests.helpers.dataflow import (
     BROKEN_MESH, PROMPT_COMMAND, VENV_BIN, DoraRun, corrupt, error_lines, run_so101,
     unused_display, write_test_dataflow,
 )

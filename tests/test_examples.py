@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.dataflow_helpers import error_lines
+from tests.helpers.dataflow import error_lines
 
 pytestmark = pytest.mark.slow  # runs the course's scripts as processes: not in the fast subset
 

@@ -11,7 +11,6 @@ from __future__ import annotations
 import functools
 import math
 import os
-import select
 import signal
 import subprocess
 import sys
@@ -31,6 +30,7 @@ from so101.feetech.fake_arm import (
 from so101.feetech.hand import eased_in, figure_eight_deg, parse_keyframes
 from so101.feetech.sts3215 import decode_signed
 from so101.robot import ACTUATED_JOINTS
+from tests.helpers.processes import Lines
 
 SO101 = Path(sys.executable).parent / "so101"
 EXAMPLE_KEYFRAMES = Path(__file__).resolve().parent.parent / "examples" / "leader_wave.keyframes"
@@ -705,27 +705,6 @@ def test_a_sync_read_is_answered_in_a_few_milliseconds_and_idle_costs_nothing(ar
 
 
 # -- the command line -----------------------------------------------------------------------------------
-
-
-class Lines:
-    """Lines from a subprocess's stdout, with a timeout."""
-
-    def __init__(self, stream):
-        self.fd = stream.fileno()
-        self.pending = b""
-
-    def next(self, timeout: float = 10.0) -> str:
-        deadline = time.monotonic() + timeout
-        while b"\n" not in self.pending:
-            left = deadline - time.monotonic()
-            if left <= 0 or not select.select([self.fd], [], [], left)[0]:
-                raise TimeoutError(f"no line within {timeout} s; so far {self.pending!r}")
-            chunk = os.read(self.fd, 4096)
-            if not chunk:
-                raise EOFError(f"output ended; so far {self.pending!r}")
-            self.pending += chunk
-        line, self.pending = self.pending.split(b"\n", 1)
-        return line.decode()
 
 
 @pytest.fixture

@@ -17,15 +17,14 @@ import subprocess
 import sys
 import time
 import uuid
-from pathlib import Path
 
 import pytest
 import yaml
 
 from so101.bodies.registry import BODIES
 from so101.runtime.dataflow import timer_period_s
-from so101.runtime.processes import processes_with_env
-from tests.dataflow_helpers import PROMPT_COMMAND, DoraRun, body_environment, dora_env, prompt_env, write_test_dataflow
+from tests.helpers.dataflow import PROMPT_COMMAND, DoraRun, body_environment, dora_env, prompt_env, write_test_dataflow
+from tests.helpers.processes import command_line, processes_with_marker, wait_until_gone
 
 pytestmark = pytest.mark.dataflow
 
@@ -34,28 +33,6 @@ ANSI_ESCAPE = re.compile(r"\x1b\[[0-9;]*m")
 
 def plain(text: str) -> str:
     return ANSI_ESCAPE.sub("", text)
-
-
-def processes_with_marker(marker: str) -> list[int]:
-    """PIDs whose environment holds SO101_TEST_RUN=marker: `dora run` and every node it started."""
-    return processes_with_env("SO101_TEST_RUN", marker)
-
-
-def command_line(pid: int) -> str:
-    try:
-        return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
-    except OSError:
-        return ""
-
-
-def wait_until_gone(marker: str, timeout_s: float = 15) -> list[int]:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        left = processes_with_marker(marker)
-        if not left:
-            return []
-        time.sleep(0.2)
-    return processes_with_marker(marker)
 
 
 @pytest.mark.parametrize("body", list(BODIES))

@@ -14,53 +14,20 @@ import shutil
 import subprocess
 import time
 
-import numpy as np
 import pytest
-from PIL import Image
 
 from so101.bodies.registry import BODIES, SIMULATED_BODIES
 from so101.runtime.dataflow import dataflow_copy, write_dataflow
-from so101.gui.display import DisplayError, virtual_display
-from tests.dataflow_helpers import ROOT, DoraRun
+from tests.helpers.dataflow import ROOT, DoraRun
+from tests.helpers.screen import GUI_MARKS, MIN_ARM_PIXELS, SAME_FRAME_OVERLAP, arm_pixels, overlap, screenshot, settled_arm
 
-pytestmark = [
-    pytest.mark.person,
-    pytest.mark.skipif(shutil.which("Xvfb") is None, reason="Xvfb is not installed (Debian package xvfb)"),
-    pytest.mark.skipif(shutil.which("import") is None, reason="ImageMagick's `import` is not installed (package imagemagick)"),
-]
+pytestmark = GUI_MARKS
 
 SENDER = ROOT / "tests" / "nodes" / "joint_cmd_sender.py"
 # shoulder_pan to 90°: the arm swings to the other side of its base, in full view of the default camera.
 COMMAND_DEG = "90 0 0 0 0"
-MIN_ARM_PIXELS = 2000  # the arm covers about 15,000 pixels of the 1024x768 window
 MAX_OVERLAP_AFTER_MOVE = 0.5  # intersection over union of the arm's pixels before and after
-SAME_FRAME_OVERLAP = 0.98  # two screenshots of an arm at rest
 WINDOW_TITLES = {"pybullet": "Bullet Physics", "mujoco": "MuJoCo"}
-
-
-@pytest.fixture
-def xvfb_display(tmp_path):
-    """A fresh Xvfb server, stopped after the test."""
-    try:
-        with virtual_display(tmp_path / "xvfb.log") as display:
-            yield display
-    except DisplayError as error:
-        pytest.skip(str(error))
-
-
-def screenshot(display: str, path) -> np.ndarray:
-    subprocess.run(["import", "-display", display, "-window", "root", str(path)], check=True, timeout=60)
-    return np.asarray(Image.open(path).convert("RGB")).astype(int)
-
-
-def arm_pixels(rgb: np.ndarray) -> np.ndarray:
-    """Yellow pixels: red and green high, blue low (shaded yellow included, floor and sky excluded)."""
-    red, green, blue = rgb[..., 0], rgb[..., 1], rgb[..., 2]
-    return (red > 120) & (green > 80) & (blue < 0.45 * green) & (green < 0.95 * red)
-
-
-def overlap(mask_a: np.ndarray, mask_b: np.ndarray) -> float:
-    return (mask_a & mask_b).sum() / max(1, (mask_a | mask_b).sum())
 
 
 def gui_dataflow(tmp_path, trigger_file, body="pybullet"):
@@ -73,22 +40,6 @@ def gui_dataflow(tmp_path, trigger_file, body="pybullet"):
             node["inputs"] = {"tick": "dora/timer/millis/50"}
             node["env"] = {"TRIGGER_FILE": str(trigger_file), "JOINT_CMD": COMMAND_DEG}
     return write_dataflow(descriptor, tmp_path / "dataflow.yml")
-
-
-def settled_arm(display, path, accept, timeout_s=60):
-    """Screenshots until the arm looks the same in two in a row and `accept(mask)` holds; returns that mask.
-
-    Two equal frames rule out a scene still loading (links drawn before they are
-    placed) and an arm still on its way.
-    """
-    deadline = time.monotonic() + timeout_s
-    previous = arm_pixels(screenshot(display, path))
-    while True:
-        time.sleep(0.5)
-        mask = arm_pixels(screenshot(display, path))
-        if (overlap(previous, mask) > SAME_FRAME_OVERLAP and accept(mask)) or time.monotonic() > deadline:
-            return mask
-        previous = mask
 
 
 @pytest.mark.parametrize("body", SIMULATED_BODIES)

@@ -257,7 +257,7 @@ def test_main_without_a_running_dataflow_says_how_to_start_it(monkeypatch, capsy
 
 
 def test_snapshot_draws_the_arm_as_it_is_now(tmp_path, monkeypatch):
-    from tests.image_helpers import arm_pixels, png_rgb
+    from tests.helpers.images import arm_pixels, png_rgb
 
     monkeypatch.chdir(tmp_path)
     _, control = make_control(tmp_path, lang="en", events=state_events())

@@ -21,7 +21,7 @@ from so101.assets import ModelFilesError
 from so101.cli.main import main
 from so101.kinematics import REACH_TOLERANCE_MM, Kinematics, Reach
 from so101.robot import ARM_JOINTS, HOME_POSE_DEG, NUM_ARM_JOINTS
-from tests.dataflow_helpers import run_so101
+from tests.helpers.dataflow import run_so101
 
 # The tip at home, from the URDF's numbers (see urdf_tip_mm): the upper arm stands up, the
 # forearm and the gripper reach forward level, 391 mm out and 226 mm up.

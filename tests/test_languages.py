@@ -14,9 +14,9 @@ from so101.feetech.bus import FeetechBus
 from so101.feetech.calibration import MOTOR_IDS, MOTOR_NAMES, load_calibration
 from so101.feetech.fake_arm import FakeArmProcess, calibrate_as_at_the_factory
 from so101.lang import LOCALE_VARS, session_language
-from tests.dataflow_helpers import SO101, TICK, body_environment, run_so101, run_simulation_node
-from tests.test_calibrate import Calibrate
-from tests.test_fake_arm import Lines
+from tests.helpers.calibrate import Calibrate
+from tests.helpers.dataflow import SO101, TICK, body_environment, run_so101, run_simulation_node
+from tests.helpers.processes import Lines
 
 CHINESE = re.compile(r"[\u4e00-\u9fff]")
 

@@ -15,7 +15,7 @@ from so101.feetech.calibration import MOTOR_IDS, MotorCalibration, save_calibrat
 from so101.feetech.fake_arm import FakeArmProcess, calibrate_as_at_the_factory
 from so101.leader.arm import LeaderFailed, SO101Leader
 from so101.leader.command import MOVED_DEG, Takeover, leader_command_deg, leader_values
-from tests.dataflow_helpers import (
+from tests.helpers.dataflow import (
     PROMPT_COMMAND, DoraRun, body_environment, error_lines, prompt_env, run_so101, write_test_dataflow,
 )
 

@@ -13,8 +13,7 @@ import pytest
 
 from so101.prompt.terminal import LOG_KEPT_BYTES, dora_logs_to
 from so101.runtime.logs import keep_last_bytes
-from tests.dataflow_helpers import PROMPT_COMMAND, DoraRun, prompt_env, write_test_dataflow
-from tests.test_two_dataflows import no_other_dataflow  # noqa: F401 - a fixture
+from tests.helpers.dataflow import PROMPT_COMMAND, DoraRun, prompt_env, write_test_dataflow
 
 
 def numbered_lines(count: int, first: int = 0) -> bytes:

@@ -16,7 +16,7 @@ from so101.bodies import mujoco_model
 from so101.bodies.mujoco_model import HULL_TOLERANCE_DEG, HULLS_NAME, collision_hulls, hulls_key, save_hulls, scene_model
 from so101.bodies.mujoco_sim import SO101MuJoCo
 from so101.robot import ACTUATED_JOINTS
-from tests.test_course_motion import SCENARIOS, STEPS_PER_COMMAND
+from tests.helpers.course_motion import SCENARIOS, STEPS_PER_COMMAND
 
 # MuJoCo as so101 imports it: imported here first, without the OpenGL back end mujoco_model
 # chooses, it could not draw offscreen for the tests that come after (an abort, in the suite).

@@ -9,7 +9,7 @@ import sys
 import pytest
 
 from so101.cli.main import main
-from tests.image_helpers import png_size
+from tests.helpers.images import png_size
 
 pytestmark = pytest.mark.slow  # runs so101 plot-step: not in the fast subset
 

@@ -9,13 +9,13 @@ import re
 import shutil
 import subprocess
 import time
-import uuid
 from pathlib import Path
 
 import pytest
 
 from so101.gui.display import virtual_display
-from tests.dataflow_helpers import SO101
+from tests.helpers.dataflow import SO101
+from tests.helpers.terminal import Terminal, calibrate_in_tmux, send_keys, start_teleop
 
 pytestmark = [
     pytest.mark.person,
@@ -25,74 +25,12 @@ pytestmark = [
 TARGET_DEG = [-30.0, 45.0, -60.0, 30.0, 0.0]
 
 
-class Terminal:
-    """One tmux session of 200x50 running a shell command; the pane stays after the command exits."""
-
-    def __init__(self, command: str, env: dict[str, str]):
-        self.name = f"so101-test-{uuid.uuid4().hex[:8]}"
-        exports = " ".join(f"{key}='{value}'" for key, value in env.items())
-        subprocess.run(
-            ["tmux", "new-session", "-d", "-s", self.name, "-x", "200", "-y", "50",
-             f"env {exports} {command}; echo TELEOP_EXIT=$?; sleep 600"],
-            check=True,
-        )
-        self.seen = 0  # screen text up to here is answered: `command` looks for replies past it
-
-    def screen(self) -> str:
-        result = subprocess.run(
-            ["tmux", "capture-pane", "-p", "-J", "-S", "-500", "-t", self.name], capture_output=True, text=True,
-        )
-        # -J keeps trailing blanks; a person does not see them
-        return "\n".join(line.rstrip() for line in result.stdout.splitlines())
-
-    def type_line(self, text: str) -> None:
-        # -l: literal text, or tmux reads "home" as the Home key
-        subprocess.run(["tmux", "send-keys", "-t", self.name, "-l", text], check=True)
-        subprocess.run(["tmux", "send-keys", "-t", self.name, "Enter"], check=True)
-
-    def wait_for(self, pattern: str, timeout_s: float = 60, after: int = 0) -> re.Match:
-        """The first match of `pattern` in the screen text past offset `after` (waits for it to appear)."""
-        deadline = time.monotonic() + timeout_s
-        while True:
-            screen = self.screen()
-            match = re.compile(pattern, re.M).search(screen, after)
-            if match:
-                return match
-            if time.monotonic() > deadline:
-                raise AssertionError(f"{pattern!r} not on the screen within {timeout_s}s:\n{screen}")
-            time.sleep(0.2)
-
-    def command(self, text: str, reply: str, timeout_s: float = 20) -> re.Match:
-        """Type `text` at the prompt and wait for `reply` (a pattern) right below it, past `seen`."""
-        self.type_line(text)
-        match = self.wait_for(rf"^> {re.escape(text)}\n{reply}$", timeout_s, after=self.seen)
-        self.seen = match.end()
-        return match
-
-    def close(self) -> None:
-        subprocess.run(["tmux", "kill-session", "-t", self.name], capture_output=True)
-
-
 def _alive(pid: int) -> bool:
     try:
         state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
     except (OSError, IndexError):
         return False
     return state != "Z"
-
-
-def start_teleop(tmp_path: Path, lang: str, mode: str = "direct", body: str = "pybullet", extra: str = "",
-                 **env: str) -> tuple[Terminal, Path, Path]:
-    """`so101 teleop` (headless by default; `extra`: more options) in a new terminal; returns it, the poses
-    file and the dataflow's log."""
-    poses_file = tmp_path / "poses.json"
-    log_file = tmp_path / "dora.log"
-    env = {
-        "SO101_POSES_FILE": str(poses_file), "SO101_HISTORY_FILE": str(tmp_path / "history"),
-        "SO101_PROMPT_LOG": str(tmp_path / "prompt.log"), "SO101_LANG": lang, "PATH": os.environ["PATH"], **env,
-    }
-    command = f"{SO101} teleop --body {body} --mode {mode} --lang {lang} --log {log_file} {extra}".rstrip()
-    return Terminal(command, env), poses_file, log_file
 
 
 def test_a_person_drives_the_arm_from_the_prompt(tmp_path):
@@ -239,27 +177,6 @@ def test_teleop_drives_the_mujoco_body_with_the_same_prompt(tmp_path):
     assert spawned and [pid for pid in spawned if _alive(pid)] == []
 
 
-def calibrate_in_tmux(fake_arm: Terminal, calibration_file: Path, *options: str) -> str:
-    """`so101 calibrate` in a second terminal on the port `fake_arm` (a `so101 fake-arm` terminal)
-    printed, as a person does it: Enter, `sweep` in the emulator's terminal, Enter. Returns the port."""
-    port = fake_arm.wait_for(r"^(/dev/\S+)$", timeout_s=30).group(1)
-    calibrate = Terminal(f"{SO101} calibrate --port {port} --out {calibration_file} {' '.join(options)}",
-                         {"PATH": os.environ["PATH"], "SO101_LANG": "en"})
-    try:
-        calibrate.wait_for(r"Then press Enter\.", timeout_s=30)
-        calibrate.type_line("")
-        calibrate.wait_for(r"Press Enter when done\.", timeout_s=30)
-        fake_arm.wait_for(r"a calibration has begun on this bus: .* type sweep here", timeout_s=10)  # the emulator's hint
-        fake_arm.type_line("sweep 2")  # the emulated hand takes each joint to both of its stops
-        time.sleep(2.5)
-        calibrate.type_line("")
-        calibrate.wait_for(r"^TELEOP_EXIT=0$", timeout_s=30)
-        assert f"Wrote {calibration_file}:" in calibrate.screen()
-    finally:
-        calibrate.close()
-    return port
-
-
 def test_a_person_without_an_arm_calibrates_the_emulated_one_and_drives_it(tmp_path):
     """The real arm's "done when": `so101 fake-arm`, `so101 calibrate` with its printed port, then
     `so101 teleop --body real` typed at as in the course; torque off after quit."""
@@ -320,10 +237,6 @@ def _pane_stty(terminal: Terminal) -> str:
     return subprocess.run(["stty", "-a", "-F", tty], capture_output=True, text=True, check=True).stdout
 
 
-def _keys(terminal: Terminal, *keys: str) -> None:
-    subprocess.run(["tmux", "send-keys", "-t", terminal.name, *keys], check=True)
-
-
 def test_jog_moves_the_arm_by_keys_and_xyz_reaches_a_point(tmp_path):
     """Mini project 7 and Cartesian targets, as a person does it: `jog`, W held, the limit, Tab
     and a sideways step, Esc; then `xyz 200 0 150` and `where`. The terminal is as it was."""
@@ -337,16 +250,16 @@ def test_jog_moves_the_arm_by_keys_and_xyz_reaches_a_point(tmp_path):
         assert "icanon" in at_prompt or "-icanon" in at_prompt
         during = _pane_stty(terminal)
         assert " -icanon" in during and " -echo " in during  # raw keys while jogging
-        _keys(terminal, *["w"] * 5)  # five presses of 2°: shoulder_lift -10° raises the arm
+        send_keys(terminal, *["w"] * 5)  # five presses of 2°: shoulder_lift -10° raises the arm
         terminal.wait_for(r"^\[joint\] step 2°  pan 0\.0 lift -10\.0 ", timeout_s=20, after=end)
-        _keys(terminal, *["w"] * 80)  # held down: the terminal repeats the key
+        send_keys(terminal, *["w"] * 80)  # held down: the terminal repeats the key
         terminal.wait_for(r"lift -100\.0 .*\| shoulder_lift at its limit -100\.0°$", timeout_s=30, after=end)
-        _keys(terminal, "-l", "+")
-        _keys(terminal, "a", "a")  # 5° a press: A turns the arm left, a negative shoulder_pan
+        send_keys(terminal, "-l", "+")
+        send_keys(terminal, "a", "a")  # 5° a press: A turns the arm left, a negative shoulder_pan
         terminal.wait_for(r"^\[joint\] step 5°  pan -10\.0 ", timeout_s=20, after=end)
-        _keys(terminal, "Tab")
+        send_keys(terminal, "Tab")
         first = terminal.wait_for(r"^\[cartesian\] step 10 mm .* tip \((-?\d+), (-?\d+), (-?\d+)\) mm", timeout_s=30, after=end)
-        _keys(terminal, "d", "d")  # two steps of 10 mm to the right: y falls by 20 mm
+        send_keys(terminal, "d", "d")  # two steps of 10 mm to the right: y falls by 20 mm
         y_before = int(first.group(2))
         deadline = time.monotonic() + 20
         while True:
@@ -356,7 +269,7 @@ def test_jog_moves_the_arm_by_keys_and_xyz_reaches_a_point(tmp_path):
             time.sleep(0.3)
         assert int(now.group(2)) == pytest.approx(y_before - 20, abs=1), terminal.screen()
         assert [int(now.group(i)) for i in (1, 3)] == pytest.approx([int(first.group(i)) for i in (1, 3)], abs=1)
-        _keys(terminal, "Escape")
+        send_keys(terminal, "Escape")
         end = terminal.wait_for(r"^  left jog mode\n>$", timeout_s=20, after=end).start()
         assert _pane_stty(terminal) == at_prompt
 
@@ -380,7 +293,7 @@ def test_jog_moves_the_arm_by_keys_and_xyz_reaches_a_point(tmp_path):
             end = terminal.wait_for(rf"^> {re.escape(bad)}\n{re.escape(reply)}.*$", timeout_s=20, after=end).end()
         terminal.type_line("jog")
         end = terminal.wait_for(r"^\[joint\] step 2°", timeout_s=20, after=end).end()
-        _keys(terminal, "C-c")  # Ctrl-C while jogging quits, as at the prompt
+        send_keys(terminal, "C-c")  # Ctrl-C while jogging quits, as at the prompt
         terminal.wait_for(r"^TELEOP_EXIT=0$", timeout_s=60, after=end)
         screen = terminal.screen()
         after_exit = _pane_stty(terminal)
@@ -398,7 +311,7 @@ def test_jog_moves_the_arm_by_keys_and_xyz_reaches_a_point(tmp_path):
 
 
 def test_the_dataflow_stopping_while_jogging_gives_the_terminal_back(tmp_path):
-    from tests.dataflow_helpers import PROMPT_COMMAND, DoraRun, prompt_env, write_test_dataflow
+    from tests.helpers.dataflow import PROMPT_COMMAND, DoraRun, prompt_env, write_test_dataflow
 
     dora = DoraRun(write_test_dataflow(tmp_path, {"SO101_LANG": "en"}), tmp_path / "dora.log")
     terminal = None
@@ -408,7 +321,7 @@ def test_the_dataflow_stopping_while_jogging_gives_the_terminal_back(tmp_path):
         end = terminal.wait_for(r"^=+\n>$", timeout_s=60).start()
         terminal.type_line("jog")
         end = terminal.wait_for(r"^\[joint\] step 2°", timeout_s=20, after=end).end()
-        _keys(terminal, "s", "s")
+        send_keys(terminal, "s", "s")
         terminal.wait_for(r"^\[joint\] step 2°  pan 0\.0 lift 4\.0 ", timeout_s=20)
         dora.stop()  # Ctrl-C to `dora run`: STOP reaches the prompt in the middle of jogging
         terminal.wait_for(r"^  the dataflow stopped: quitting\nTELEOP_EXIT=0$", timeout_s=30, after=end)

@@ -7,7 +7,7 @@ import re
 import pytest
 
 from so101.cli.main import SUBCOMMANDS
-from tests.dataflow_helpers import ROOT
+from tests.helpers.dataflow import ROOT
 
 README = (ROOT / "README.md").read_text(encoding="utf-8")
 

@@ -18,7 +18,7 @@ import pytest
 from so101.feetech.calibration import MOTOR_IDS, save_calibration
 from so101.feetech.fake_arm import FakeArmProcess, calibrate_as_at_the_factory
 from so101.bodies.real_arm import SO101Real
-from tests.dataflow_helpers import TICK, DoraRun, body_environment, run_simulation_node, write_test_dataflow
+from tests.helpers.dataflow import TICK, DoraRun, body_environment, run_simulation_node, write_test_dataflow
 
 pytestmark = pytest.mark.emulated_hardware  # the under-load check (tools/under_load.py) runs exactly these
 
@@ -263,7 +263,7 @@ def test_a_lost_port_ends_the_node_with_one_line(monkeypatch, capsys, fake_arm):
 @pytest.mark.dataflow
 @pytest.mark.parametrize("signal_number", [signal.SIGTERM, signal.SIGINT], ids=["SIGTERM", "Ctrl-C"])
 def test_a_signal_to_the_running_node_switches_torque_off(tmp_path, signal_number):
-    from tests.test_faults import command_line, processes_with_marker, wait_until_gone
+    from tests.helpers.processes import command_line, processes_with_marker, wait_until_gone
 
     marker = uuid.uuid4().hex
     with body_environment("real", tmp_path) as (env, arm):

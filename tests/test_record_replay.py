@@ -19,9 +19,9 @@ import pytest
 from so101.dataset.features import ACTION_KEY, STATE_KEY, from_lerobot, to_lerobot
 from so101.dataset.reader import Dataset
 from so101.dataset.writer import DatasetWriter
-from tests.dataflow_helpers import SO101, body_environment
+from tests.helpers.dataflow import SO101, body_environment
 from so101.runtime.processes import processes_with_env
-from tests.test_prompt_tmux import Terminal, _keys, calibrate_in_tmux, start_teleop
+from tests.helpers.terminal import Terminal, calibrate_in_tmux, send_keys, start_teleop
 
 pytestmark = [pytest.mark.person]
 
@@ -53,13 +53,13 @@ def test_a_person_records_two_episodes_quits_and_replays_one_on_both_simulators(
         # jog's E: an episode of the last task typed (the discarded one's), started and stopped by one key.
         terminal.type_line("jog")
         terminal.seen = terminal.wait_for(r"^  jog mode \(a press moves, holding repeats\):$", timeout_s=20, after=terminal.seen).end()
-        _keys(terminal, "e")
+        send_keys(terminal, "e")
         terminal.wait_for(r"● recording episode 2: task 'dropped one'", timeout_s=20, after=terminal.seen)
-        _keys(terminal, "a", "a")
+        send_keys(terminal, "a", "a")
         time.sleep(1.0)
-        _keys(terminal, "e")
+        send_keys(terminal, "e")
         saved = terminal.wait_for(r"^  ✓ episode 2 saved: \d+ frames.*\n\[joint\] step", timeout_s=60, after=terminal.seen)
-        _keys(terminal, "Escape")
+        send_keys(terminal, "Escape")
         terminal.seen = terminal.wait_for(r"^  left jog mode$", timeout_s=20, after=saved.start()).end()
         listing = terminal.command("episodes", rf"  {re.escape(str(dataset_dir))}: 3 episodes, 30 fps\n(.*\n.*\n.*)")
         assert "wave the arm" in listing.group(1) and "dropped one" in listing.group(1)

@@ -19,7 +19,7 @@ from so101.dataset.replay import ramp_deg, tracking_errors_deg, tracking_line
 from so101.prompt.commands import Episodes, ParseError, parse_command
 from so101.prompt.recorder_link import RecorderLink
 from so101.runtime.dataflow import DATAFLOW_FILE, dataflow_copy, with_recorder, with_replay, with_web_view
-from tests.dataflow_helpers import TICK, TICK_TIMER_CONFIG, run_simulation_node
+from tests.helpers.dataflow import TICK, TICK_TIMER_CONFIG, run_simulation_node
 
 
 # -- the gripper in LeRobot's 0-100 ---------------------------------------------------------------

@@ -1,7 +1,7 @@
 """The project's LeRobotDataset v3.0 reader reads what LeRobot 0.4.x writes.
 
 Two sources, neither of them the project's writer:
-* tests/lerobot_written.py, which writes datasets the way LeRobot 0.4.x does, by code of its own,
+* tests/helpers/lerobot_written.py, which writes datasets the way LeRobot 0.4.x does, by code of its own,
   here with and without video and in one file or spread over several data, video and
   episode-metadata files across chunks;
 * tests/data/lerobot_made/, a small dataset that LeRobot 0.4.4 itself wrote (its README says how).
@@ -20,7 +20,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
-from tests import lerobot_written as lw
+from tests.helpers import lerobot_written as lw
 
 MADE = Path(__file__).parent / "data" / "lerobot_made"
 TMP_MADE = Path("/tmp/lerobot_made")
@@ -62,7 +62,7 @@ def make_episodes(with_video: bool) -> list[dict]:
 
 @pytest.fixture(scope="module", params=[(video, layout) for video in (False, True) for layout in LAYOUTS], ids=lambda p: f"{'video' if p[0] else 'no_video'}-{p[1]}")
 def written(request, tmp_path_factory):
-    """(root, episodes, with_video, layout) of a dataset written by tests/lerobot_written.py."""
+    """(root, episodes, with_video, layout) of a dataset written by tests/helpers/lerobot_written.py."""
     with_video, layout = request.param
     episodes = make_episodes(with_video)
     root = tmp_path_factory.mktemp("lerobot") / "dataset"
@@ -212,7 +212,7 @@ def made_pictures(episode: int, length: int) -> np.ndarray:
 
 
 def made_inputs() -> list[dict]:
-    """The episodes LeRobot recorded into tests/data/lerobot_made, as tests/lerobot_written.py takes them."""
+    """The episodes LeRobot recorded into tests/data/lerobot_made, as tests/helpers/lerobot_written.py takes them."""
     data = pa.concat_tables(pq.read_table(p) for p in sorted((MADE / "data").rglob("*.parquet")))
     tasks = pq.read_table(MADE / "meta" / "tasks.parquet").column("__index_level_0__").to_pylist()
     episodes, start = [], 0
@@ -251,7 +251,7 @@ def test_reads_what_lerobot_wrote():
 
 def test_the_fixture_writes_what_lerobot_wrote(tmp_path):
     """From the inputs of tests/data/lerobot_made, with the file limits LeRobot's sizes came to,
-    tests/lerobot_written.py writes the same files: the same parquet schemas, schema metadata
+    tests/helpers/lerobot_written.py writes the same files: the same parquet schemas, schema metadata
     and contents, info.json, stats.json and tasks; mp4s that decode to the same frames at the
     same times (their bytes differ: another build of the encoder)."""
     root = tmp_path / "written"

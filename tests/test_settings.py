@@ -18,7 +18,7 @@ from so101.bodies.settings import (
     PyBulletSettings,
 )
 from so101.runtime.settings import Setting, declared
-from tests.dataflow_helpers import ROOT
+from tests.helpers.dataflow import ROOT
 
 # Each body node's table of environment variables in the README: the heading of the section it is in.
 README_SECTIONS = {

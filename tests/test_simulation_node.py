@@ -17,7 +17,7 @@ import pytest
 
 from so101.bodies.registry import BODIES, SIMULATED_BODIES
 from so101.runtime.dataflow import MAX_STEPS_PER_TICK, TickClock
-from tests.dataflow_helpers import TICK, body_environment, run_simulation_node
+from tests.helpers.dataflow import TICK, body_environment, run_simulation_node
 
 pytestmark = pytest.mark.slow  # drives every body's node for seconds of simulated time: not in the fast subset
 
@@ -236,7 +236,7 @@ def test_image_output_shows_the_arm_at_the_asked_rate(monkeypatch, simulated_bod
     import numpy as np
     from dora.testing import MockNode
 
-    from tests.image_helpers import arm_pixels
+    from tests.helpers.images import arm_pixels
 
     metadata_sent = []
     send_output = MockNode.send_output

@@ -8,7 +8,7 @@ import pytest
 
 from so101.cli.main import main
 from so101.bodies.pybullet_sim import SO101Sim
-from tests.image_helpers import arm_pixels, open_png, png_rgb, png_size
+from tests.helpers.images import arm_pixels, open_png, png_rgb, png_size
 
 pytestmark = pytest.mark.slow  # renders pictures of the arm: not in the fast subset
 
@@ -108,7 +108,7 @@ def test_an_output_path_that_cannot_be_written_gives_one_line_and_exit_1(tmp_pat
 
 
 def test_mujoco_draws_the_pose_offscreen(tmp_path, capsys):
-    from tests.image_helpers import arm_pixels, png_rgb
+    from tests.helpers.images import arm_pixels, png_rgb
 
     out = tmp_path / "mujoco.png"
     assert main(["snapshot", "--body", "mujoco", "--pose", "90", "0", "0", "0", "0", "--out", str(out),

@@ -6,7 +6,7 @@ import subprocess
 import sys
 import textwrap
 
-from tests.dataflow_helpers import ROOT
+from tests.helpers.dataflow import ROOT
 
 
 def test_descriptor_1_goes_to_the_log_and_python_output_stays_where_it_was(tmp_path):

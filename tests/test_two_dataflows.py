@@ -17,29 +17,17 @@ from pathlib import Path
 
 import pytest
 
-from so101.prompt.join import port_holder, unreachable_dataflows
 from so101.bodies.registry import BODIES
 from so101.runtime.cluster import CLUSTER_DATAFLOW
 from so101.runtime.dataflow import LEADER_DATAFLOW_FILE, LEADER_NODE_ID, has_dynamic_node
 from so101.runtime.processes import DAEMON_PORT_TAKEN_MARK, running_with_env
-from tests.dataflow_helpers import PROMPT_COMMAND, DoraRun, write_test_dataflow
-from tests.test_prompt_tmux import Terminal, start_teleop
+from tests.helpers.dataflow import PROMPT_COMMAND, DoraRun, write_test_dataflow
+from tests.helpers.terminal import Terminal, start_teleop
 
 JOINT_0_TARGET_DEG = 77.0
 COMMAND = f"0 {JOINT_0_TARGET_DEG:g}"
 SENT = re.escape(f"  → joint 0 (shoulder_pan) → {JOINT_0_TARGET_DEG:g}°")
 PROMPT_READY = r"^=+\n>$"
-OTHERS_WAIT_S = 180
-
-
-@pytest.fixture
-def no_other_dataflow():
-    """Another program's dataflow that takes a prompt (on a shared runner) would be the one named: wait for none."""
-    deadline = time.monotonic() + OTHERS_WAIT_S
-    while port_holder() or unreachable_dataflows("keyboard_control", None):
-        if time.monotonic() > deadline:
-            pytest.skip(f"another dora dataflow kept running on this machine for {OTHERS_WAIT_S} s")
-        time.sleep(1)
 
 
 @pytest.mark.parametrize(

@@ -21,7 +21,7 @@ import pytest
 
 from so101.runtime.processes import kill_with_env, running_with_env
 from so101.runtime.venv import env_with_bin_first
-from tests.dataflow_helpers import PROMPT_COMMAND, SO101
+from tests.helpers.dataflow import PROMPT_COMMAND, SO101
 
 ARM_IP, DESK_IP = "10.231.0.1", "10.231.0.2"
 COORDINATOR_PORT, ZENOH_PORT = 6013, 7447  # dora's default, and the README's rendezvous

@@ -6,7 +6,7 @@ from __future__ import annotations
 import subprocess
 import sys
 
-from tests.dataflow_helpers import ROOT
+from tests.helpers.dataflow import ROOT
 
 
 def test_mypy_finds_no_errors():

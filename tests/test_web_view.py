@@ -20,7 +20,7 @@ from PIL import Image
 
 from bench.browser import CHROMIUM, Browser
 from so101.runtime.cluster import free_port
-from tests.dataflow_helpers import PROMPT_COMMAND, DoraRun, body_environment, prompt_env, write_test_dataflow
+from tests.helpers.dataflow import PROMPT_COMMAND, DoraRun, body_environment, prompt_env, write_test_dataflow
 
 pytestmark = [pytest.mark.dataflow, pytest.mark.skipif(CHROMIUM is None, reason="chromium is not installed (.ci/run installs it)")]
 
@@ -148,7 +148,7 @@ def test_teleop_web_shows_the_camera_and_marks_an_episode_while_it_records(tmp_p
     """`so101 teleop --record DIR --web` as a person runs it in a terminal: the page shows the camera's
     picture, and the marker from `record` to `stop`."""
     from so101.bodies.node_loop import IMAGE_SIZE
-    from tests.test_prompt_tmux import start_teleop
+    from tests.helpers.terminal import start_teleop
 
     web_port = free_port()
     terminal, _, log_file = start_teleop(tmp_path, "en", extra=f"--record {tmp_path / 'episodes'} --web --web-port {web_port}")

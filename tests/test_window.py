@@ -19,9 +19,7 @@ from bench.window_bench import window_start
 from so101 import assets
 from so101.gui.viewer import Window
 from so101.robot import ACTUATED_JOINTS
-from tests import test_gui
-from tests.test_gui import MIN_ARM_PIXELS, SAME_FRAME_OVERLAP, arm_pixels, overlap, screenshot, settled_arm
-from tests.test_gui import xvfb_display  # noqa: F401 - a fixture
+from tests.helpers.screen import GUI_MARKS, MIN_ARM_PIXELS, SAME_FRAME_OVERLAP, arm_pixels, overlap, screenshot, settled_arm
 
 # shoulder_pan at 90°: the arm swings to the other side of its base; at the angles the
 # window loads with (all 0) it would stand elsewhere, and loose links lie about the base.
@@ -33,7 +31,7 @@ MS = 1_000_000  # ns
 
 def gui_test(test):
     """test_gui's marks on one test: Xvfb and ImageMagick, or skipped; a person's test."""
-    for mark in test_gui.pytestmark:
+    for mark in GUI_MARKS:
         test = mark(test)
     return test
 

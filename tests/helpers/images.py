@@ -28,6 +28,6 @@ def png_rgb(data: bytes) -> np.ndarray:
 def arm_pixels(rgb: np.ndarray) -> np.ndarray:
     """The SO-101's yellow in PyBullet's CPU render: the floor is white and pale blue, so only
     the arm is red+green with little blue. (The GUI's shaded screenshot needs other thresholds:
-    tests/test_gui.py has its own.)"""
+    tests/helpers/screen.py has its own.)"""
     red, green, blue = (rgb[:, :, channel].astype(int) for channel in range(3))
     return (red > 150) & (green > 110) & (blue < 90)

@@ -1,0 +1,100 @@
+"""The terminal a person types in: a tmux session driven with send-keys and read with capture-pane,
+`so101 teleop` and `so101 calibrate` started in one as a person starts them."""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import time
+import uuid
+from pathlib import Path
+
+from tests.helpers.dataflow import SO101
+
+
+class Terminal:
+    """One tmux session of 200x50 running a shell command; the pane stays after the command exits."""
+
+    def __init__(self, command: str, env: dict[str, str]):
+        self.name = f"so101-test-{uuid.uuid4().hex[:8]}"
+        exports = " ".join(f"{key}='{value}'" for key, value in env.items())
+        subprocess.run(
+            ["tmux", "new-session", "-d", "-s", self.name, "-x", "200", "-y", "50",
+             f"env {exports} {command}; echo TELEOP_EXIT=$?; sleep 600"],
+            check=True,
+        )
+        self.seen = 0  # screen text up to here is answered: `command` looks for replies past it
+
+    def screen(self) -> str:
+        result = subprocess.run(
+            ["tmux", "capture-pane", "-p", "-J", "-S", "-500", "-t", self.name], capture_output=True, text=True,
+        )
+        # -J keeps trailing blanks; a person does not see them
+        return "\n".join(line.rstrip() for line in result.stdout.splitlines())
+
+    def type_line(self, text: str) -> None:
+        # -l: literal text, or tmux reads "home" as the Home key
+        subprocess.run(["tmux", "send-keys", "-t", self.name, "-l", text], check=True)
+        subprocess.run(["tmux", "send-keys", "-t", self.name, "Enter"], check=True)
+
+    def wait_for(self, pattern: str, timeout_s: float = 60, after: int = 0) -> re.Match:
+        """The first match of `pattern` in the screen text past offset `after` (waits for it to appear)."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            screen = self.screen()
+            match = re.compile(pattern, re.M).search(screen, after)
+            if match:
+                return match
+            if time.monotonic() > deadline:
+                raise AssertionError(f"{pattern!r} not on the screen within {timeout_s}s:\n{screen}")
+            time.sleep(0.2)
+
+    def command(self, text: str, reply: str, timeout_s: float = 20) -> re.Match:
+        """Type `text` at the prompt and wait for `reply` (a pattern) right below it, past `seen`."""
+        self.type_line(text)
+        match = self.wait_for(rf"^> {re.escape(text)}\n{reply}$", timeout_s, after=self.seen)
+        self.seen = match.end()
+        return match
+
+    def close(self) -> None:
+        subprocess.run(["tmux", "kill-session", "-t", self.name], capture_output=True)
+
+
+def start_teleop(tmp_path: Path, lang: str, mode: str = "direct", body: str = "pybullet", extra: str = "",
+                 **env: str) -> tuple[Terminal, Path, Path]:
+    """`so101 teleop` (headless by default; `extra`: more options) in a new terminal; returns it, the poses
+    file and the dataflow's log."""
+    poses_file = tmp_path / "poses.json"
+    log_file = tmp_path / "dora.log"
+    env = {
+        "SO101_POSES_FILE": str(poses_file), "SO101_HISTORY_FILE": str(tmp_path / "history"),
+        "SO101_PROMPT_LOG": str(tmp_path / "prompt.log"), "SO101_LANG": lang, "PATH": os.environ["PATH"], **env,
+    }
+    command = f"{SO101} teleop --body {body} --mode {mode} --lang {lang} --log {log_file} {extra}".rstrip()
+    return Terminal(command, env), poses_file, log_file
+
+
+def calibrate_in_tmux(fake_arm: Terminal, calibration_file: Path, *options: str) -> str:
+    """`so101 calibrate` in a second terminal on the port `fake_arm` (a `so101 fake-arm` terminal)
+    printed, as a person does it: Enter, `sweep` in the emulator's terminal, Enter. Returns the port."""
+    port = fake_arm.wait_for(r"^(/dev/\S+)$", timeout_s=30).group(1)
+    calibrate = Terminal(f"{SO101} calibrate --port {port} --out {calibration_file} {' '.join(options)}",
+                         {"PATH": os.environ["PATH"], "SO101_LANG": "en"})
+    try:
+        calibrate.wait_for(r"Then press Enter\.", timeout_s=30)
+        calibrate.type_line("")
+        calibrate.wait_for(r"Press Enter when done\.", timeout_s=30)
+        fake_arm.wait_for(r"a calibration has begun on this bus: .* type sweep here", timeout_s=10)  # the emulator's hint
+        fake_arm.type_line("sweep 2")  # the emulated hand takes each joint to both of its stops
+        time.sleep(2.5)
+        calibrate.type_line("")
+        calibrate.wait_for(r"^TELEOP_EXIT=0$", timeout_s=30)
+        assert f"Wrote {calibration_file}:" in calibrate.screen()
+    finally:
+        calibrate.close()
+    return port
+
+
+def send_keys(terminal: Terminal, *keys: str) -> None:
+    subprocess.run(["tmux", "send-keys", "-t", terminal.name, *keys], check=True)
