@@ -25,15 +25,19 @@ settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
 
 
 # -- in parallel (pytest-xdist: `-n auto --dist loadgroup`, pyproject's addopts) -------------------
-# dora 1.1's `dora run` (and `dora up`'s daemon) always listens on port 53291 for dynamic nodes, the
-# prompt among them: two at once and a prompt joins the wrong one. So every test that starts dora runs
+# dora 1.1's `dora run` (and a daemon started without --local-listen-port, as `dora up`'s) always
+# listens on port 53291 for dynamic nodes, the prompt among them: two at once and a prompt joins the
+# wrong one. So every test that starts dora runs
 # in one xdist group, one after another on one worker, while the other tests share the other workers.
 # These modules start dora in some of their tests (dora run, dora up, so101 teleop, replay, cluster).
 DORA_MODULES = {
-    "test_cluster", "test_course_differences", "test_dataflow", "test_environment", "test_faults", "test_gui",
+    "test_course_differences", "test_dataflow", "test_environment", "test_faults", "test_gui",
     "test_leader", "test_log_noise", "test_prompt_tmux", "test_real_arm", "test_record_replay",
     "test_two_dataflows", "test_two_machines", "test_web_view",
 }
+# These start dora's daemons with ports of their own (--local-listen-port, which `dora daemon` honours
+# and `dora run` does not): beside the dora group, one test at a time among themselves.
+OWN_PORT_MODULES = {"test_cluster"}
 MAX_WORKERS = 4
 
 
@@ -49,8 +53,10 @@ def pytest_collection_modifyitems(items):
     for item in items:
         if item.get_closest_marker("dataflow") or item.get_closest_marker("person"):
             item.add_marker(pytest.mark.slow)
-        if (item.get_closest_marker("dataflow") or item.get_closest_marker("person")
-                or item.module.__name__.rsplit(".", 1)[-1] in DORA_MODULES):
+        module = item.module.__name__.rsplit(".", 1)[-1]
+        if module in OWN_PORT_MODULES:
+            item.add_marker(pytest.mark.xdist_group(module))
+        elif item.get_closest_marker("dataflow") or item.get_closest_marker("person") or module in DORA_MODULES:
             item.add_marker(pytest.mark.xdist_group("dora"))
 
 

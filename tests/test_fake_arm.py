@@ -634,6 +634,16 @@ def test_hold_lets_go_where_the_joints_stand(leader):
     assert fake.stop_hand() == ()  # nothing left to let go
 
 
+def test_time_scale_runs_the_emulators_clock_faster_than_the_wall_clock():
+    with FakeArmProcess(time_scale=4.0) as fake:
+        assert fake.sweep(duration_s=2.0) == IDS
+        time.sleep(0.6)  # at least 2.4 s of the emulator's clock, however late the sleep ends
+        assert not fake.hand_busy()
+        assert [fake.physical_position(i) for i in IDS] == [MECHANICS[i].centre for i in IDS]  # the sweep's end
+    with pytest.raises(ValueError, match="time_scale must be positive"):
+        FakeArmProcess(time_scale=0.0)
+
+
 def five_angles(t_s: float) -> tuple[float, ...]:
     return (0.0,) * 5
 
