@@ -22,7 +22,7 @@ import pytest
 import serial
 import scservo_sdk as scs
 
-from so101.feetech.bus import FeetechBus
+from so101.feetech.bus import FeetechBus, PortHandler
 from so101.feetech.calibration import MOTOR_NAMES, steps_to_deg
 from so101.feetech.fake_arm import (
     MECHANICAL_TABLE, MECHANICS, FakeArmProcess, calibrate_as_at_the_factory, joint_deg, physical_steps,
@@ -54,7 +54,7 @@ def arm():
 
 
 def open_bus(path: str):
-    port = scs.PortHandler(path)
+    port = PortHandler(path)  # the SDK's, as the driver opens it (so101/feetech/bus.py)
     assert port.openPort()
     assert port.setBaudRate(1_000_000)
     return port, scs.PacketHandler(0)

@@ -48,7 +48,7 @@ def main(argv: list[str]) -> int:
     try:
         for round_number in range(1, args.rounds + 1):
             started = time.monotonic()
-            command = [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-m", "emulated_hardware",
+            command = [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-n", "0", "-m", "emulated_hardware",
                        *pytest_args]
             result = subprocess.run(command, cwd=ROOT, capture_output=True, text=True)
             summary = (result.stdout.strip().splitlines() or ["(no output)"])[-1]

@@ -40,6 +40,26 @@ class ServoSilent(BusError):
         super().__init__(f"servo {servo_id} {problem} to {what}: " + CHECK_SERVO.format(servo_id=servo_id))
 
 
+class PortHandler(scs.PortHandler):  # the SDK is untyped
+    """Feetech's PortHandler, with two holes closed, both opened by a driver descheduled for tens of
+    milliseconds (a loaded machine):
+    - the SDK reads what has arrived, then asks whether the reply's time is up; descheduled between
+      the two, it finds its time up with the reply waiting, and reports a servo that did answer as
+      silent. Here the time is up only when nothing is waiting to be read;
+    - a reply that comes after its request gave up stays in the port, and the SDK reads it as the
+      next request's reply (a wrong value, or a cut-short packet it fails to index). Here what is
+      waiting is thrown away before each request."""
+
+    def clearPort(self) -> None:
+        self.ser.reset_input_buffer()
+        super().clearPort()
+
+    def isPacketTimeout(self) -> bool:
+        if self.ser.in_waiting:
+            return False
+        return bool(super().isPacketTimeout())
+
+
 def _bytes(value: int, size: int) -> list[int]:
     return list(int(value).to_bytes(size, "little"))
 
@@ -57,7 +77,7 @@ class FeetechBus:
         self.last_round_trip_s = 0.0  # of the last sync read: request out, every reply in
 
     def open(self) -> "FeetechBus":
-        port = scs.PortHandler(self.port_name)
+        port = PortHandler(self.port_name)
         try:
             opened = port.openPort() and port.setBaudRate(self.baudrate)
         except (serial.SerialException, OSError) as error:
