@@ -160,15 +160,6 @@ class FakeArmProcess:
     def calibrations_begun(self) -> int:
         return self._request("get", "calibrations_begun")
 
-    def wait_hand(self, timeout: float | None = None) -> bool:
-        """As FakeArm.wait_hand, asked here so that the pipe stays free meanwhile."""
-        deadline = None if timeout is None else time.monotonic() + timeout
-        while self.hand_busy():
-            if deadline is not None and time.monotonic() >= deadline:
-                return False
-            time.sleep(0.01)
-        return True
-
     def close(self) -> None:
         """Stop the emulator and its process; safe to call twice."""
         with self._lock:
