@@ -224,16 +224,25 @@ def video_codec() -> str:
 
 def _encode_episode_video(frames: np.ndarray, path: Path, fps: int, vcodec: str) -> None:
     """`encode_video_frames`: RGB frames -> mp4 with the codec options LeRobot uses."""
+    from so101.dataset.video import _no_realtime_threads, scheduling_policy
+
     height, width = frames.shape[1:3]
+    # Not LeRobot's, and nothing in the file changes: SVT-AV1 (as root) runs its threads at SCHED_FIFO
+    # priority 99, which starved the tests running beside this one (the emulated arm, real-time
+    # dataflows) for as long as it encoded. Its threads go back to this one's policy once they exist.
+    policy = scheduling_policy()
     with av.open(str(path), "w") as output:
         stream = output.add_stream(vcodec, fps, options=dict(CODEC_OPTIONS.get(vcodec, {"g": "2"})))
         stream.pix_fmt = "yuv420p"
         stream.width, stream.height = width, height
-        for frame in frames:
+        for index, frame in enumerate(frames):
             for packet in stream.encode(av.VideoFrame.from_ndarray(np.ascontiguousarray(frame), format="rgb24")):
                 output.mux(packet)
+            if index == 0:
+                _no_realtime_threads(policy)
         for packet in stream.encode():
             output.mux(packet)
+        _no_realtime_threads(policy)
 
 
 def _concatenate_videos(inputs: list[Path], output_path: Path) -> None:
