@@ -296,6 +296,65 @@ class Kinematics:
             error_mm=_distance(tip_m, target_m) * 1000.0,
         )
 
+    def solve_oriented(self, target_mm, rotation, seed_deg=None) -> tuple[tuple[float, ...], float, float]:
+        """Five arm angles that put the tip at `target_mm` with its frame turned as `rotation` (a
+        3x3 matrix, its columns the tip's axes in the base frame), within the limits: (angles in
+        degrees, position error in mm, angle error in degrees). A five-joint arm cannot take every
+        orientation: the errors say how near it came. The starts are tried as `solve` tries them
+        (`seed_deg`, default home, first), until one comes within EXACT_MM and 0.1°."""
+        import numpy as np
+        from mujoco import mju_mat2Quat  # a well-kept matrix-to-quaternion; PyBullet has none
+
+        target_m = [coordinate / 1000.0 for coordinate in point_mm(target_mm)]
+        matrix = np.asarray(rotation, dtype=np.float64).reshape(3, 3)
+        wxyz = np.zeros(4)
+        mju_mat2Quat(wxyz, matrix.ravel())
+        quat_xyzw = [wxyz[1], wxyz[2], wxyz[3], wxyz[0]]
+        seed = arm_angles_deg(seed_deg) if seed_deg is not None else (0.0,) * NUM_ARM_JOINTS
+        p = self._p
+
+        def refined(start: list[float]) -> tuple[list[float], float, float]:
+            angles = start
+            for _ in range(CALLS_PER_START):
+                self._tip_m(angles)  # the joints where this call starts
+                answer = p.calculateInverseKinematics(
+                    self.robot_id, TIP_LINK_INDEX, target_m, quat_xyzw,
+                    jointDamping=[DLS_DAMPING] * len(self._movable), physicsClientId=self.client)
+                angles = self._clamped(answer)
+                angles[-1] = self._gripper_rad
+            tip_m = self._tip_m(angles)
+            reached = p.getLinkState(self.robot_id, TIP_LINK_INDEX, computeForwardKinematics=True,
+                                     physicsClientId=self.client)[5]
+            reached_matrix = np.asarray(p.getMatrixFromQuaternion(reached)).reshape(3, 3)
+            cosine = (np.trace(reached_matrix.T @ matrix) - 1) / 2
+            return angles, _distance(tip_m, target_m) * 1000.0, math.degrees(math.acos(min(1.0, max(-1.0, cosine))))
+
+        with self._lock:
+            self._connected()
+            current = self._clamped([math.radians(angle) for angle in seed] + [self._gripper_rad])
+            home = self._clamped([0.0] * NUM_ARM_JOINTS + [self._gripper_rad])
+            best: tuple[list[float], float, float] | None = None
+            for start in [current, home] + self._seeds_rad:
+                found = refined(start)
+                if best is None or found[1] + found[2] < best[1] + best[2]:
+                    best = found
+                if best[1] < EXACT_MM and best[2] < 0.1:
+                    break
+        assert best is not None
+        angles, position_error_mm, angle_error_deg = best
+        return tuple(math.degrees(angle) for angle in angles[:NUM_ARM_JOINTS]), position_error_mm, angle_error_deg
+
+    def frame_m(self, link_index: int, arm_deg=None) -> tuple[tuple[float, float, float], tuple[float, ...]]:
+        """A link's URDF frame at five arm angles (default home), the gripper closed: (origin in
+        metres, rotation as 9 numbers, row-major), in the base frame."""
+        arm = arm_angles_deg(arm_deg) if arm_deg is not None else (0.0,) * NUM_ARM_JOINTS
+        p = self._p
+        with self._lock:
+            client = self._connected()
+            self._tip_m([math.radians(angle) for angle in arm] + [self._gripper_rad])
+            state = p.getLinkState(self.robot_id, link_index, computeForwardKinematics=True, physicsClientId=client)
+        return tuple(state[4]), tuple(p.getMatrixFromQuaternion(state[5]))
+
     # -- life cycle --------------------------------------------------------------------
     def close(self) -> None:
         """Disconnect the private client; safe to call twice."""

@@ -98,7 +98,7 @@ def test_the_dataflow_file_sets_only_declared_settings(body):
 
 def test_an_empty_environment_gives_the_declared_defaults():
     assert NodeSettings.from_environ({}) == NodeSettings(
-        display_mode="auto", image_hz=0.0, fast_steps=0, tick_log_path="", lang="zh")
+        display_mode="auto", image_hz=0.0, fast_steps=0, tick_log_path="", lang="zh", task="", seed=0)
     assert PyBulletSettings.from_environ({}) == PyBulletSettings(
         assets_dir=None, control_mode="position", servo_damping_ratio=0.7)
     assert MuJoCoSettings.from_environ({}) == MuJoCoSettings(assets_dir=None, joint_damping_n_m_s=None)
@@ -163,3 +163,19 @@ def test_the_readme_documents_the_other_nodes_settings(heading, class_path):
         (name,) = names
         assert (f"`{by_name[name].default}`" in default_cell) if by_name[name].default else default_cell.startswith("empty")
         assert meaning_cell == by_name[name].meaning, name
+
+
+def test_a_task_is_read_by_name_and_an_unknown_one_is_refused_in_one_line():
+    settings = NodeSettings.from_environ({"SO101_TASK": " cube_to_box ", "SO101_SEED": "12"})
+    assert (settings.task, settings.seed) == ("cube_to_box", 12)
+    with pytest.raises(ValueError, match=r"^SO101_TASK: unknown task 'cubes'; the tasks are: cube_to_box$"):
+        NodeSettings.from_environ({"SO101_TASK": "cubes"})
+    with pytest.raises(ValueError, match=r"^SO101_SEED='-1' is not a whole number >= 0$"):
+        NodeSettings.from_environ({"SO101_SEED": "-1"})
+
+
+def test_the_real_arm_refuses_a_task():
+    from so101.bodies.real_arm import check_node_settings
+
+    with pytest.raises(ValueError, match="the real arm has no task scene .* SO101_TASK=cube_to_box is for a simulation"):
+        check_node_settings(NodeSettings.from_environ({"SO101_TASK": "cube_to_box"}))

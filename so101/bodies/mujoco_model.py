@@ -50,12 +50,13 @@ def hulls_key() -> str:
     return f"mujoco {mujoco.__version__}; model {assets.manifest_digest()}"
 
 
-def scene_model(mjcf: Path, hulls: Hulls | None, visual: bool = True) -> Any:
+def scene_model(mjcf: Path, hulls: Hulls | None, visual: bool = True, task: Any = None) -> Any:
     """The MJCF's arm (a mujoco.MjModel) with what PyBullet's scene has too: a ground plane at z = 0 and a light.
 
     `hulls` None collides the MJCF's full meshes, as MuJoCo compiles the file; otherwise each
     collision geom uses its mesh's hull. `visual` False leaves out the visual geoms and their
-    meshes: a model to step, not to draw.
+    meshes: a model to step, not to draw. `task` (a so101.tasks task) adds its cube and box and
+    switches the jaw pads on (so101.tasks.mujoco_scene).
     """
     spec = mujoco.MjSpec.from_file(str(mjcf))
     if hulls is not None:
@@ -70,6 +71,11 @@ def scene_model(mjcf: Path, hulls: Hulls | None, visual: bool = True) -> Any:
         name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 0.05], rgba=[0.85, 0.87, 0.92, 1],
     )
     spec.worldbody.add_light(pos=[0.3, -0.3, 1.5], dir=[-0.2, 0.2, -1], type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL)
+    if task is not None:
+        from so101.bodies.jaw_pads import jaw_pads
+        from so101.tasks.mujoco_scene import add_to_spec
+
+        add_to_spec(spec, task, tuple(pad.grown() for pad in jaw_pads(mjcf)))
     return spec.compile()
 
 

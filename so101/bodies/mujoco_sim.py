@@ -26,6 +26,9 @@ from so101.gui.display import DisplayError, resolve_mode
 from so101.robot import ACTUATED_JOINTS, HOME_POSE_DEG, goal_deg
 from so101.runtime.dataflow import TICK_PERIOD_S
 from so101.gui.viewer import WINDOW_SHOWING, Window
+from so101.tasks import task_named
+from so101.tasks.cube_to_box import CubeToBox
+from so101.tasks.mujoco_scene import MuJoCoScene
 
 import mujoco  # after so101.bodies.mujoco_model, which chooses its OpenGL back end
 
@@ -44,6 +47,8 @@ class SO101MuJoCo:
 
     `mode` is the display mode asked for (auto, gui, direct); `display_mode` the one it got.
     `renders` False: a body that draws no pictures, compiled without the visual meshes.
+    `task` puts that task's scene (so101.tasks) on the floor, laid out from `seed`, and switches
+    the gripper's jaw pads on (so101.bodies.jaw_pads); None: the arm alone.
     """
 
     kind: BodyName = "mujoco"
@@ -56,6 +61,8 @@ class SO101MuJoCo:
         log: Callable[[str], None] = print,
         joint_damping_n_m_s: float | None = None,
         renders: bool = True,
+        task: CubeToBox | None = None,
+        seed: int = 0,
     ):
         if joint_damping_n_m_s is not None and not joint_damping_n_m_s >= 0:
             raise ValueError(f"joint damping must be a number >= 0 N·m·s/rad, got {joint_damping_n_m_s!r}")
@@ -66,7 +73,7 @@ class SO101MuJoCo:
             log(notice)
         # Without pictures the visual meshes stay out: they are most of the model, and the
         # window, when there is one, is another process with its own model.
-        self.model = scene_model(mjcf, collision_hulls(mjcf, log), visual=renders)
+        self.model = scene_model(mjcf, collision_hulls(mjcf, log), visual=renders, task=task)
         self.data = mujoco.MjData(self.model)
         self.model_step_s = float(self.model.opt.timestep)
         self.joint_names = [self.model.joint(i).name for i in range(self.model.njnt)]
@@ -85,6 +92,9 @@ class SO101MuJoCo:
         self.set_time_step_s(time_step_s)
         self.set_targets_deg(HOME_POSE_DEG)
         mujoco.mj_forward(self.model, self.data)
+        self.scene: MuJoCoScene | None = None
+        if task is not None:
+            self.scene = MuJoCoScene(self.model, self.data, task, task.layout(seed))
 
     @classmethod
     def from_settings(cls, settings: MuJoCoSettings, node: NodeSettings, log: Callable[[str], None] = print) -> "SO101MuJoCo":
@@ -93,6 +103,7 @@ class SO101MuJoCo:
         return cls(
             mode=node.display_mode, time_step_s=TICK_PERIOD_S, assets_dir=settings.assets_dir, log=log,
             joint_damping_n_m_s=settings.joint_damping_n_m_s, renders=node.image_hz > 0,
+            task=task_named(node.task) if node.task else None, seed=node.seed,
         )
 
     # -- control ---------------------------------------------------------------------
@@ -103,6 +114,15 @@ class SO101MuJoCo:
     def set_targets_deg(self, targets_deg: Sequence[float]) -> None:
         """Goal angles in degrees for all six actuated joints (arm 0-4, gripper)."""
         self.data.ctrl[self._actuators] = np.radians(goal_deg(targets_deg))
+
+    def reset_task(self, seed: int) -> None:
+        """The task's scene laid out from `seed`, and the arm at home, still, its goal home."""
+        if self.scene is None:
+            raise ValueError("this simulation runs no task (start it with one: --task)")
+        self.data.qpos[self._qpos] = np.radians(HOME_POSE_DEG)
+        self.data.qvel[self._qvel] = 0.0
+        self.set_targets_deg(HOME_POSE_DEG)
+        self.scene.lay_out(self.scene.task.layout(seed))  # also recomputes the kinematics
 
     def joint_damping_n_m_s(self) -> float:
         """The joints' damping (one value for all, as the MJCF's STS3215 class and this class set it)."""

@@ -8,7 +8,11 @@ updates the targets, which the next tick applies; bad ones are logged and ignore
 commands, marked so in their metadata, is not logged command by command). Where the
 dataflow declares a `joint_target` output (`so101 teleop --record` does, for the recorder), the
 targets the body applies go out on it at the first tick, whenever they change, and once a second
-for a node that joined late. STOP or Ctrl-C closes the body and ends with 0, as every node's loop
+for a node that joined late. A body running a task (so101.tasks) also publishes, where the dataflow declares them, `object_state`
+each tick (float32, the task's object names in its metadata) and `task_status` (the success
+function's answer, a bool, with the task and seed in its metadata) at the first tick, whenever it
+changes and after each reset; a `task_cmd` (`reset` or `reset SEED`) lays the scene out again and
+homes the arm. STOP or Ctrl-C closes the body and ends with 0, as every node's loop
 does (so101/runtime/node_events.py). The real arm differs only where hardware must: it
 starts from where it stands (`start_targets_deg`), a tick whose read failed publishes
 nothing (`joint_angles_deg` is None), and a bus past saving ends the node with one line and
@@ -35,6 +39,7 @@ from so101.joint_cmd import decode_joint_cmd
 from so101.robot import GRIPPER_COMMAND_INDEX, NUM_ARM_JOINTS
 from so101.runtime.dataflow import TICK_PERIOD_S, TickClock, timer_period_s
 from so101.runtime.node_events import Event, inputs_until_stop
+from so101.tasks import parse_reset
 
 if TYPE_CHECKING:
     from dora import Node
@@ -60,6 +65,9 @@ TEXT = {
         "rejected": "{tag} 忽略无效 joint_cmd: {error}",
         "no_timer": "{tag} tick 不是 dora 定时器,物理步长取 {step_ms:g} ms",
         "stopping": "{tag} 停止: {reason}",
+        "laid_out": "{tag} 任务 {task}: 按种子 {seed} 摆放,机械臂回零位",
+        "succeeded": "{tag} 任务 {task}: 方块已在盒中(种子 {seed})",
+        "bad_task_cmd": "{tag} 忽略无效 task_cmd: {error}",
     },
     "en": {
         "loaded": "{tag} SO-101 loaded, {identity} ({mode} mode, step {step_ms:g} ms, {detail})",
@@ -69,6 +77,9 @@ TEXT = {
         "rejected": "{tag} ignored invalid joint_cmd: {error}",
         "no_timer": "{tag} tick is not a dora timer; physics step set to {step_ms:g} ms",
         "stopping": "{tag} stopping: {reason}",
+        "laid_out": "{tag} task {task}: laid out from seed {seed}, the arm at home",
+        "succeeded": "{tag} task {task}: the cube is in the box (seed {seed})",
+        "bad_task_cmd": "{tag} ignored invalid task_cmd: {error}",
     },
 }
 
@@ -149,9 +160,16 @@ def run_body_node(body: Body, node: Node, settings: NodeSettings, identity: str,
     # Counted in physics steps, so fast mode (several steps per tick) keeps the simulated rate.
     steps_per_image = max(1, round(1.0 / (image_hz * tick_s))) if image_hz > 0 else 0
     next_image_step = steps_per_image
-    sends_targets = "joint_target" in (node.node_config() or {}).get("outputs", [])
+    outputs = (node.node_config() or {}).get("outputs", [])
+    sends_targets = "joint_target" in outputs
     targets_sent_at_step: int | None = None  # body.steps when joint_target last went out; None: to send
     target_refresh_steps = max(1, round(TARGET_REFRESH_S / tick_s))
+    scene = body.scene
+    sends_objects = scene is not None and "object_state" in outputs
+    sends_status = scene is not None and "task_status" in outputs
+    object_names = ",".join(scene.task.object_state_names) if scene is not None else ""
+    last_success: bool | None = None  # None: task_status is due at the next tick
+    status_reply_to = ""  # the task_cmd request the next task_status answers
 
     def finish() -> None:  # however the loop ends: the window, the bus let go; the tick log kept
         body.close()
@@ -178,6 +196,17 @@ def run_body_node(body: Body, node: Node, settings: NodeSettings, identity: str,
                                           or body.steps - targets_sent_at_step >= target_refresh_steps):
                         node.send_output("joint_target", pa.array(joint_targets_deg, type=pa.float64()))
                         targets_sent_at_step = body.steps
+                    if scene is not None:
+                        if sends_objects:
+                            node.send_output("object_state", pa.array(scene.object_state()), {"names": object_names})
+                        success = scene.succeeded()
+                        if success != last_success:
+                            if success:
+                                logger.info(text["succeeded"].format(task=scene.task.name, seed=scene.layout.seed))
+                            if sends_status:
+                                node.send_output("task_status", pa.array([success]), {
+                                    "task": scene.task.name, "seed": scene.layout.seed, "reply_to": status_reply_to})
+                            last_success, status_reply_to = success, ""
                     if tick_log is not None:
                         tick_log.extend((time.monotonic_ns(), body.steps))
                     if steps_per_image and body.steps >= next_image_step:
@@ -188,6 +217,20 @@ def run_body_node(body: Body, node: Node, settings: NodeSettings, identity: str,
                             "image", pa.array(rgb.ravel()),
                             {"width": width, "height": height, "encoding": "rgb8"},
                         )
+                elif event["id"] == "task_cmd":
+                    try:
+                        if scene is None:
+                            raise ValueError("this body runs no task")
+                        asked = parse_reset(" ".join(str(word) for word in event["value"].to_pylist()))
+                        seed = scene.layout.seed + 1 if asked is None else asked
+                        body.reset_task(seed)
+                    except ValueError as error:
+                        logger.warning(text["bad_task_cmd"].format(error=error))
+                        continue
+                    joint_targets_deg = body.start_targets_deg()
+                    targets_sent_at_step = None
+                    last_success, status_reply_to = None, str((event.get("metadata") or {}).get("request", ""))
+                    logger.info(text["laid_out"].format(task=scene.task.name, seed=seed))
                 elif event["id"] == "joint_cmd":
                     decoded = decode_joint_cmd(event["value"], joint_targets_deg)
                     if decoded.targets_deg is None:  # what arrived is not a command: decoded.error says why

@@ -3,7 +3,8 @@
 `SO101Sim` (PyBullet), `SO101MuJoCo` and `SO101Real` (six servos on a bus) implement it.
 Angles are degrees, six of them in `so101.robot.ACTUATED_JOINTS` order: the five arm
 joints, then the gripper. The real arm differs only where hardware must: it starts
-where it stands, a read can fail (no angles that tick), and it has no camera.
+where it stands, a read can fail (no angles that tick), and it has no camera and no task.
+A simulation started with a task (so101.tasks) has its `scene`: the objects on the floor.
 """
 
 from __future__ import annotations
@@ -13,15 +14,36 @@ from typing import Literal, Protocol, Sequence, Union
 import numpy as np
 import numpy.typing as npt
 
+from so101.tasks.cube_to_box import CubeToBox, Layout
+
 BodyName = Literal["pybullet", "mujoco", "real"]
 
 # A simulator hands back numpy arrays, the real arm a tuple of what it read.
 AnglesDeg = Union[npt.NDArray[np.float64], tuple[float, ...]]
 RgbImage = npt.NDArray[np.uint8]
+ObjectState = npt.NDArray[np.float32]
 
 
 class BodyFailed(Exception):
     """A body that cannot start or go on (the real arm's bus, a closed window); str() is one line for the user."""
+
+
+class TaskScene(Protocol):
+    """A task's objects in a simulation (so101.tasks.pybullet_scene, so101.tasks.mujoco_scene)."""
+
+    @property
+    def task(self) -> CubeToBox:
+        """The task whose objects these are (its facts, its object_state names, its success function)."""
+
+    @property
+    def layout(self) -> Layout:
+        """The layout the scene was last laid out from (its seed among it)."""
+
+    def object_state(self) -> ObjectState:
+        """The objects' poses now, float32, in the task's `object_state_names` order (metres, base frame)."""
+
+    def succeeded(self) -> bool:
+        """The task's success function, on the objects as they are now."""
 
 
 class Body(Protocol):
@@ -39,6 +61,13 @@ class Body(Protocol):
 
     def start_targets_deg(self) -> tuple[float, ...]:
         """The targets before any command: home for a simulation, where the real arm stands."""
+
+    @property
+    def scene(self) -> TaskScene | None:
+        """The task's objects; None without a task (the real arm: always)."""
+
+    def reset_task(self, seed: int) -> None:
+        """The scene laid out from `seed` and the arm at home, still, its targets home; ValueError without a task."""
 
     def set_targets_deg(self, targets_deg: Sequence[float]) -> None:
         """New goals for all six joints; the next `step` applies them."""

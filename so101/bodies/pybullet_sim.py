@@ -8,6 +8,7 @@ in degrees; PyBullet's radians stay inside.
 from __future__ import annotations
 
 import ctypes
+import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Sequence
@@ -20,6 +21,7 @@ import pybullet_data
 from so101 import assets
 from so101.bodies import pybullet_hulls
 from so101.bodies.camera import DEFAULT_CAMERA, Camera, check_picture
+from so101.bodies.jaw_pads import jaw_pads, urdf_with_pads
 from so101.bodies.protocol import BodyName, RgbImage
 from so101.bodies.settings import NodeSettings, PyBulletSettings, check_control_mode
 from so101.gui.display import resolve_mode
@@ -33,12 +35,17 @@ from so101.bodies.pd_servo import (
 )
 from so101.robot import (
     ACTUATED_JOINTS,
+    ARM_JOINTS,
     COURSE_LINK_DAMPING,
+    GRIPPER,
     COURSE_MAX_VELOCITY_RAD_S,
     HOME_POSE_DEG,
     goal_deg,
 )
 from so101.gui.viewer import WINDOW_SHOWING, Window
+from so101.tasks import task_named
+from so101.tasks.cube_to_box import CubeToBox
+from so101.tasks.pybullet_scene import PyBulletScene
 
 JOINT_TYPE_NAMES = {
     p.JOINT_REVOLUTE: "revolute",
@@ -51,6 +58,8 @@ JOINT_TYPE_NAMES = {
 M_MMAP_THRESHOLD = -3  # glibc's mallopt parameter number
 
 FloatArray = npt.NDArray[np.float64]
+# The link that carries the fixed jaw (and its pad): the child of wrist_roll.
+GRIPPER_LINK_INDEX = ARM_JOINTS[-1].index
 
 
 def release_freed_memory() -> None:
@@ -104,6 +113,9 @@ class SO101Sim:
     course does; the arm moves the same (tests/test_course_motion.py). Pictures always
     show the full meshes.
 
+    `task` puts that task's scene (so101.tasks) on the floor, laid out from `seed`, and gives
+    the gripper its jaw pads (so101.bodies.jaw_pads); None: the arm alone, as in the course.
+
     `mode` is the display mode asked for (auto, gui, direct); `display_mode` the one it got.
     """
 
@@ -123,6 +135,8 @@ class SO101Sim:
         servo_torque_limit_nm: float = SERVO_TORQUE_LIMIT_NM,
         renders: bool = True,
         hull_collisions: bool = True,
+        task: CubeToBox | None = None,
+        seed: int = 0,
     ):
         check_control_mode(control_mode)
         if not servo_torque_limit_nm > 0:
@@ -158,10 +172,8 @@ class SO101Sim:
         p.setGravity(0, 0, -9.81, physicsClientId=cid)
         p.setPhysicsEngineParameter(fixedTimeStep=self.time_step_s, physicsClientId=cid)
         self.plane_id: int = p.loadURDF("plane.urdf", physicsClientId=cid)
-        self.robot_id: int = p.loadURDF(
-            str(physics_urdf), basePosition=[0, 0, 0], baseOrientation=[0, 0, 0, 1],
-            useFixedBase=True, physicsClientId=cid,
-        )
+        self.robot_id: int = self._load_arm(physics_urdf, assets_dir, with_pads=task is not None)
+        self.scene: PyBulletScene | None = None if task is None else PyBulletScene(cid, task, task.layout(seed))
         if self.display_mode == "gui":
             self._window = Window(["so101.gui.viewer", "--urdf", str(urdf)], on_showing=lambda: log(WINDOW_SHOWING))
         self.joints = [self._joint_info(i) for i in range(p.getNumJoints(self.robot_id, physicsClientId=cid))]
@@ -191,6 +203,25 @@ class SO101Sim:
             )
 
     # -- set-up helpers --------------------------------------------------------------
+    def _load_arm(self, physics_urdf: Path, assets_dir: Path | str | None, with_pads: bool) -> int:
+        """The arm on its fixed base; `with_pads`, with the MJCF's jaw pads as extra collision boxes,
+        loaded from a copy of the URDF that names its meshes by absolute path."""
+        options = dict(basePosition=[0, 0, 0], baseOrientation=[0, 0, 0, 1], useFixedBase=True, physicsClientId=self.client)
+        if not with_pads:
+            return int(p.loadURDF(str(physics_urdf), **options))
+        pads = tuple(pad.grown() for pad in jaw_pads(assets.mjcf_path(None if assets_dir is None else Path(assets_dir))))
+        rpy = {pad.name: tuple(p.getEulerFromQuaternion([*pad.quat_wxyz[1:], pad.quat_wxyz[0]])) for pad in pads}
+        text = urdf_with_pads(physics_urdf.read_text(encoding="utf-8"), physics_urdf.parent, pads, rpy)
+        with tempfile.NamedTemporaryFile("w", suffix=".urdf", prefix="so101-pads-", encoding="utf-8") as copy:
+            copy.write(text)
+            copy.flush()
+            robot_id = int(p.loadURDF(copy.name, **options))
+        # Bullet's friction lets a held cube creep out of the jaws (measured: 13 mm down and sideways
+        # in 4 s, then dropped); a friction anchor holds each contact where it started.
+        for link in {GRIPPER_LINK_INDEX, GRIPPER.index}:
+            p.changeDynamics(robot_id, link, frictionAnchor=1, physicsClientId=self.client)
+        return robot_id
+
     def _joint_info(self, index: int) -> JointInfo:
         info = p.getJointInfo(self.robot_id, index, physicsClientId=self.client)
         return JointInfo(
@@ -220,7 +251,7 @@ class SO101Sim:
         return cls(
             mode=node.display_mode, time_step_s=TICK_PERIOD_S, assets_dir=settings.assets_dir, log=log,
             control_mode=settings.control_mode, servo_damping_ratio=settings.servo_damping_ratio,
-            renders=node.image_hz > 0,
+            renders=node.image_hz > 0, task=task_named(node.task) if node.task else None, seed=node.seed,
         )
 
     # -- control ---------------------------------------------------------------------
@@ -242,6 +273,15 @@ class SO101Sim:
 
     def targets_deg(self) -> FloatArray:
         return np.degrees(self._goal_rad)
+
+    def reset_task(self, seed: int) -> None:
+        """The task's scene laid out from `seed`, and the arm at home, still, its goal home."""
+        if self.scene is None:
+            raise ValueError("this simulation runs no task (start it with one: --task)")
+        self.scene.lay_out(self.scene.task.layout(seed))
+        for joint_index, home_rad in zip(self._indices, np.radians(HOME_POSE_DEG).tolist()):
+            p.resetJointState(self.robot_id, joint_index, home_rad, 0.0, physicsClientId=self.client)
+        self.set_targets_deg(HOME_POSE_DEG)
 
     def step(self, count: int = 1) -> None:
         """Send new motor commands, if any, and advance the physics by `count` time steps."""

@@ -79,6 +79,9 @@ def check_node_settings(settings: NodeSettings) -> None:
         raise ValueError("the real arm has no camera: set SO101_IMAGE_HZ to 0")
     if settings.fast_steps > 0:
         raise ValueError("the real arm has no fast mode (its goals ramp by the tick): set SO101_FAST_STEPS to 0")
+    if settings.task:
+        raise ValueError(f"the real arm has no task scene (nothing reports where real objects are, so no object_state): "
+                         f"SO101_TASK={settings.task} is for a simulation; leave it empty")
 
 
 def _percentiles_ms(samples_s: Sequence[float], no_reads: str) -> str:
@@ -93,6 +96,7 @@ class SO101Real:
 
     kind: BodyName = "real"
     display_mode: None = None  # hardware: no window, no headless rendering
+    scene: None = None  # no task: nothing reports where real objects are
 
     def __init__(self, port: str, calibration: Calibration, *, calibration_name: str = "the calibration",
                  joint_signs: tuple[int, ...] = (1,) * 6, max_speed_deg_s: float = DEFAULT_MAX_SPEED_DEG_S,
@@ -225,6 +229,9 @@ class SO101Real:
     @property
     def sim_time_s(self) -> float:
         return self.steps * self.time_step_s
+
+    def reset_task(self, seed: int) -> NoReturn:
+        raise ValueError("the real arm has no task scene to lay out")
 
     def render_rgb(self, width: int, height: int) -> NoReturn:
         raise ValueError("the real arm has no camera: set SO101_IMAGE_HZ to 0")

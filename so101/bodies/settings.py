@@ -24,6 +24,7 @@ from so101.runtime.settings import (
     read_stripped_text, read_text, read_whole_number, setting,
 )
 from so101.runtime.versions import spawning_daemon_version_problem
+from so101.tasks import task_named
 
 # "position": the course's POSITION_CONTROL motor. "servo": a PD torque servo, in
 # which the damping ratio decides whether a step overshoots (exercise 2).
@@ -48,6 +49,16 @@ def check_control_mode(control_mode: str) -> str:
 
 def read_control_mode(environ: Mapping[str, str], declared_setting: Setting) -> str:
     return check_control_mode(declared_setting.raw(environ))
+
+
+def read_task(environ: Mapping[str, str], declared_setting: Setting) -> str:
+    name = read_stripped_text(environ, declared_setting)
+    if name:
+        try:
+            task_named(name)
+        except ValueError as error:  # naming the tasks there are
+            raise ValueError(f"{declared_setting.env_var}: {error}") from None
+    return name
 
 
 def read_joint_signs(environ: Mapping[str, str], declared_setting: Setting) -> tuple[int, ...]:
@@ -79,6 +90,10 @@ class NodeSettings(EnvironSettings):
     tick_log_path: str = setting(
         "SO101_TICK_LOG", "", "a file for per-tick timings and step counts (used by `so101 bench`)", read_text)
     lang: str = setting(LANG_ENV_VAR, DEFAULT_LANGUAGE, "log language, `zh` or `en`", read_language)
+    task: str = setting(
+        "SO101_TASK", "", "a task's scene on the floor (`cube_to_box`; simulations only); empty = the arm alone",
+        read_task)
+    seed: int = setting("SO101_SEED", "0", "the task's first layout (a whole number)", read_whole_number)
 
     @classmethod
     def from_environ(cls, environ: Mapping[str, str]) -> Self:

@@ -1,0 +1,68 @@
+"""A task's scene in PyBullet: the cube and the box of so101.tasks.cube_to_box, in one client.
+
+The arm's PyBullet body (so101.bodies.pybullet_sim.SO101Sim) makes one of these when it runs a
+task, on its own client, and loads the arm with the jaw pads (so101.bodies.jaw_pads).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+import pybullet as p
+
+from so101.tasks.cube_to_box import CubeToBox, Layout
+
+
+class PyBulletScene:
+    """The cube (a free body) and the box (fixed, five plates) of `task`, laid out as `layout`."""
+
+    def __init__(self, client: int, task: CubeToBox, layout: Layout):
+        self.client = client
+        self.task = task
+        cube = task.cube
+        half = [cube.half_size_m] * 3
+        self.cube_id: int = p.createMultiBody(
+            baseMass=cube.mass_kg,
+            baseCollisionShapeIndex=p.createCollisionShape(p.GEOM_BOX, halfExtents=half, physicsClientId=client),
+            baseVisualShapeIndex=p.createVisualShape(p.GEOM_BOX, halfExtents=half, rgbaColor=list(cube.rgba),
+                                                     physicsClientId=client),
+            physicsClientId=client,
+        )
+        # A friction anchor, as on the jaws (so101.bodies.pybullet_sim): without, a held cube creeps out.
+        p.changeDynamics(self.cube_id, -1, lateralFriction=cube.friction, frictionAnchor=1, physicsClientId=client)
+        plates = task.box.plates()
+        centres = [list(centre) for centre, _ in plates]
+        halves = [list(half_extents) for _, half_extents in plates]
+        self.box_id: int = p.createMultiBody(
+            baseMass=0.0,
+            baseCollisionShapeIndex=p.createCollisionShapeArray(
+                [p.GEOM_BOX] * len(plates), halfExtents=halves, collisionFramePositions=centres, physicsClientId=client),
+            baseVisualShapeIndex=p.createVisualShapeArray(
+                [p.GEOM_BOX] * len(plates), halfExtents=halves, visualFramePositions=centres,
+                rgbaColors=[list(task.box.rgba)] * len(plates), physicsClientId=client),
+            physicsClientId=client,
+        )
+        p.changeDynamics(self.box_id, -1, lateralFriction=task.box.friction, physicsClientId=client)
+        self.lay_out(layout)
+
+    def lay_out(self, layout: Layout) -> None:
+        """The cube and the box where `layout` puts them, the cube still."""
+        self.layout = layout
+        p.resetBasePositionAndOrientation(self.box_id, list(layout.box_xyz_m), [0, 0, 0, 1], physicsClientId=self.client)
+        p.resetBasePositionAndOrientation(self.cube_id, list(layout.cube_xyz_m), list(layout.cube_quat_xyzw()),
+                                          physicsClientId=self.client)
+        p.resetBaseVelocity(self.cube_id, [0, 0, 0], [0, 0, 0], physicsClientId=self.client)
+
+    def object_state(self) -> npt.NDArray[np.float32]:
+        """The cube's centre and quaternion (x y z w) and the box's position: OBJECT_STATE_NAMES' order."""
+        cube_xyz, cube_quat = p.getBasePositionAndOrientation(self.cube_id, physicsClientId=self.client)
+        box_xyz, _ = p.getBasePositionAndOrientation(self.box_id, physicsClientId=self.client)
+        return np.array([*cube_xyz, *cube_quat, *box_xyz], dtype=np.float32)
+
+    def cube_speed_m_s(self) -> float:
+        linear, _ = p.getBaseVelocity(self.cube_id, physicsClientId=self.client)
+        return float(np.linalg.norm(linear))
+
+    def succeeded(self) -> bool:
+        state = self.object_state().astype(np.float64)
+        return self.task.succeeded(state[0:3].tolist(), state[7:10].tolist(), self.cube_speed_m_s())

@@ -1,0 +1,138 @@
+"""The task's scene on both simulators, from one description: the same layout, a cube that can be held, a reset.
+
+Each test runs on every simulated body of so101.bodies.registry (PyBullet and MuJoCo).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from so101 import assets
+from so101.bodies.jaw_pads import INNER_FACE_SIGN, PAD_GEOM_NAMES, jaw_pads
+from so101.bodies.registry import BODIES, SIMULATED_BODIES
+from so101.kinematics import Kinematics
+from so101.robot import HOME_POSE_DEG
+from so101.tasks import CUBE_TO_BOX
+from so101.tasks.cube_to_box import Layout
+from so101.tasks.grasp import GRIPPER_LINK_INDEX, TopDownGrasp
+
+pytestmark = pytest.mark.slow  # steps both simulators for seconds: not in the fast subset
+
+STEP_S = 0.004
+OPEN_DEG = 35.0  # pads 45 mm apart: room for the 25 mm cube
+CLOSED_DEG = 0.0  # the goal the jaw squeezes toward; the cube stops it
+
+
+def make(body_name, **options):
+    return BODIES[body_name].body_class()(mode="direct", time_step_s=STEP_S, renders=False, log=lambda line: None,
+                                          task=CUBE_TO_BOX, **options)
+
+
+def run_for(sim, seconds):
+    sim.step(round(seconds / STEP_S))
+
+
+@pytest.fixture(scope="module")
+def grasp():
+    with Kinematics() as kinematics:
+        fixed_pad = jaw_pads(assets.mjcf_path())[0].grown()
+        yield TopDownGrasp(kinematics, fixed_pad, CUBE_TO_BOX.cube.half_size_m)
+
+
+@pytest.mark.parametrize("body_name", SIMULATED_BODIES)
+def test_the_same_seed_lays_the_same_scene_out_on_each_simulator_and_it_stays(body_name):
+    for seed in (0, 1, 41):
+        layout = CUBE_TO_BOX.layout(seed)
+        with make(body_name, seed=seed) as sim:
+            for when in ("at start", "after 1 s"):
+                state = sim.scene.object_state()
+                assert state.dtype == np.float32 and state.shape == (10,)
+                assert np.allclose(state[0:3], layout.cube_xyz_m, atol=0.001), when
+                assert np.allclose(state[3:7], layout.cube_quat_xyzw(), atol=0.002), when
+                assert np.allclose(state[7:10], layout.box_xyz_m, atol=0.001), when
+                assert not sim.scene.succeeded()
+                run_for(sim, 1.0)
+
+
+@pytest.mark.parametrize("body_name", SIMULATED_BODIES)
+def test_a_cube_grasped_and_lifted_10_cm_stays_in_the_gripper_for_5_s(body_name, grasp):
+    layout = Layout(0, (0.2, -0.05, CUBE_TO_BOX.cube.half_size_m), math.radians(20), (*CUBE_TO_BOX.box.xy_m, 0.0))
+    cube = np.array(layout.cube_xyz_m)
+    above = grasp.pose(cube + [0, 0, 0.06], layout.cube_yaw_rad)
+    down = grasp.pose(cube, layout.cube_yaw_rad, seed_deg=above.arm_deg)
+    assert above.exact and down.exact
+    # Straight up by 10 cm; the gripper need not point straight down on the way (close to the base
+    # it cannot: the wrist would pass its limit).
+    tip_mm = np.array(grasp.kinematics.tip_mm(down.arm_deg))
+    lifted = grasp.kinematics.solve(tip_mm + [0, 0, 100], seed_deg=down.arm_deg)
+    assert lifted.reachable
+    with make(body_name) as sim:
+        sim.scene.lay_out(layout)
+        for pose, gripper_deg, seconds in ((above, OPEN_DEG, 1.5), (down, OPEN_DEG, 1.5), (down, CLOSED_DEG, 1.0),
+                                           (lifted, CLOSED_DEG, 1.5)):
+            sim.set_targets_deg([*(pose.joints_deg if pose is lifted else pose.arm_deg), gripper_deg])
+            run_for(sim, seconds)
+        lifted_xyz = sim.scene.object_state()[0:3].copy()
+        assert lifted_xyz[2] > cube[2] + 0.08, "the cube did not come up with the gripper"
+        run_for(sim, 5.0)
+        held_xyz = sim.scene.object_state()[0:3]
+        gripper_deg = sim.joint_angles_deg()[-1]
+    assert np.linalg.norm(held_xyz - lifted_xyz) < 0.003, f"the cube moved {held_xyz - lifted_xyz} m in the gripper"
+    assert gripper_deg > 5.0, "the jaws closed on nothing"
+
+
+@pytest.mark.parametrize("body_name", SIMULATED_BODIES)
+def test_reset_lays_the_next_scene_out_and_homes_the_arm_as_a_fresh_start_does(body_name):
+    with make(body_name, seed=3) as sim, make(body_name, seed=4) as fresh:
+        sim.set_targets_deg([30.0, -20.0, 40.0, 10.0, 0.0, 50.0])
+        run_for(sim, 1.0)
+        sim.reset_task(4)
+        assert sim.scene.layout == CUBE_TO_BOX.layout(4)
+        assert np.allclose(sim.joint_angles_deg(), HOME_POSE_DEG, atol=1e-6)
+        assert np.allclose(sim.scene.object_state(), fresh.scene.object_state(), atol=1e-6)
+        # Still, its goal home: it goes on as a body started with that seed does.
+        run_for(sim, 0.5)
+        run_for(fresh, 0.5)
+        assert np.allclose(sim.joint_angles_deg(), fresh.joint_angles_deg(), atol=0.01)
+        assert np.allclose(sim.scene.object_state(), fresh.scene.object_state(), atol=1e-4)
+
+
+@pytest.mark.parametrize("body_name", SIMULATED_BODIES)
+def test_without_a_task_there_is_no_scene_and_no_reset(body_name):
+    with BODIES[body_name].body_class()(mode="direct", renders=False, log=lambda line: None) as sim:
+        assert sim.scene is None
+        with pytest.raises(ValueError, match="runs no task"):
+            sim.reset_task(1)
+
+
+def test_every_corner_of_where_a_cube_may_start_can_be_grasped_from_above(grasp):
+    for x, y in CUBE_TO_BOX.sector.corners_xy_m():
+        for yaw_deg in (-45.0, 0.0, 44.9):
+            pose = grasp.pose((x, y, CUBE_TO_BOX.cube.half_size_m), math.radians(yaw_deg))
+            assert pose.exact, (x, y, yaw_deg, pose)
+
+
+def test_each_pads_inner_face_looks_at_the_other_pad():
+    # INNER_FACE_SIGN, checked with the kinematics: the pads' x axes and their centres, with the jaw half open.
+    pads = {pad.name: pad for pad in jaw_pads(assets.mjcf_path())}
+    assert tuple(pads) == PAD_GEOM_NAMES
+    import pybullet as p
+
+    with Kinematics() as kinematics:
+        client, robot = kinematics.client, kinematics.robot_id
+        p.resetJointState(robot, 6, math.radians(26.4), physicsClientId=client)  # the MJCF's "parallel" angle
+        centres, axes = {}, {}
+        for name, link in (("fixed_jaw_pad", GRIPPER_LINK_INDEX), ("moving_jaw_pad", 6)):
+            state = p.getLinkState(robot, link, computeForwardKinematics=True, physicsClientId=client)
+            pad = pads[name]
+            w, x, y, z = pad.quat_wxyz
+            link_rotation = np.asarray(p.getMatrixFromQuaternion(state[5])).reshape(3, 3)
+            pad_rotation = np.asarray(p.getMatrixFromQuaternion([x, y, z, w])).reshape(3, 3)
+            centres[name] = np.asarray(state[4]) + link_rotation @ pad.pos_m
+            axes[name] = link_rotation @ pad_rotation[:, 0]
+    between = centres["moving_jaw_pad"] - centres["fixed_jaw_pad"]
+    assert np.dot(axes["fixed_jaw_pad"] * INNER_FACE_SIGN["fixed_jaw_pad"], between) > 0.99 * np.linalg.norm(between)
+    assert np.dot(axes["moving_jaw_pad"] * INNER_FACE_SIGN["moving_jaw_pad"], -between) > 0.99 * np.linalg.norm(between)
