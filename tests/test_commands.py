@@ -6,7 +6,7 @@ import pytest
 
 from so101.prompt.commands import (
     GRIPPER_CLOSED_DEG, GRIPPER_OPEN_DEG, Batch, Empty, GoPose, Help, Home, ListJoints, ListPoses, ParseError,
-    Quit, SavePose, SetJoint, ShowState, Snapshot, format_angle, format_angles, help_lines, joint_lines, parse_command,
+    Quit, ResetTask, SavePose, SetJoint, ShowState, ShowTask, Snapshot, format_angle, format_angles, help_lines, joint_lines, parse_command,
 )
 
 
@@ -39,6 +39,11 @@ from so101.prompt.commands import (
         ("help", Help()),
         ("quit", Quit()),
         ("exit", Quit()),
+        ("reset", ResetTask()),
+        ("reset 7", ResetTask(7)),
+        ("RESET 0", ResetTask(0)),
+        ("reset ７", ResetTask(7)),
+        ("task", ShowTask()),
         ("", Empty()),
         ("   ", Empty()),
     ],
@@ -79,6 +84,11 @@ def test_valid_lines(line, command):
         ("save " + "x" * 41, "最多 40 个字符", "at most 40 characters"),
         ("home now", "'home' 不带参数", "'home' takes no arguments"),
         ("snapshot a.png b.png", "snapshot 命令格式:snapshot [文件]", "snapshot format: snapshot [FILE]"),
+        ("reset x", "reset 命令格式:reset [种子]", "reset format: reset [SEED]"),
+        ("reset -1", "reset 命令格式", "reset format"),
+        ("reset 1.5", "reset 命令格式", "reset format"),
+        ("reset 1 2", "reset 命令格式", "reset format"),
+        ("task 3", "'task' 不带参数", "'task' takes no arguments"),
     ],
 )
 def test_invalid_lines_get_one_line_saying_the_valid_form(line, expected_zh, expected_en):
@@ -122,6 +132,7 @@ def test_list_shows_the_course_joint_names_and_the_gripper():
 @pytest.mark.parametrize("lang", ["zh", "en"])
 def test_help_names_every_command(lang):
     text = "\n".join(help_lines(lang))
-    for word in ("batch", "grip", "open", "close", "home", "list", "state", "save", "go", "poses", "help", "quit"):
+    for word in ("batch", "grip", "open", "close", "home", "list", "state", "save", "go", "poses", "reset", "task", "help",
+                 "quit"):
         assert word in text
     assert "100°" in text and "0°" in text

@@ -161,7 +161,7 @@ def test_a_piped_script_runs_in_order_echoes_and_stops_at_quit(tmp_path, monkeyp
         "  → joint 0 (shoulder_pan) → 90°",
         "> bogus",
         "  cannot read 'bogus': use 'JOINT ANGLE' (e.g. '0 45'), batch, grip, open, close, home, list, state, save, "
-        "go, poses, snapshot, xyz, where, jog, record, stop, discard, episodes, help, quit (type help)",
+        "go, poses, snapshot, xyz, where, jog, record, stop, discard, episodes, reset, task, help, quit (type help)",
         "> save a",
         "  → pose 'a' saved: [-30.0, 44.98, -59.69, 30.0, 0.0]°, gripper 12.35°",
         "> quit",
@@ -451,3 +451,70 @@ def test_a_settle_watch_gives_up_on_an_arm_that_keeps_moving():
     swinging = [watch.add(step * 0.02, [math.sin(step / 10.0)] * 5) for step in range(int(SETTLE_TIMEOUT_S / 0.02) + 10)]
     assert swinging == [None] * len(swinging) and watch.done
     assert watch.add(SETTLE_TIMEOUT_S + 1.0, [0.0] * 5) is None  # still, but too late
+
+
+# -- a task (so101 teleop --task): `reset`, `task`, and the news of the cube ------------------------------
+
+def task_control(tmp_path, lang="en", answer=True):
+    """A KeyboardControl whose task link goes to a stand-in body: each `reset` is answered at once
+    (unless `answer` is False), from seed 7 onward; returns (control, task_cmd texts sent, news lines)."""
+    from so101.prompt.task_link import TaskLink
+
+    node, control = make_control(tmp_path, lang, events=state_events())
+    sent_cmds, news = [], []
+    seed = [7]
+
+    def send(task_cmd, request):
+        sent_cmds.append(task_cmd)
+        words = task_cmd.split()
+        seed[0] = int(words[1]) if len(words) == 2 else seed[0] + 1
+        if answer:
+            control.task.on_status(False, {"task": "cube_to_box", "seed": seed[0], "reply_to": request})
+
+    control.task = TaskLink(send, control.task_news)
+    control.show_news = news.append
+    return control, sent_cmds, news
+
+
+def test_reset_lays_the_next_or_the_given_seed_out_and_says_where_the_cube_is(tmp_path):
+    from so101.tasks import CUBE_TO_BOX
+
+    control, sent_cmds, _ = task_control(tmp_path)
+    assert control.handle_line("reset")[0] == [
+        "  → laid out from seed 8, the arm at home: cube at ({x:.0f}, {y:.0f}) mm, yaw {yaw:.0f}°; box at (160, 190) mm".format(
+            x=CUBE_TO_BOX.layout(8).cube_xyz_m[0] * 1000, y=CUBE_TO_BOX.layout(8).cube_xyz_m[1] * 1000,
+            yaw=math.degrees(CUBE_TO_BOX.layout(8).cube_yaw_rad))]
+    assert control.handle_line("reset 40")[0][0].startswith("  → laid out from seed 40, the arm at home: cube at (")
+    assert sent_cmds == ["reset", "reset 40"]
+
+
+def test_task_shows_the_layout_where_the_cube_is_and_whether_it_is_in_the_box(tmp_path):
+    control, _, news = task_control(tmp_path)
+    assert control.handle_line("task")[0] == ["  no object_state received yet (is the simulation running?)"]
+    control.task.on_status(False, {"task": "cube_to_box", "seed": 3, "reply_to": ""})
+    control.task.on_objects([0.2123, -0.0456, 0.0125, 0, 0, 0, 1, 0.16, 0.19, 0])
+    lines = control.handle_line("task")[0]
+    assert lines[0].startswith("  task cube_to_box, seed 3: cube at (")
+    assert lines[1] == "  the cube is now at (212, -46, 12) mm: not in the box"
+    # The cube lands in the box: one line of news, and `task` says so; the same status again says nothing more.
+    control.task.on_status(True, {"task": "cube_to_box", "seed": 3, "reply_to": ""})
+    control.task.on_status(True, {"task": "cube_to_box", "seed": 3, "reply_to": ""})
+    assert news == ["  ★ the cube is in the box (task cube_to_box, seed 3)"]
+    control.task.on_objects([0.16, 0.19, 0.0175, 0, 0, 0, 1, 0.16, 0.19, 0])
+    assert control.handle_line("task")[0][1] == "  the cube is now at (160, 190, 18) mm: in the box"
+
+
+def test_without_a_task_reset_and_task_say_how_to_start_one(tmp_path):
+    node, control = make_control(tmp_path, "zh", events=state_events())
+    for line in ("reset", "reset 3", "task"):
+        assert control.handle_line(line) == (["  没有任务:用 so101 teleop --task cube_to_box 启动"], False)
+    assert sent(node) == []
+
+
+def test_a_body_that_does_not_answer_a_reset_is_said_to_in_one_line(tmp_path, monkeypatch):
+    from so101.prompt import task_link
+
+    monkeypatch.setattr(task_link, "REPLY_WAIT_S", 0.2)
+    control, sent_cmds, _ = task_control(tmp_path, answer=False)
+    lines, _ = control.handle_line("reset")
+    assert sent_cmds == ["reset"] and lines == ["  the simulation did not answer within 0.2 s"]

@@ -17,7 +17,7 @@ import pytest
 
 from so101.bodies.registry import BODIES, SIMULATED_BODIES
 from so101.runtime.dataflow import MAX_STEPS_PER_TICK, TickClock
-from tests.helpers.dataflow import TICK, body_environment, run_simulation_node
+from tests.helpers.dataflow import TICK, TICK_TIMER_CONFIG, body_environment, run_simulation_node
 
 pytestmark = pytest.mark.slow  # drives every body's node for seconds of simulated time: not in the fast subset
 
@@ -312,3 +312,57 @@ def test_mujoco_without_an_opengl_back_end_says_which_packages_in_one_line(monke
     assert err.count("\n") == 1
     assert "MuJoCo cannot draw offscreen (RuntimeError: Cannot initialize a EGL device display.)" in err
     assert "apt-get install libegl1 libegl-mesa0 libgl1-mesa-dri" in err
+
+
+TASK_CONFIG = {**TICK_TIMER_CONFIG, "outputs": ["joint_state", "gripper_state", "object_state", "task_status"]}
+
+
+def test_a_task_publishes_its_objects_each_tick_and_success_when_it_changes_and_resets_on_command(
+        monkeypatch, capsys, simulated_body):
+    from dora.testing import MockNode
+
+    from so101.tasks import CUBE_TO_BOX
+
+    metadata_sent = {"object_state": [], "task_status": []}
+    send_output = MockNode.send_output
+
+    def send_and_keep_metadata(self, output_id, data, metadata=None):
+        if output_id in metadata_sent:
+            metadata_sent[output_id].append(metadata)
+        send_output(self, output_id, data, metadata)
+
+    monkeypatch.setattr(MockNode, "send_output", send_and_keep_metadata)
+    reset = {"type": "INPUT", "id": "task_cmd", "value": pa.array(["reset"]), "metadata": {"request": "1"}}
+    reset_to_40 = {"type": "INPUT", "id": "task_cmd", "value": pa.array(["reset 40"]), "metadata": {"request": "2"}}
+    bad = {"type": "INPUT", "id": "task_cmd", "value": pa.array(["reset x"]), "metadata": {}}
+    events = ticks(5) + [reset] + ticks(5) + [bad, reset_to_40] + ticks(5)
+    code, node = run_simulation_node(monkeypatch, events, node_config=TASK_CONFIG, body=simulated_body,
+                                     SO101_TASK="cube_to_box", SO101_SEED="7")
+    assert code == 0
+    assert len(node.outputs["object_state"]) == 15
+    assert all(meta == {"names": ",".join(CUBE_TO_BOX.object_state_names)} for meta in metadata_sent["object_state"])
+    first, after_reset, after_seed = (node.outputs["object_state"][index].to_pylist() for index in (0, 5, 10))
+    assert first[0:3] == pytest.approx(CUBE_TO_BOX.layout(7).cube_xyz_m, abs=1e-3)
+    assert after_reset[0:3] == pytest.approx(CUBE_TO_BOX.layout(8).cube_xyz_m, abs=1e-3)  # `reset`: the next seed
+    assert after_seed[0:3] == pytest.approx(CUBE_TO_BOX.layout(40).cube_xyz_m, abs=1e-3)
+    assert node.outputs["object_state"][0].type == pa.float32()
+    # Success at the first tick, then after each reset (the answer to it), and only then: nothing fell in.
+    assert [status.to_pylist() for status in node.outputs["task_status"]] == [[False]] * 3
+    assert metadata_sent["task_status"] == [
+        {"task": "cube_to_box", "seed": 7, "reply_to": ""},
+        {"task": "cube_to_box", "seed": 8, "reply_to": "1"},
+        {"task": "cube_to_box", "seed": 40, "reply_to": "2"},
+    ]
+    log = capsys.readouterr().out
+    assert "task cube_to_box: laid out from seed 8, the arm at home" in log
+    assert "ignored invalid task_cmd: a seed is a whole number >= 0, got 'x'" in log
+
+
+def test_without_a_task_a_body_publishes_no_objects_and_ignores_task_cmd(monkeypatch, capsys, simulated_body):
+    reset = {"type": "INPUT", "id": "task_cmd", "value": pa.array(["reset"]), "metadata": {}}
+    code, node = run_simulation_node(monkeypatch, ticks(3) + [reset] + ticks(2), node_config=TASK_CONFIG,
+                                     body=simulated_body)
+    assert code == 0
+    assert "object_state" not in node.outputs and "task_status" not in node.outputs
+    assert len(node.outputs["joint_state"]) == 5
+    assert "ignored invalid task_cmd: this body runs no task" in capsys.readouterr().out

@@ -11,7 +11,7 @@ targets the body applies go out on it at the first tick, whenever they change, a
 for a node that joined late. A body running a task (so101.tasks) also publishes, where the dataflow declares them, `object_state`
 each tick (float32, the task's object names in its metadata) and `task_status` (the success
 function's answer, a bool, with the task and seed in its metadata) at the first tick, whenever it
-changes and after each reset; a `task_cmd` (`reset` or `reset SEED`) lays the scene out again and
+changes, after each reset and once a second; a `task_cmd` (`reset` or `reset SEED`) lays the scene out again and
 homes the arm. STOP or Ctrl-C closes the body and ends with 0, as every node's loop
 does (so101/runtime/node_events.py). The real arm differs only where hardware must: it
 starts from where it stands (`start_targets_deg`), a tick whose read failed publishes
@@ -170,6 +170,7 @@ def run_body_node(body: Body, node: Node, settings: NodeSettings, identity: str,
     object_names = ",".join(scene.task.object_state_names) if scene is not None else ""
     last_success: bool | None = None  # None: task_status is due at the next tick
     status_reply_to = ""  # the task_cmd request the next task_status answers
+    status_sent_at_step = 0  # body.steps when task_status last went out
 
     def finish() -> None:  # however the loop ends: the window, the bus let go; the tick log kept
         body.close()
@@ -200,13 +201,15 @@ def run_body_node(body: Body, node: Node, settings: NodeSettings, identity: str,
                         if sends_objects:
                             node.send_output("object_state", pa.array(scene.object_state()), {"names": object_names})
                         success = scene.succeeded()
-                        if success != last_success:
-                            if success:
-                                logger.info(text["succeeded"].format(task=scene.task.name, seed=scene.layout.seed))
-                            if sends_status:
-                                node.send_output("task_status", pa.array([success]), {
-                                    "task": scene.task.name, "seed": scene.layout.seed, "reply_to": status_reply_to})
-                            last_success, status_reply_to = success, ""
+                        if success and success != last_success:
+                            logger.info(text["succeeded"].format(task=scene.task.name, seed=scene.layout.seed))
+                        # Also once a second unchanged, for a prompt that joined late.
+                        if sends_status and (success != last_success
+                                             or body.steps - status_sent_at_step >= target_refresh_steps):
+                            node.send_output("task_status", pa.array([success]), {
+                                "task": scene.task.name, "seed": scene.layout.seed, "reply_to": status_reply_to})
+                            status_sent_at_step = body.steps
+                        last_success, status_reply_to = success, ""
                     if tick_log is not None:
                         tick_log.extend((time.monotonic_ns(), body.steps))
                     if steps_per_image and body.steps >= next_image_step:

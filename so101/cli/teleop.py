@@ -14,6 +14,9 @@ those two values set and the node paths made absolute. The file itself stays as 
 (dataflow_leader.yml's graph, on whichever body `--body` chose): the leader arm drives, and typed
 motion commands take over until the leader moves again.
 
+`--task NAME [--seed N]` puts a task's scene (so101.tasks) on a simulated body's floor: the body
+publishes `object_state` and `task_status`, and the prompt's `reset [SEED]` and `task` talk to it.
+
 `--record DIR` adds the recorder node (and, for a simulation, the camera node that draws its
 pictures) to that copy: the prompt's `record`, `stop`, `discard` and `episodes` then keep
 episodes in DIR as a LeRobot dataset.
@@ -36,7 +39,7 @@ from so101.bodies.registry import BODIES, DEFAULT_BODY, BodyKind, body_node_env
 from so101.dataset.features import DEFAULT_FPS, IMAGE_KEY
 from so101.runtime.dataflow import (
     LEADER_READY_MARKS, LOADED_MARKS, PROMPT_NODE_FILE, ROOT, WEB_VIEW_MARKS, dataflow_copy, with_leader, with_recorder,
-    with_web_view, write_dataflow,
+    with_task, with_web_view, write_dataflow,
 )
 from so101.gui.display import MODES, resolve_mode
 from so101.web.settings import (
@@ -45,6 +48,7 @@ from so101.web.settings import (
 from so101.prompt.join import port_holder
 from so101.runtime.processes import DAEMON_PORT_TAKEN_MARK, alive, descendants, kill_until_gone, stop_process, who_runs
 from so101.cli.argtypes import add_language_option, whole_number
+from so101.tasks import TASKS, parse_seed, task_named
 from so101.runtime.venv import dora_executable, env_with_bin_first
 from so101.runtime.versions import DAEMON_DEFAULT_LOCAL_PORT, dora_version_problem
 
@@ -86,8 +90,34 @@ TEXT = {
 }
 
 
+def _task_name(text: str) -> str:
+    try:
+        return task_named(text).name
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
+
+
+def _seed(text: str) -> int:
+    try:
+        return parse_seed(text)
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
+
+
+def add_task_arguments(parser: argparse.ArgumentParser) -> None:
+    """--task NAME, --seed N: a task's scene on a simulated body's floor."""
+    parser.add_argument(
+        "--task", type=_task_name, metavar="NAME", default=None,
+        help=f"a task's scene on the floor ({', '.join(TASKS)}; --body pybullet or mujoco): the body publishes "
+        "object_state and task_status; at the prompt: reset [SEED], task",
+    )
+    parser.add_argument("--seed", type=_seed, metavar="N", default=None,
+                        help="--task: the first layout's seed, a whole number (default 0); `reset` goes on from it")
+
+
 def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
     add_body_arguments(parser)
+    add_task_arguments(parser)
     add_language_option(parser, "the prompt and the logs")
     parser.add_argument(
         "--record", type=Path, metavar="DIR", default=None,
@@ -280,11 +310,17 @@ def port_held_problem(template: str) -> str | None:
 
 def run(args: argparse.Namespace) -> int:
     text = TEXT[args.lang]
+    problem = task_problem(args, BODIES[args.body])
+    if problem:
+        print(f"so101 teleop: {problem}", file=sys.stderr)
+        return 2
     launch = prepare(args, "teleop")
     if launch is None:
         return 2
     descriptor = dataflow_copy(launch.node_env, launch.body.dataflow_file)
     ready_marks: tuple[tuple[str, ...], ...] = (LOADED_MARKS,)
+    if args.task is not None:
+        with_task(descriptor, launch.body.node_id, args.task, args.seed or 0)
     if args.leader is not None or args.leader_calibration is not None:
         problem = add_leader(descriptor, launch.body, args.leader, args.leader_calibration, args.port, args.lang)
         if problem:
@@ -314,6 +350,16 @@ def run_beside(launch: Launch, descriptor: dict, node_file: Path, text: dict[str
         ready_line = ("ready_leader" if LEADER_READY_MARKS in ready_marks else "ready" if launch.body.simulated
                       else "ready_real")
         return _run_node(dataflow, node_file, launch.env, text, launch.log, ready_line, also_say)
+
+
+def task_problem(args: argparse.Namespace, body: BodyKind) -> str | None:
+    """Why --task and --seed cannot be as given, in one line; None when they can (or are not given)."""
+    if args.task is None:
+        return "--seed goes with --task NAME" if args.seed is not None else None
+    if not body.simulated:
+        return (f"--task {args.task} is for a simulated body (--body pybullet or mujoco): nothing reports where a real "
+                "cube is, so the real arm has no task scene and no object_state")
+    return None
 
 
 def add_leader(descriptor: dict, body: BodyKind, port: str | None, calibration_file: Path | None,

@@ -11,6 +11,8 @@ Beyond the course (its mini project 7, and Cartesian targets):
   jog                      key jogging (so101/prompt/jog.py)
 Episodes, with `so101 teleop --record DIR` (the recorder node answers):
   record TASK TEXT | stop | discard | episodes
+A task's scene, with `so101 teleop --task NAME` (the body answers):
+  reset [SEED] | task
 
 Out-of-limit angles are refused, not clamped: at a keyboard a value beyond the
 URDF limits is far more likely a typo (900 for 90) than a wish for the limit.
@@ -112,6 +114,18 @@ class Episodes:
 
 
 @dataclass(frozen=True)
+class ResetTask:
+    """`reset [SEED]`: the task's scene laid out again (from SEED, or the next seed) and the arm homed."""
+
+    seed: int | None = None
+
+
+@dataclass(frozen=True)
+class ShowTask:
+    """`task`: the task, its seed's layout, where the cube is now, and whether it is in the box."""
+
+
+@dataclass(frozen=True)
 class Help:
     pass
 
@@ -133,7 +147,7 @@ class ParseError:
 
 Command = (
     SetJoint | Batch | Home | ListJoints | ShowState | SavePose | GoPose | ListPoses | Snapshot | MoveTip | Where | JogKeys
-    | Episodes | Help | Quit | Empty
+    | Episodes | ResetTask | ShowTask | Help | Quit | Empty
 )
 
 
@@ -162,7 +176,7 @@ TEXT = {
         "none": "无",
         "bye": "  再见",
         "unknown": "  无法识别 '{text}':可用 '关节号 角度'(如 '0 45')、batch、grip、open、close、home、list、"
-        "state、save、go、poses、snapshot、xyz、where、jog、record、stop、discard、episodes、help、quit(输入 help 查看)",
+        "state、save、go、poses、snapshot、xyz、where、jog、record、stop、discard、episodes、reset、task、help、quit(输入 help 查看)",
         "joint_form": "  格式错误:关节号 角度(如 '0 45'),关节号 0-5(5 = 夹爪)",
         "joint_range": "  关节号范围 0-5(0-4 手臂,5 夹爪),收到 '{text}';格式:关节号 角度(如 '0 45')",
         "bad_angle": "  '{text}' 不是角度:角度是十进制数字,单位度(如 45、-30.5)",
@@ -192,6 +206,18 @@ TEXT = {
         "record_off": "  录制未开启:用 so101 teleop --record 文件夹 启动",
         "recorder_silent": "  录制节点 {seconds:g} 秒内没有回答",
         "body_silent": "  {seconds:.0f} 秒没有收到 joint_state:仿真(或机械臂驱动)、它所在的机器或网络已断开,命令未发送",
+        "reset_form": "  reset 命令格式:reset [种子](种子是 ≥ 0 的整数,如 'reset 7';不写则用下一个种子)",
+        "task_off": "  没有任务:用 so101 teleop --task cube_to_box 启动",
+        "task_silent": "  仿真节点 {seconds:g} 秒内没有回答",
+        "laid_out": "  → 按种子 {seed} 重新摆放,机械臂回零位:{layout}",
+        "layout": "方块在 ({x:.0f}, {y:.0f}) mm,偏航 {yaw:.0f}°;盒子在 ({box_x:.0f}, {box_y:.0f}) mm",
+        "task_line": "  任务 {task},种子 {seed}:{layout}",
+        "cube_now": "  方块现在在 ({x:.0f}, {y:.0f}, {z:.0f}) mm:{verdict}",
+        "in_box": "在盒中",
+        "not_in_box": "不在盒中",
+        "landed_in_box": "  ★ 方块进了盒子(任务 {task},种子 {seed})",
+        "left_box": "  方块离开了盒子(任务 {task},种子 {seed})",
+        "no_task_state": "  还没有收到 object_state(仿真节点在运行吗?)",
         "help": [
             "  命令格式:",
             "    关节号 角度              如 '0 45'(关节号 0-4 手臂,5 夹爪)",
@@ -210,6 +236,8 @@ TEXT = {
             "    record 任务描述          开始录制一段(需 so101 teleop --record 文件夹)",
             "    stop / discard          结束并保存这一段 / 放弃这一段",
             "    episodes                显示已保存的片段",
+            "    reset [种子]             重新摆放任务场景(默认下一个种子),机械臂回零位(需 so101 teleop --task)",
+            "    task                    显示任务、摆放和方块是否在盒中",
             "    help                    显示本帮助",
             "    quit / exit             退出(也可 Ctrl-D、Ctrl-C)",
             "  超出关节限位的角度不会发送(会提示范围)。",
@@ -239,7 +267,7 @@ TEXT = {
         "none": "none",
         "bye": "  bye",
         "unknown": "  cannot read '{text}': use 'JOINT ANGLE' (e.g. '0 45'), batch, grip, open, close, home, list, "
-        "state, save, go, poses, snapshot, xyz, where, jog, record, stop, discard, episodes, help, quit (type help)",
+        "state, save, go, poses, snapshot, xyz, where, jog, record, stop, discard, episodes, reset, task, help, quit (type help)",
         "joint_form": "  format: JOINT ANGLE (e.g. '0 45'), JOINT 0-5 (5 = gripper)",
         "joint_range": "  joints are 0-5 (0-4 arm, 5 gripper), got '{text}'; format: JOINT ANGLE (e.g. '0 45')",
         "bad_angle": "  '{text}' is not an angle: angles are decimal numbers in degrees (e.g. 45, -30.5)",
@@ -273,6 +301,18 @@ TEXT = {
         "recorder_silent": "  the recorder did not answer within {seconds:g} s",
         "body_silent": "  no joint_state for {seconds:.0f} s: the simulation (or the arm's driver), its machine or the network "
         "is gone; not sent",
+        "reset_form": "  reset format: reset [SEED] (a whole number >= 0, e.g. 'reset 7'; without one, the next seed)",
+        "task_off": "  no task: start with so101 teleop --task cube_to_box",
+        "task_silent": "  the simulation did not answer within {seconds:g} s",
+        "laid_out": "  → laid out from seed {seed}, the arm at home: {layout}",
+        "layout": "cube at ({x:.0f}, {y:.0f}) mm, yaw {yaw:.0f}°; box at ({box_x:.0f}, {box_y:.0f}) mm",
+        "task_line": "  task {task}, seed {seed}: {layout}",
+        "cube_now": "  the cube is now at ({x:.0f}, {y:.0f}, {z:.0f}) mm: {verdict}",
+        "in_box": "in the box",
+        "not_in_box": "not in the box",
+        "landed_in_box": "  ★ the cube is in the box (task {task}, seed {seed})",
+        "left_box": "  the cube left the box (task {task}, seed {seed})",
+        "no_task_state": "  no object_state received yet (is the simulation running?)",
         "help": [
             "  commands:",
             "    JOINT ANGLE             e.g. '0 45' (JOINT 0-4 arm, 5 gripper)",
@@ -291,6 +331,8 @@ TEXT = {
             "    record TASK TEXT        start recording an episode (with so101 teleop --record DIR)",
             "    stop / discard          end the episode and save it / drop it",
             "    episodes                list the saved episodes",
+            "    reset [SEED]            lay the task's scene out again (default: the next seed), the arm home (with so101 teleop --task)",
+            "    task                    the task, its layout, and whether the cube is in the box",
             "    help                    this help",
             "    quit / exit             quit (Ctrl-D and Ctrl-C quit too)",
             "  Angles beyond a joint's limits are not sent (the reply gives the range).",
@@ -355,7 +397,7 @@ def _pose_name(command: str, words: list[str], text: dict) -> str | ParseError:
 NO_ARGUMENT_COMMANDS: dict[str, Command] = {
     "home": Home(), "list": ListJoints(), "state": ShowState(), "poses": ListPoses(), "help": Help(), "?": Help(),
     "quit": Quit(), "exit": Quit(), "where": Where(), "jog": JogKeys(),
-    "stop": Episodes("stop"), "discard": Episodes("discard"), "episodes": Episodes("episodes"),
+    "stop": Episodes("stop"), "discard": Episodes("discard"), "episodes": Episodes("episodes"), "task": ShowTask(),
     "open": SetJoint(GRIPPER_COMMAND_INDEX, GRIPPER_OPEN_DEG),
     "close": SetJoint(GRIPPER_COMMAND_INDEX, GRIPPER_CLOSED_DEG),
 }
@@ -380,6 +422,13 @@ def parse_command(line: str, lang: str = "zh") -> Command | ParseError:
         # The task is the rest of the line as typed (commas and spacing are part of a sentence).
         task = " ".join(line.strip()[len(words[0]):].split())
         return Episodes("record", task) if task else ParseError(text["record_form"])
+
+    if keyword == "reset":
+        if len(words) == 1:
+            return ResetTask()
+        if len(words) != 2 or not words[1].isdecimal():  # full-width digits too, as for joints
+            return ParseError(text["reset_form"])
+        return ResetTask(int(words[1]))
 
     if keyword == "batch":
         values = words[1:]

@@ -16,12 +16,14 @@ import time
 from typing import Callable, Sequence
 
 from so101.prompt.commands import (
-    Batch, Empty, Episodes, GoPose, Help, Home, JogKeys, ListJoints, ListPoses, MoveTip, ParseError, Quit, SavePose, SetJoint,
-    ShowState, Snapshot, Where, format_angle, format_angles, help_lines, joint_lines, parse_command, texts,
+    Batch, Empty, Episodes, GoPose, Help, Home, JogKeys, ListJoints, ListPoses, MoveTip, ParseError, Quit, ResetTask, SavePose,
+    SetJoint, ShowState, ShowTask, Snapshot, Where, format_angle, format_angles, help_lines, joint_lines, parse_command, texts,
 )
 from so101.prompt.landing import SettleWatch, worth_saying
 from so101.prompt.poses import Pose, PoseStore
 from so101.prompt.recorder_link import REPLY_WAIT_S, RecorderLink
+from so101.prompt import task_link
+from so101.prompt.task_link import TaskLink, TaskStatus
 from so101.robot import ACTUATED_JOINTS, NUM_ARM_JOINTS
 from so101.runtime.dataflow import ROOT
 
@@ -62,6 +64,8 @@ class KeyboardControl:
         self.news_shown = 0  # lines of news printed while jogging (jog draws its status line again)
         # Prints a line of news at once (the leader's, on `leader_status`); None: nowhere to show it.
         self.show_news: Callable[[str], None] | None = None
+        # The line to a body running a task (`so101 teleop --task`); None: the dataflow runs none.
+        self.task: TaskLink | None = None
 
     # -- events, from the pump thread ----------------------------------------------------
     def on_event(self, event: dict) -> None:
@@ -73,6 +77,12 @@ class KeyboardControl:
             status = event["value"].to_pylist()
             reply_to = str((event.get("metadata") or {}).get("reply_to", ""))
             self.recorder.on_status(str(status[0]) if status else "", reply_to)
+        elif event["type"] == "INPUT" and event["id"] == "task_status" and self.task is not None:
+            values = event["value"].to_pylist()
+            if len(values) == 1:
+                self.task.on_status(bool(values[0]), dict(event.get("metadata") or {}))
+        elif event["type"] == "INPUT" and event["id"] == "object_state" and self.task is not None:
+            self.task.on_objects([float(value) for value in event["value"].to_pylist()])
         elif event["type"] == "INPUT" and event["id"] == "leader_status" and self.show_news is not None:
             for line in event["value"].to_pylist():
                 self.show_news(f"  {line}")
@@ -208,6 +218,10 @@ class KeyboardControl:
             return [self._move_tip(command.target_mm, state_wait_s)], False
         if isinstance(command, Where):
             return [self._where(state_wait_s)], False
+        if isinstance(command, ResetTask):
+            return [self._reset_task(command.seed)], False
+        if isinstance(command, ShowTask):
+            return self._task_lines(), False
         if isinstance(command, JogKeys):
             if self.keys_fd is None:
                 return [text["jog_needs_terminal"]], False
@@ -228,6 +242,41 @@ class KeyboardControl:
         if answer is None:
             return [self.text["recorder_silent"].format(seconds=REPLY_WAIT_S)]
         return [f"  {line}" for line in answer]
+
+    def task_news(self, status: TaskStatus) -> None:
+        """The cube landed in the box, or left it (the task link's on_change, on the pump thread)."""
+        if self.show_news is not None:
+            line = self.text["landed_in_box" if status.success else "left_box"]
+            self.show_news(line.format(task=status.task, seed=status.seed))
+
+    def _layout_text(self, task_name: str, seed: int) -> str:
+        from so101.tasks import task_named
+
+        layout = task_named(task_name).layout(seed)
+        return self.text["layout"].format(
+            x=layout.cube_xyz_m[0] * 1000, y=layout.cube_xyz_m[1] * 1000, yaw=math.degrees(layout.cube_yaw_rad) + 0.0,
+            box_x=layout.box_xyz_m[0] * 1000, box_y=layout.box_xyz_m[1] * 1000)
+
+    def _reset_task(self, seed: int | None) -> str:
+        if self.task is None:
+            return self.text["task_off"]
+        self._landing = None
+        status = self.task.reset(seed)
+        if status is None:
+            return self.text["task_silent"].format(seconds=task_link.REPLY_WAIT_S)
+        return self.text["laid_out"].format(seed=status.seed, layout=self._layout_text(status.task, status.seed))
+
+    def _task_lines(self) -> list[str]:
+        if self.task is None:
+            return [self.text["task_off"]]
+        status, objects = self.task.status, self.task.object_state
+        if status is None or objects is None:
+            return [self.text["no_task_state"]]
+        x, y, z = (value * 1000 + 0.0 for value in objects[0:3])
+        verdict = self.text["in_box" if status.success else "not_in_box"]
+        return [self.text["task_line"].format(task=status.task, seed=status.seed,
+                                              layout=self._layout_text(status.task, status.seed)),
+                self.text["cube_now"].format(x=x, y=y, z=z, verdict=verdict)]
 
     def _batch_line(self, angles_deg: Sequence[float]) -> str:
         arm = format_angles(angles_deg[:NUM_ARM_JOINTS])

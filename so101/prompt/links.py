@@ -1,8 +1,8 @@
 """The prompt's links to the dataflow's other nodes, each where the dataflow declares it.
 
-News (the recorder's, the leader's on `leader_status`, where the tip landed after `xyz`) is
-printed as it comes, between the person's lines; `record_cmd`, where the dataflow has a recorder,
-is the line to it. A command that talks to another node wires its output in `link_other_nodes`,
+News (the recorder's, the leader's on `leader_status`, where the tip landed after `xyz`, the cube
+landing in the box) is printed as it comes, between the person's lines; `record_cmd`, where the
+dataflow has a recorder, is the line to it; `task_cmd`, where the body runs a task, the line to the body. A command that talks to another node wires its output in `link_other_nodes`,
 so nodes/keyboard_control.py stays the course's file.
 """
 
@@ -13,12 +13,14 @@ from typing import Callable
 
 from so101.prompt.control import KeyboardControl
 from so101.prompt.recorder_link import RecorderLink
+from so101.prompt.task_link import TaskLink, TaskStatus
 
 
 def link_other_nodes(control: KeyboardControl, node, interactive: bool) -> None:
     """Gives `control` what the joined `node`'s dataflow offers beyond joint_cmd and the states."""
     control.show_news = news_printer(control, interactive)
     control.recorder = recorder_link(node, control.show_news)
+    control.task = task_link(node, control.task_news)
 
 
 def has_output(node, output_id: str) -> bool:
@@ -59,3 +61,15 @@ def recorder_link(node, show: Callable[[str], None]) -> RecorderLink | None:
         node.send_output("record_cmd", pa.array([record_cmd]), {"request": request})
 
     return RecorderLink(send, show)
+
+
+def task_link(node, on_change: Callable[[TaskStatus], None]) -> TaskLink | None:
+    """The line to a body running a task, where the dataflow has one (`so101 teleop --task`)."""
+    if not has_output(node, "task_cmd"):
+        return None
+    import pyarrow as pa
+
+    def send(task_cmd: str, request: str) -> None:
+        node.send_output("task_cmd", pa.array([task_cmd]), {"request": request})
+
+    return TaskLink(send, on_change)

@@ -207,6 +207,21 @@ def with_leader(descriptor: dict, body_node_id: str, leader_env: dict[str, str],
     return descriptor
 
 
+def with_task(descriptor: dict, body_node_id: str, task_name: str, seed: int) -> dict:
+    """A dataflow (dataflow_copy's dict) whose body runs a task (so101.tasks) from `seed`: it publishes
+    `object_state` and `task_status`, which the prompt hears, and takes `task_cmd` (`reset`) from the prompt."""
+    body = _node(descriptor, body_node_id)
+    body["env"] = {**(body.get("env") or {}), "SO101_TASK": task_name, "SO101_SEED": str(seed)}
+    body["outputs"] = [*body["outputs"], "object_state", "task_status"]
+    body["inputs"] = {**body["inputs"], "task_cmd": {"source": f"{PROMPT_NODE_ID}/task_cmd", "queue_size": 100}}
+    prompt = _node(descriptor, PROMPT_NODE_ID)
+    prompt["outputs"] = [*prompt["outputs"], "task_cmd"]
+    prompt["inputs"] = {**prompt["inputs"],
+                        "task_status": {"source": f"{body_node_id}/task_status", "queue_size": 100},
+                        "object_state": _queued(f"{body_node_id}/object_state", STATE_QUEUE)}
+    return descriptor
+
+
 def with_web_view(descriptor: dict, body_node_id: str, web_env: dict[str, str], root: PurePath = ROOT) -> dict:
     """A dataflow (dataflow_copy's dict) with the web view added: it reads the body's state and, where the
     dataflow has them, the camera's pictures and the recorder's `record_status`."""

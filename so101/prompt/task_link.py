@@ -1,0 +1,59 @@
+"""The prompt's line to a body running a task: `reset` out on `task_cmd`, the body's answer back on
+`task_status` (matched by a request number in the metadata), the latest `object_state` kept for `task`,
+and news when the cube lands in the box or leaves it."""
+
+from __future__ import annotations
+
+import itertools
+import threading
+from dataclasses import dataclass
+from typing import Callable
+
+# The body answers at its next event (a 4 ms tick); this allows for a loaded machine.
+REPLY_WAIT_S = 3.0
+
+
+@dataclass(frozen=True)
+class TaskStatus:
+    task: str
+    seed: int
+    success: bool
+
+
+class TaskLink:
+    """`send(task_cmd text, request id)` sends on `task_cmd`; `on_change(status)` is called (on the pump
+    thread) when success changes other than by a reset: the news to show."""
+
+    def __init__(self, send: Callable[[str, str], None], on_change: Callable[[TaskStatus], None]):
+        self.send = send
+        self.on_change = on_change
+        self._requests = itertools.count(1)
+        self._answers: dict[str, TaskStatus] = {}
+        self._changed = threading.Condition()
+        self.status: TaskStatus | None = None  # the latest task_status
+        self.object_state: tuple[float, ...] | None = None  # the latest object_state
+
+    def reset(self, seed: int | None) -> TaskStatus | None:
+        """Lay the scene out again from `seed` (None: the next one): the body's answer, or None if none
+        came within REPLY_WAIT_S."""
+        request = str(next(self._requests))
+        self.send("reset" if seed is None else f"reset {seed}", request)
+        with self._changed:
+            self._changed.wait_for(lambda: request in self._answers, REPLY_WAIT_S)
+            return self._answers.pop(request, None)
+
+    def on_status(self, success: bool, metadata: dict) -> None:
+        """A `task_status` message (from the pump thread): an answer to a reset, or news."""
+        status = TaskStatus(str(metadata.get("task", "")), int(metadata.get("seed", 0)), bool(success))
+        reply_to = str(metadata.get("reply_to", ""))
+        with self._changed:
+            previous, self.status = self.status, status
+            if reply_to:
+                self._answers[reply_to] = status
+                self._changed.notify_all()
+        if not reply_to and previous is not None and previous.seed == status.seed and previous.success != status.success:
+            self.on_change(status)
+
+    def on_objects(self, values: list[float]) -> None:
+        with self._changed:
+            self.object_state = tuple(values)
