@@ -1,8 +1,9 @@
 """camera: pictures of a simulated arm, drawn in a process of its own.
 
-Each `tick` (the picture rate's timer) draws the latest `joint_state` + `gripper_state` with the
-body's own renderer (PyBullet's or MuJoCo's, SO101_CAMERA_BODY) and publishes it on `image`
-(uint8 RGB, metadata width, height, encoding "rgb8"), when the arm moved since the last one.
+Each `tick` (the picture rate's timer) draws the latest `joint_state` + `gripper_state` (and, with a
+task, its objects where the latest `object_state` puts them) with the body's own renderer (PyBullet's
+or MuJoCo's, SO101_CAMERA_BODY) and publishes it on `image` (uint8 RGB, metadata width, height,
+encoding "rgb8"), when something moved since the last one.
 A picture of this arm takes a CPU renderer tens of milliseconds (`so101 bench` measures it):
 drawn inside the body's physics loop it would hold the loop back, so it is drawn here, below the
 body's priority. The recorder takes the latest picture at each of its frames.
@@ -37,10 +38,18 @@ from so101.runtime.dataflow import TICK_PERIOD_S, timer_period_s  # noqa: E402
 from so101.runtime.logs import send_diagnostics_to  # noqa: E402
 from so101.runtime.node_events import inputs_until_stop  # noqa: E402
 from so101.runtime.processes import yield_cpu_to_the_body  # noqa: E402
+from so101.tasks import task_named  # noqa: E402
 
 NODE_ID = "camera"
 # A pose that moved less than this on every joint since the last picture is not drawn again.
 REDRAW_DEG = 0.05
+# Nor a task's objects that moved less than this, in metres (or quaternion units).
+REDRAW_M = 0.0002
+
+
+def objects_moved(objects: list[float], drawn: list[float]) -> bool:
+    """Whether a task's objects moved by REDRAW_M or more since they were drawn."""
+    return len(objects) != len(drawn) or any(abs(now - then) >= REDRAW_M for now, then in zip(objects, drawn))
 
 
 def stale(stamp: object, period_s: float) -> bool:
@@ -60,7 +69,7 @@ def main() -> int:
         else:
             from so101.bodies.pybullet_sim import SO101Sim as Simulator  # type: ignore[assignment]
         sim = Simulator(mode="direct", time_step_s=TICK_PERIOD_S, assets_dir=settings.assets_dir,
-                        log=lambda line: None)
+                        log=lambda line: None, task=task_named(settings.task) if settings.task else None)
         width, height = settings.image_size or (0, 0)
         sim.render_rgb(width, height)  # a renderer that cannot work says so now, in one line
     except (ValueError, ModelFilesError, DisplayError, RuntimeError) as error:
@@ -69,6 +78,8 @@ def main() -> int:
     arm_deg: list[float] | None = None
     gripper_deg = 0.0
     drawn_deg: np.ndarray | None = None
+    objects: list[float] = []  # the latest object_state (a task's)
+    drawn_objects: list[float] = []
     node = Node()
     period_s = timer_period_s(node.node_config()) or 1.0 / DEFAULT_FPS  # a tick that is no timer: the usual rate
     with inputs_until_stop(node, close=sim.close) as inputs:
@@ -81,15 +92,20 @@ def main() -> int:
                 values = event["value"].to_pylist()
                 if len(values) == 1:
                     gripper_deg = values[0]
+            elif event["id"] == "object_state":
+                objects = event["value"].to_pylist()
             elif event["id"] == "tick" and arm_deg is not None:
                 if stale(event["metadata"].get("timestamp"), period_s):  # waited while drawing: newer states came
                     continue
                 pose_deg = np.array(arm_deg + [gripper_deg])
-                if drawn_deg is not None and np.all(np.abs(pose_deg - drawn_deg) < REDRAW_DEG):
+                if (drawn_deg is not None and np.all(np.abs(pose_deg - drawn_deg) < REDRAW_DEG)
+                        and not objects_moved(objects, drawn_objects)):
                     continue
                 sim.show_pose_deg(pose_deg.tolist())
+                if sim.scene is not None and objects:
+                    sim.scene.show_object_state(objects)
                 rgb = sim.render_rgb(width, height)
-                drawn_deg = pose_deg
+                drawn_deg, drawn_objects = pose_deg, objects
                 node.send_output("image", pa.array(rgb.ravel()), {"width": width, "height": height, "encoding": "rgb8"})
     return 0
 

@@ -2,8 +2,9 @@
 
 Serves a page (so101/web/view.py, with viser) showing the SO-101 from the URDF's meshes, posed
 by the body's `joint_state` and `gripper_state`, with the angles as text and a rolling plot; the
-camera's `image` where the dataflow has one (`--record` on a simulation), and a marker while the
-recorder's `record_status` says an episode is recording. It poses the arm at most REDRAW_HZ
+camera's `image` where the dataflow has one (`--record` on a simulation), a marker while the
+recorder's `record_status` says an episode is recording, and a task's cube and box, posed by the
+body's `object_state` (SO101_TASK names the task). It poses the arm at most REDRAW_HZ
 times a second, whatever the body's rate, and runs below the body's priority: a browser
 closing, reloading or stalling costs the body nothing. Read-only: the page sends nothing into
 the dataflow.
@@ -31,6 +32,7 @@ from so101.robot import NUM_ARM_JOINTS  # noqa: E402
 from so101.runtime.logs import send_diagnostics_to  # noqa: E402
 from so101.runtime.node_events import inputs_until_stop  # noqa: E402
 from so101.runtime.processes import yield_cpu_to_the_body  # noqa: E402
+from so101.tasks import task_named  # noqa: E402
 from so101.web.settings import WebViewSettings, page_address  # noqa: E402
 from so101.web.urdf_scene import load_urdf_scene  # noqa: E402
 from so101.web.view import WebView  # noqa: E402
@@ -64,10 +66,12 @@ def main() -> int:
         view = WebView(scene, settings.host, settings.port)
     except OSError as error:  # the port is taken, or the address is not this machine's
         return cannot_start(OSError(f"cannot serve on {settings.host}:{settings.port}: {error.strerror or error}"), NODE_ID)
+    if settings.task:
+        view.add_task(task_named(settings.task))
     announce(f"web view: {page_address(settings.host, settings.port)}")
     arm_deg: tuple[float, ...] | None = None
     gripper_deg = 0.0
-    shown_at = picture_at = 0.0
+    shown_at = picture_at = objects_at = 0.0
     with inputs_until_stop(Node(), close=view.close) as inputs:
         for event in inputs:
             if event["id"] == "joint_state":
@@ -83,6 +87,12 @@ def main() -> int:
                 if now - picture_at >= 1.0 / PICTURE_HZ and (rgb := picture(event)) is not None:
                     view.show_picture(rgb)
                     picture_at = now
+                continue
+            elif event["id"] == "object_state":
+                now = time.monotonic()
+                if now - objects_at >= 1.0 / REDRAW_HZ:
+                    view.show_objects(event["value"].to_pylist())
+                    objects_at = now
                 continue
             elif event["id"] == "record_status":
                 view.show_recording(recording_from_metadata(event.get("metadata") or {}))

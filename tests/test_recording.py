@@ -396,3 +396,19 @@ def test_encoding_a_video_leaves_no_thread_of_this_process_real_time(tmp_path):
         except ProcessLookupError:
             pass
     assert not set(policies.values()) & {os.SCHED_FIFO, os.SCHED_RR}, policies
+
+
+def test_a_task_adds_its_outputs_to_the_body_its_line_to_the_prompt_and_its_objects_to_the_web_view():
+    from so101.runtime.dataflow import with_task
+
+    descriptor = with_web_view(with_task(dataflow_copy({}), "simulation", "cube_to_box", 5), "simulation",
+                               {"SO101_TASK": "cube_to_box"})
+    nodes = {node["id"]: node for node in descriptor["nodes"]}
+    body, prompt, web = nodes["simulation"], nodes["keyboard_control"], nodes["web_view"]
+    assert body["env"]["SO101_TASK"] == "cube_to_box" and body["env"]["SO101_SEED"] == "5"
+    assert body["outputs"][-2:] == ["object_state", "task_status"]
+    assert body["inputs"]["task_cmd"]["source"] == "keyboard_control/task_cmd"
+    assert prompt["outputs"] == ["joint_cmd", "task_cmd"]
+    assert {prompt["inputs"][name]["source"] for name in ("task_status", "object_state")} == {
+        "simulation/task_status", "simulation/object_state"}
+    assert web["inputs"]["object_state"]["source"] == "simulation/object_state"

@@ -96,3 +96,30 @@ def test_a_connection_closed_before_its_request_is_no_error(caplog):
         view.close()  # safe twice
     errors = [record for record in caplog.records if record.levelno >= logging.ERROR]
     assert errors == [], [record.getMessage() for record in errors]
+
+
+def test_a_tasks_cube_and_box_are_drawn_where_object_state_puts_them():
+    import socket
+
+    from so101.tasks import CUBE_TO_BOX
+
+    with socket.socket() as probe:  # a free port
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    view = WebView(load_urdf_scene(urdf_path(None)), "127.0.0.1", port)
+    try:
+        view.show_objects([0.2, -0.1, 0.0125, 0, 0, 0, 1, 0.16, 0.19, 0])  # no task added: nothing to pose
+        view.add_task(CUBE_TO_BOX)
+        assert not view._cube.visible and not view._box.visible  # until an object_state poses them
+        yaw = np.radians(30)
+        state = [0.2, -0.1, 0.0125, 0, 0, np.sin(yaw / 2), np.cos(yaw / 2), 0.16, 0.19, 0]
+        view.show_objects(state)
+        assert view._cube.visible and view._box.visible
+        assert np.allclose(view._cube.position, state[0:3]) and np.allclose(view._cube.wxyz, [state[6], 0, 0, state[5]])
+        assert np.allclose(view._box.position, state[7:10])
+        view.show_objects([0.2001, *state[1:]])  # a tenth of a millimetre: not sent again
+        assert np.allclose(view._cube.position, state[0:3])
+        view.show_objects([0.25, *state[1:]])
+        assert np.allclose(view._cube.position, [0.25, -0.1, 0.0125])
+    finally:
+        view.close()

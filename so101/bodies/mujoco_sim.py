@@ -88,7 +88,8 @@ class SO101MuJoCo:
         # GUI mode: MuJoCo's viewer in a process of its own, mirroring the angles (so101/gui/mujoco_viewer.py).
         self._window: Window | None = None
         if self.display_mode == "gui":
-            self._window = Window(["so101.gui.mujoco_viewer", "--mjcf", str(mjcf)], on_showing=lambda: log(WINDOW_SHOWING))
+            self._window = Window(["so101.gui.mujoco_viewer", "--mjcf", str(mjcf), *(["--task", task.name] if task else [])],
+                                  on_showing=lambda: log(WINDOW_SHOWING))
         self.set_time_step_s(time_step_s)
         self.set_targets_deg(HOME_POSE_DEG)
         mujoco.mj_forward(self.model, self.data)
@@ -143,7 +144,7 @@ class SO101MuJoCo:
         mujoco.mj_step(self.model, self.data, nstep=count * self.substeps)
         self.steps += count
         if self._window is not None and self._window.due():
-            self._window.show(self.data.qpos[self._qpos])
+            self._window.show(self.data.qpos[self._qpos], None if self.scene is None else self.scene.object_state())
 
     # -- state -----------------------------------------------------------------------
     def joint_angles_deg(self) -> FloatArray:

@@ -175,7 +175,8 @@ class SO101Sim:
         self.robot_id: int = self._load_arm(physics_urdf, assets_dir, with_pads=task is not None)
         self.scene: PyBulletScene | None = None if task is None else PyBulletScene(cid, task, task.layout(seed))
         if self.display_mode == "gui":
-            self._window = Window(["so101.gui.viewer", "--urdf", str(urdf)], on_showing=lambda: log(WINDOW_SHOWING))
+            self._window = Window(["so101.gui.viewer", "--urdf", str(urdf), *(["--task", task.name] if task else [])],
+                                  on_showing=lambda: log(WINDOW_SHOWING))
         self.joints = [self._joint_info(i) for i in range(p.getNumJoints(self.robot_id, physicsClientId=cid))]
         self._indices = [joint.index for joint in ACTUATED_JOINTS]
         if link_damping is not None:
@@ -309,7 +310,7 @@ class SO101Sim:
             self.steps += 1
         if self._window is not None and self._window.due():
             states = p.getJointStates(robot_id, self._indices, physicsClientId=client)
-            self._window.show([state[0] for state in states])
+            self._window.show([state[0] for state in states], None if self.scene is None else self.scene.object_state())
 
     def _send_servo_torques(self) -> None:
         # PyBullet forgets TORQUE_CONTROL torques after each step: they are sent every step.

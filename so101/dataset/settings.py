@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Mapping
 
 from so101.assets import ASSETS_ENV_VAR
-from so101.bodies.settings import read_language
+from so101.bodies.settings import read_language, read_task
 from so101.dataset.features import DEFAULT_FPS
 from so101.lang import DEFAULT_LANGUAGE, ENV_VAR as LANG_ENV_VAR
 from so101.runtime.settings import EnvironSettings, Setting, read_file_path, read_optional_path, read_whole_number, setting
@@ -74,6 +74,8 @@ class CameraSettings(EnvironSettings):
         required="to WIDTHxHEIGHT (e.g. 320x240)")
     assets_dir: Path | None = setting(
         ASSETS_ENV_VAR, "", "where the model is; empty = where `so101 assets` puts it", read_optional_path)
+    task: str = setting("SO101_TASK", "", "the task whose objects the pictures show, posed by `object_state`; empty = none",
+                        read_task)
 
 
 @dataclass(frozen=True)

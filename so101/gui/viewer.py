@@ -10,9 +10,10 @@ The window keeps PyBullet's own camera controls (Ctrl + left drag turns, the whe
 zooms, Ctrl + middle drag pans).
 
 The two processes share one small file, mapped into both: a frame counter, the
-viewer's state, and the six joint angles in radians (so101.robot.ACTUATED_JOINTS order).
+viewer's state, the six joint angles in radians (so101.robot.ACTUATED_JOINTS order) and,
+with a task (`--task NAME`), its objects' poses (so101.tasks' object_state).
 
-    python -m so101.gui.viewer --shared FILE --urdf URDF [--fps N]    (started by `Window`, not by hand)
+    python -m so101.gui.viewer --shared FILE --urdf URDF [--fps N] [--task NAME]    (started by `Window`, not by hand)
 """
 
 from __future__ import annotations
@@ -34,6 +35,7 @@ from so101.bodies.protocol import BodyFailed
 from so101.runtime.dataflow import ROOT
 from so101.runtime.processes import stop_process
 from so101.robot import ACTUATED_JOINTS
+from so101.tasks.cube_to_box import OBJECT_STATE_NAMES
 
 DEFAULT_FPS = 30.0
 # With the arm still and the mouse unused, the window is drawn this seldom; any
@@ -42,10 +44,12 @@ IDLE_PERIOD_S = 0.25
 BUSY_FOR_S = 1.0
 # Slots of the shared file, float64 each.
 FRAME, STATUS, ANGLES = 0, 1, 2
-SLOTS = ANGLES + len(ACTUATED_JOINTS)
+OBJECTS = ANGLES + len(ACTUATED_JOINTS)
+SLOTS = OBJECTS + len(OBJECT_STATE_NAMES)
 STARTING, OPEN, SHOWING = 0.0, 1.0, 2.0  # the window: not yet, open, showing the arm
-# Differences below this are not drawn (a hundredth of a degree).
+# Differences below these are not drawn (a hundredth of a degree; a tenth of a millimetre).
 STILL_RAD = 1.7e-4
+STILL_M = 1e-4
 # The viewer's niceness where SCHED_IDLE is not to be had.
 VIEWER_NICENESS = 19
 # The course's camera: where the window starts.
@@ -97,8 +101,9 @@ class Window:
         """Whether a new frame is due (cheap: the physics asks after every step)."""
         return time.monotonic() >= self._next_frame_s
 
-    def show(self, angles_rad) -> None:
-        """Hand the viewer the latest angles; raises WindowClosed once its process has ended."""
+    def show(self, angles_rad, object_state=None) -> None:
+        """Hand the viewer the latest angles (and a task's object_state, if any); raises WindowClosed
+        once its process has ended."""
         self._next_frame_s = time.monotonic() + self.frame_period_s
         code = self.process.poll()
         if code is not None:
@@ -110,9 +115,13 @@ class Window:
         if not self.showing and self._shared[STATUS] == SHOWING:
             self.showing = True
             self._on_showing()
-        # A new frame only when the arm moved: a still arm costs the viewer nothing.
-        if np.any(np.abs(self._shared[ANGLES:] - angles_rad) > STILL_RAD):
-            self._shared[ANGLES:] = angles_rad
+        # A new frame only when something moved: a still scene costs the viewer nothing.
+        moved = bool(np.any(np.abs(self._shared[ANGLES:OBJECTS] - angles_rad) > STILL_RAD))
+        if object_state is not None and np.any(np.abs(self._shared[OBJECTS:] - object_state) > STILL_M):
+            self._shared[OBJECTS:] = object_state
+            moved = True
+        if moved:
+            self._shared[ANGLES:OBJECTS] = angles_rad
             self._shared[FRAME] += 1
 
     def close(self) -> None:
@@ -166,7 +175,7 @@ def lowest_priority() -> None:
         pass  # not allowed here: the same priority as the physics
 
 
-def run_viewer(shared_path: Path, urdf: Path, fps: float) -> int:
+def run_viewer(shared_path: Path, urdf: Path, fps: float, task_name: str = "") -> int:
     """The viewer process: a GUI client that shows the angles the physics hands it.
 
     The window draws nothing until the arm stands at the physics' angles: drawn while
@@ -199,13 +208,22 @@ def run_viewer(shared_path: Path, urdf: Path, fps: float) -> int:
         # Nothing collides in a mirror: no collision shapes, which are most of the loading time.
         robot_id = p.loadURDF(str(urdf), useFixedBase=True, flags=p.URDF_IGNORE_COLLISION_SHAPES, physicsClientId=client)
         indices = [joint.index for joint in ACTUATED_JOINTS]
+        scene = None
+        if task_name:
+            from so101.tasks import task_named
+            from so101.tasks.pybullet_scene import PyBulletScene
+
+            task = task_named(task_name)
+            scene = PyBulletScene(client, task, task.layout(0))
 
         def pose(slots: np.ndarray) -> float:
-            """The arm at the latest angles in the shared `slots`; returns the frame they belong to."""
+            """The arm (and the task's objects) as the shared `slots` have them; returns the frame they belong to."""
             frame = slots[FRAME]  # before the angles: the physics writes them, then counts the frame
             p.resetJointStatesMultiDof(
-                robot_id, indices, [[angle] for angle in slots[ANGLES:].tolist()], physicsClientId=client,
+                robot_id, indices, [[angle] for angle in slots[ANGLES:OBJECTS].tolist()], physicsClientId=client,
             )
+            if scene is not None:
+                scene.show_object_state(slots[OBJECTS:].tolist())
             return frame
 
         shown_frame = pose(shared)
@@ -234,13 +252,14 @@ def run_viewer(shared_path: Path, urdf: Path, fps: float) -> int:
 
 
 def viewer_main(argv: list[str] | None, module: str, description: str, model_option: str, run) -> int:
-    """The command line of a viewer process: `python -m MODULE --shared FILE --MODEL PATH [--fps N]`."""
+    """The command line of a viewer process: `python -m MODULE --shared FILE --MODEL PATH [--fps N] [--task NAME]`."""
     parser = argparse.ArgumentParser(prog=f"python -m {module}", description=description)
     parser.add_argument("--shared", type=Path, required=True, help="the file the physics writes the angles to")
     parser.add_argument(f"--{model_option}", type=Path, required=True, help="the arm's model file")
     parser.add_argument("--fps", type=float, default=DEFAULT_FPS, help=f"frames per second at most (default {DEFAULT_FPS:g})")
+    parser.add_argument("--task", default="", help="a task's objects to show too (so101.tasks), posed from the shared file")
     args = parser.parse_args(argv)
-    return run(args.shared, getattr(args, model_option), args.fps)
+    return run(args.shared, getattr(args, model_option), args.fps, args.task)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -165,14 +165,17 @@ def with_recorder(descriptor: dict, body_node_id: str, recorder_env: dict[str, s
     }
     if camera_env is not None:
         recorder_inputs["image"] = _queued("camera/image", TICK_QUEUE)
+        camera_inputs = {
+            "tick": _queued(f"dora/timer/millis/{max(1, round(1000 / picture_hz))}", TICK_QUEUE),
+            "joint_state": _queued(f"{body_node_id}/joint_state", STATE_QUEUE),
+            "gripper_state": _queued(f"{body_node_id}/gripper_state", STATE_QUEUE),
+        }
+        if "object_state" in body["outputs"]:  # a task's objects are in the pictures too
+            camera_inputs["object_state"] = _queued(f"{body_node_id}/object_state", STATE_QUEUE)
+            camera_env = {**camera_env, "SO101_TASK": body["env"]["SO101_TASK"]}
         descriptor["nodes"].append({
             "id": "camera", "path": str(root / CAMERA_NODE_FILE.relative_to(ROOT)), "restart_policy": "never",
-            "inputs": {
-                "tick": _queued(f"dora/timer/millis/{max(1, round(1000 / picture_hz))}", TICK_QUEUE),
-                "joint_state": _queued(f"{body_node_id}/joint_state", STATE_QUEUE),
-                "gripper_state": _queued(f"{body_node_id}/gripper_state", STATE_QUEUE),
-            },
-            "outputs": ["image"], "env": camera_env,
+            "inputs": camera_inputs, "outputs": ["image"], "env": camera_env,
         })
     descriptor["nodes"].append({
         "id": "recorder", "path": str(root / RECORDER_NODE_FILE.relative_to(ROOT)), "restart_policy": "never",
@@ -224,7 +227,8 @@ def with_task(descriptor: dict, body_node_id: str, task_name: str, seed: int) ->
 
 def with_web_view(descriptor: dict, body_node_id: str, web_env: dict[str, str], root: PurePath = ROOT) -> dict:
     """A dataflow (dataflow_copy's dict) with the web view added: it reads the body's state and, where the
-    dataflow has them, the camera's pictures and the recorder's `record_status`."""
+    dataflow has them, the camera's pictures, the recorder's `record_status` and a task's `object_state`
+    (the caller gives SO101_TASK in `web_env`)."""
     inputs = {
         "joint_state": _queued(f"{body_node_id}/joint_state", STATE_QUEUE),
         "gripper_state": _queued(f"{body_node_id}/gripper_state", STATE_QUEUE),
@@ -234,6 +238,8 @@ def with_web_view(descriptor: dict, body_node_id: str, web_env: dict[str, str], 
         inputs["image"] = _queued("camera/image", TICK_QUEUE)
     if "recorder" in node_ids:
         inputs["record_status"] = {"source": "recorder/record_status", "queue_size": 100}
+    if "object_state" in _node(descriptor, body_node_id)["outputs"]:
+        inputs["object_state"] = _queued(f"{body_node_id}/object_state", STATE_QUEUE)
     descriptor["nodes"].append({
         "id": WEB_VIEW_NODE_ID, "path": str(root / WEB_VIEW_NODE_FILE.relative_to(ROOT)), "restart_policy": "never",
         "inputs": inputs, "env": web_env,

@@ -6,7 +6,7 @@ and switches the jaw pads on (so101.bodies.jaw_pads); `MuJoCoScene` lays them ou
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Sequence
 
 import numpy as np
 import numpy.typing as npt
@@ -69,6 +69,15 @@ class MuJoCoScene:
         self.data.qpos[self._cube_qpos:self._cube_qpos + 7] = [*layout.cube_xyz_m, qw, qx, qy, qz]
         self.data.qvel[self._cube_qvel:self._cube_qvel + 6] = 0.0
         mujoco.mj_forward(self.model, self.data)
+
+    def show_object_state(self, state: Sequence[float]) -> None:
+        """Put the objects where an object_state says, for drawing (the caller runs mj_kinematics). An
+        object_state of zeros (none came yet: no quaternion) leaves them where they are."""
+        if not any(state[3:7]):
+            return
+        x, y, z, qx, qy, qz, qw, box_x, box_y, box_z = (float(value) for value in state[:10])
+        self.data.qpos[self._cube_qpos:self._cube_qpos + 7] = [x, y, z, qw, qx, qy, qz]
+        self.model.body_pos[self._box_body] = (box_x, box_y, box_z)
 
     def object_state(self) -> npt.NDArray[np.float32]:
         """The cube's centre and quaternion (x y z w) and the box's position: OBJECT_STATE_NAMES' order."""

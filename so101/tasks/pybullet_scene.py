@@ -6,6 +6,8 @@ task, on its own client, and loads the arm with the jaw pads (so101.bodies.jaw_p
 
 from __future__ import annotations
 
+from typing import Sequence
+
 import numpy as np
 import numpy.typing as npt
 import pybullet as p
@@ -52,6 +54,15 @@ class PyBulletScene:
         p.resetBasePositionAndOrientation(self.cube_id, list(layout.cube_xyz_m), list(layout.cube_quat_xyzw()),
                                           physicsClientId=self.client)
         p.resetBaseVelocity(self.cube_id, [0, 0, 0], [0, 0, 0], physicsClientId=self.client)
+
+    def show_object_state(self, state: Sequence[float]) -> None:
+        """Put the objects where an object_state says, without physics: a scene to draw (a window, a camera).
+        An object_state of zeros (none came yet: no quaternion) leaves them where they are."""
+        if not any(state[3:7]):
+            return
+        values = [float(value) for value in state]
+        p.resetBasePositionAndOrientation(self.cube_id, values[0:3], values[3:7], physicsClientId=self.client)
+        p.resetBasePositionAndOrientation(self.box_id, values[7:10], [0, 0, 0, 1], physicsClientId=self.client)
 
     def object_state(self) -> npt.NDArray[np.float32]:
         """The cube's centre and quaternion (x y z w) and the box's position: OBJECT_STATE_NAMES' order."""

@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Mapping
 
 from so101.assets import ASSETS_ENV_VAR
+from so101.bodies.settings import read_task
 from so101.runtime.settings import EnvironSettings, Setting, read_optional_path, read_stripped_text, setting
 
 DEFAULT_HOST = "127.0.0.1"  # this machine only: anyone who can reach the port sees the arm
@@ -34,5 +35,7 @@ class WebViewSettings(EnvironSettings):
     host: str = setting("SO101_WEB_HOST", DEFAULT_HOST,
                         "the address the page is served on; 127.0.0.1 = this machine only", read_stripped_text)
     port: int = setting("SO101_WEB_PORT", str(DEFAULT_PORT), "the page's TCP port", read_port)
+    task: str = setting("SO101_TASK", "", "the task whose objects the page draws, posed by `object_state`; empty = none",
+                        read_task)
     assets_dir: Path | None = setting(
         ASSETS_ENV_VAR, "", "where the model is; empty = where `so101 assets` puts it", read_optional_path)

@@ -24,6 +24,7 @@ import viser
 from viser import uplot
 
 from so101.robot import ACTUATED_JOINTS
+from so101.tasks.cube_to_box import CubeToBox
 from so101.web.urdf_scene import UrdfScene
 
 # The rolling plot: this many seconds, one point per pose shown, redrawn this often.
@@ -36,6 +37,13 @@ ANGLE_TEXT_TITLE = "**Joint angles**"
 PLOT_COLOURS = ("#e6194b", "#3cb44b", "#4363d8", "#f58231", "#911eb4", "#42d4f4")
 CAMERA_POSITION = (0.55, -0.45, 0.40)
 CAMERA_LOOK_AT = (0.10, 0.0, 0.15)
+# A task's object that moved less than this since the pages last drew it is not sent again.
+MOVED_M = 0.0002
+
+
+def rgb255(rgba: Sequence[float]) -> tuple[int, int, int]:
+    red, green, blue = (round(component * 255) for component in rgba[:3])
+    return red, green, blue
 
 
 def recording_html(recording: tuple[int, str] | None) -> str:
@@ -78,10 +86,12 @@ class WebView:
                 scene.link_path(joint.child), show_axes=False, position=joint.xyz, wxyz=joint.rotation(0.0))
         for number, visual in enumerate(scene.visuals):
             mesh = trimesh.load_mesh(visual.mesh_file)
-            red, green, blue = (round(component * 255) for component in visual.rgba[:3])
             server.scene.add_mesh_simple(
                 f"{scene.link_path(visual.link)}/visual_{number}", np.asarray(mesh.vertices, dtype=np.float32),
-                np.asarray(mesh.faces, dtype=np.uint32), color=(red, green, blue), position=visual.xyz, wxyz=visual.wxyz)
+                np.asarray(mesh.faces, dtype=np.uint32), color=rgb255(visual.rgba), position=visual.xyz, wxyz=visual.wxyz)
+        self._cube: viser.BoxHandle | None = None
+        self._box: viser.FrameHandle | None = None
+        self._shown_objects: npt.NDArray[np.float64] | None = None
         self._recording = server.gui.add_html("", visible=False)
         self._angles = server.gui.add_markdown(angles_markdown([0.0] * len(ACTUATED_JOINTS)))
         self._started = time.monotonic()
@@ -124,6 +134,33 @@ class WebView:
             if now - self._plotted_at >= 1.0 / PLOT_HZ:
                 self._plot.data = self._plot_data()
                 self._plotted_at = now
+
+    def add_task(self, task: CubeToBox) -> None:
+        """A task's cube and box on the floor, hidden until `show_objects` poses them."""
+        if self.server is None:
+            return
+        scene = self.server.scene
+        self._box = scene.add_frame("/box", show_axes=False, visible=False)
+        for number, (centre, half_extents) in enumerate(task.box.plates()):
+            scene.add_box(f"/box/plate_{number}", color=rgb255(task.box.rgba),
+                          dimensions=np.multiply(2, half_extents), position=centre)
+        size = 2 * task.cube.half_size_m
+        self._cube = scene.add_box("/cube", color=rgb255(task.cube.rgba), dimensions=(size, size, size), visible=False)
+
+    def show_objects(self, object_state: Sequence[float]) -> None:
+        """The task's objects posed as an object_state has them (the cube's centre and x y z w quaternion,
+        the box's position); only when they moved."""
+        if self.server is None or self._cube is None or self._box is None:
+            return
+        state = np.asarray(object_state[:10], dtype=np.float64)
+        if self._shown_objects is not None and np.all(np.abs(state - self._shown_objects) < MOVED_M):
+            return
+        x, y, z, qx, qy, qz, qw, box_x, box_y, box_z = state.tolist()
+        with self.server.atomic():
+            self._cube.position, self._cube.wxyz = (x, y, z), (qw, qx, qy, qz)
+            self._box.position = (box_x, box_y, box_z)
+            self._cube.visible = self._box.visible = True
+        self._shown_objects = state
 
     def show_recording(self, recording: tuple[int, str] | None) -> None:
         """The recording marker at the panel's top: (episode, task) while one records, None to hide it."""
