@@ -3,7 +3,8 @@
 `so101 teleop --record DIR` adds this node. Each `tick` (a 5 ms timer) adds the frames due at
 the dataset's rate, each with the latest `joint_state` + `gripper_state` (observation.state),
 `joint_target` (action: what the body was told) and `image` (the camera node's picture, stored
-as video); `record_cmd` messages from the prompt start, stop, discard and list episodes, and
+as video), and with a task (SO101_TASK) its `object_state` (observation.environment_state) and
+`task_status` (next.success, and next.reward from it); `record_cmd` messages from the prompt start, stop, discard and list episodes, and
 each gets its reply on `record_status`, whose metadata also says which episode is recording (the
 web view's marker). Saving runs in the background. STOP saves an episode
 still recording. What it does is so101/dataset/recording.py; the files, writer.py there.
@@ -36,6 +37,7 @@ from so101.dataset.settings import RecorderSettings  # noqa: E402
 from so101.dataset.writer import DatasetWriter  # noqa: E402
 from so101.runtime.logs import send_diagnostics_to  # noqa: E402
 from so101.runtime.processes import yield_cpu_to_the_body  # noqa: E402
+from so101.tasks import task_named  # noqa: E402
 
 NODE_ID = "recorder"
 logger = logging.getLogger("so101.recorder")
@@ -59,7 +61,9 @@ def main() -> int:
         settings = RecorderSettings.from_environ(os.environ)
         # Opened before joining: a folder that is not this dataset stops the node in one line.
         video_sizes = {IMAGE_KEY: settings.image_size} if settings.image_size else {}
-        writer = DatasetWriter.open(settings.root, settings.fps, video_sizes)
+        task = task_named(settings.task) if settings.task else None
+        writer = DatasetWriter.open(settings.root, settings.fps, video_sizes,
+                                    environment_names=task.object_state_names if task else ())
     except (ValueError, DatasetError) as error:
         return cannot_start(error, NODE_ID)
     yield_cpu_to_the_body()
@@ -69,7 +73,7 @@ def main() -> int:
                                        "(empty it to record without video)"), NODE_ID)
     reports: queue.Queue[str] = queue.Queue()  # lines from the save thread, sent from this one
     recording = Recording(writer, str(settings.root), settings.fps, settings.lang,
-                          needs_image=settings.image_size is not None, say=reports.put)
+                          needs_image=settings.image_size is not None, say=reports.put, task=task)
 
     def send_status(lines: list[str], reply_to: str | None = None) -> None:
         for line in lines:
@@ -91,6 +95,12 @@ def main() -> int:
                     recording.on_gripper_state(event["value"].to_pylist())
                 elif name == "joint_target":
                     recording.on_joint_target(event["value"].to_pylist())
+                elif name == "object_state":
+                    recording.on_object_state(event["value"].to_pylist())
+                elif name == "task_status":
+                    values = event["value"].to_pylist()
+                    if len(values) == 1:
+                        recording.on_task_status(bool(values[0]))
                 elif name == "image" and settings.image_size:
                     rgb = picture(event, settings.image_size)
                     if rgb is not None:

@@ -125,7 +125,7 @@ def column(table: pa.Table, name: str) -> np.ndarray:
     values = table.column(name).combine_chunks()
     if pa.types.is_fixed_size_list(values.type):
         return values.flatten().to_numpy().reshape(len(values), values.type.list_size)
-    return values.to_numpy()
+    return values.to_numpy(zero_copy_only=False)  # bools are bits in Arrow: copied out
 
 
 def decode_episode(root: Path, row: dict) -> list[tuple[float, np.ndarray]]:
@@ -947,3 +947,42 @@ def test_cli_errors_are_one_line(recorded: Path, tmp_path: Path, capsys: pytest.
     assert dataset_cli.run(args) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.startswith("so101 dataset: ") and expected in err
+
+
+def test_a_tasks_episodes_carry_the_environment_state_reward_and_success(tmp_path: Path) -> None:
+    from so101.dataset.features import ENVIRONMENT_KEY, REWARD_KEY, SUCCESS_KEY
+    from so101.tasks import CUBE_TO_BOX
+
+    names = CUBE_TO_BOX.object_state_names
+    root = tmp_path / "task"
+    with DatasetWriter.open(root, FPS, {}, environment_names=names) as writer:
+        episode = writer.start_episode("put the cube in the box")
+        for i in range(40):
+            done = i >= 30
+            episode.add_frame({**frame(0, i, video=False), ENVIRONMENT_KEY: np.full(len(names), i, np.float32),
+                               REWARD_KEY: np.array([float(done)], np.float32), SUCCESS_KEY: np.array([done])})
+        episode.save()
+    features = read_json(root / "meta/info.json")["features"]
+    assert list(features)[:5] == [ACTION_KEY, STATE_KEY, ENVIRONMENT_KEY, REWARD_KEY, SUCCESS_KEY]
+    assert features[ENVIRONMENT_KEY] == {"dtype": "float32", "shape": [10], "names": list(names)}
+    assert features[REWARD_KEY] == {"dtype": "float32", "shape": [1], "names": None}
+    assert features[SUCCESS_KEY] == {"dtype": "bool", "shape": [1], "names": None}
+    table = data_table(root)
+    assert table.schema.field(SUCCESS_KEY).type == pa.bool_() and table.schema.field(REWARD_KEY).type == pa.float32()
+    assert column(table, SUCCESS_KEY).tolist() == [False] * 30 + [True] * 10
+    assert column(table, ENVIRONMENT_KEY)[39].tolist() == [39.0] * 10
+    row = episode_rows(root)[0]
+    assert row[f"stats/{SUCCESS_KEY}/min"] == [False] and row[f"stats/{SUCCESS_KEY}/max"] == [True]
+    assert row[f"stats/{SUCCESS_KEY}/mean"] == [0.25] and row[f"stats/{REWARD_KEY}/max"] == [1.0]
+    stats = read_json(root / "meta/stats.json")
+    assert stats[SUCCESS_KEY]["min"] == [False] and stats[ENVIRONMENT_KEY]["max"] == [39.0] * 10
+    read_back = Dataset.open(root).episode_frames(0)
+    assert read_back[SUCCESS_KEY].ravel().tolist() == [False] * 30 + [True] * 10
+    assert read_back[ENVIRONMENT_KEY].shape == (40, 10)
+    # A task's dataset takes only a task's episodes, and the other way round: one line each.
+    with pytest.raises(DatasetError, match=r"holds a task's episodes .*: record them with --task$"):
+        DatasetWriter.open(root, FPS, {})
+    plain = tmp_path / "plain"
+    record(plain, [("pick", 3)], video=False)
+    with pytest.raises(DatasetError, match=r"holds episodes without a task: record a task's episodes \(--task\) in another folder$"):
+        DatasetWriter.open(plain, FPS, {}, environment_names=names)

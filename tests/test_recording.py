@@ -75,6 +75,7 @@ class FakeEpisode:
 
     def add_frame(self, frame):
         self.rows.append((frame[STATE_KEY].copy(), frame[ACTION_KEY].copy(), frame.get(IMAGE_KEY)))
+        self.frames_given = getattr(self, "frames_given", []) + [frame]
 
     def save(self):
         self.release.wait(5)
@@ -106,11 +107,11 @@ class Clock:
         return self.now_s
 
 
-def recording(needs_image=False, lang="en"):
+def recording(needs_image=False, lang="en", task=None):
     said: list[str] = []
     clock = Clock()
     writer = FakeWriter()
-    return Recording(writer, "/data/set", 30, lang, needs_image, said.append, clock), writer, clock, said
+    return Recording(writer, "/data/set", 30, lang, needs_image, said.append, clock, task), writer, clock, said
 
 
 def feed(rec, clock, seconds, arm=(10.0, 20.0, 30.0, 40.0, 50.0), gripper=45.0):
@@ -412,3 +413,44 @@ def test_a_task_adds_its_outputs_to_the_body_its_line_to_the_prompt_and_its_obje
     assert {prompt["inputs"][name]["source"] for name in ("task_status", "object_state")} == {
         "simulation/task_status", "simulation/object_state"}
     assert web["inputs"]["object_state"]["source"] == "simulation/object_state"
+
+
+
+def test_a_tasks_frames_hold_its_objects_reward_and_success_from_the_first_object_state_on():
+    from so101.dataset.features import ENVIRONMENT_KEY, REWARD_KEY, SUCCESS_KEY
+    from so101.tasks import CUBE_TO_BOX
+
+    rec, writer, clock, said = recording(task=CUBE_TO_BOX)
+    record_for(rec, clock, "put the cube in the box", 0.2)
+    assert rec.episode.frames == 0  # no object_state yet: no frame
+    objects = [0.2, -0.1, 0.0125, 0, 0, 0, 1, 0.16, 0.19, 0]
+    rec.on_object_state(objects[:9])  # not this task's: ignored
+    feed(rec, clock, 0.1)
+    assert rec.episode.frames == 0
+    rec.on_object_state(objects)
+    feed(rec, clock, 0.5)
+    rec.on_task_status(True)
+    rec.on_object_state([0.16, 0.19, 0.0175, 0, 0, 0, 1, 0.16, 0.19, 0])
+    feed(rec, clock, 0.2)
+    frames = rec.episode.frames_given
+    first, last = frames[0], frames[-1]
+    assert first[ENVIRONMENT_KEY].dtype == np.float32 and np.allclose(first[ENVIRONMENT_KEY], objects)
+    assert first[REWARD_KEY].tolist() == [0.0] and first[SUCCESS_KEY].tolist() == [False]
+    assert last[REWARD_KEY].dtype == np.float32 and last[REWARD_KEY].tolist() == [1.0]
+    assert last[SUCCESS_KEY].dtype == np.bool_ and last[SUCCESS_KEY].tolist() == [True]
+    assert np.allclose(last[ENVIRONMENT_KEY][0:3], [0.16, 0.19, 0.0175])
+    assert 20 <= len(frames) <= 22  # 0.7 s at 30 fps, counted from the first object_state
+
+
+def test_record_with_a_task_gives_the_recorder_the_bodys_objects_and_success():
+    from so101.runtime.dataflow import with_task
+
+    descriptor = with_recorder(with_task(dataflow_copy({}), "simulation", "cube_to_box", 0), "simulation",
+                               {"SO101_RECORD_DIR": "/d"}, {"SO101_CAMERA_BODY": "mujoco"}, 30)
+    nodes = {node["id"]: node for node in descriptor["nodes"]}
+    recorder, camera = nodes["recorder"], nodes["camera"]
+    assert recorder["inputs"]["object_state"]["source"] == "simulation/object_state"
+    assert recorder["inputs"]["task_status"]["source"] == "simulation/task_status"
+    assert recorder["env"] == {"SO101_RECORD_DIR": "/d", "SO101_TASK": "cube_to_box"}
+    assert camera["inputs"]["object_state"]["source"] == "simulation/object_state"
+    assert camera["env"] == {"SO101_CAMERA_BODY": "mujoco", "SO101_TASK": "cube_to_box"}

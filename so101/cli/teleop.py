@@ -329,7 +329,8 @@ def run(args: argparse.Namespace) -> int:
             return 2
         ready_marks += (LEADER_READY_MARKS,)
     if args.record is not None:
-        problem = add_recorder(descriptor, launch.body, args.record.expanduser().resolve(), args.fps, args.lang)
+        problem = add_recorder(descriptor, launch.body, args.record.expanduser().resolve(), args.fps, args.lang,
+                               args.task)
         if problem:
             print(f"so101 teleop: {problem}", file=sys.stderr)
             return 2
@@ -384,7 +385,8 @@ def add_leader(descriptor: dict, body: BodyKind, port: str | None, calibration_f
     return None
 
 
-def add_recorder(descriptor: dict, body: BodyKind, dataset_dir: Path, fps: int, lang: str) -> str | None:
+def add_recorder(descriptor: dict, body: BodyKind, dataset_dir: Path, fps: int, lang: str,
+                 task: str | None = None) -> str | None:
     """The recorder (and a simulation's camera) added to `descriptor`; or why DIR cannot take
     these episodes, in one line, before anything starts."""
     from so101.bodies.node_loop import IMAGE_SIZE
@@ -393,7 +395,8 @@ def add_recorder(descriptor: dict, body: BodyKind, dataset_dir: Path, fps: int, 
 
     image_size = IMAGE_SIZE if body.simulated else None  # the real arm has no camera of its own
     try:  # checked now, and let go: the recorder node opens it again
-        DatasetWriter.open(dataset_dir, fps, {IMAGE_KEY: image_size} if image_size else {}).close()
+        DatasetWriter.open(dataset_dir, fps, {IMAGE_KEY: image_size} if image_size else {},
+                           environment_names=task_named(task).object_state_names if task else ()).close()
     except DatasetError as error:
         return str(error)
     size_text = f"{image_size[0]}x{image_size[1]}" if image_size else ""

@@ -21,6 +21,11 @@ MOTOR_NAMES: tuple[str, ...] = tuple(f"{joint.name}.pos" for joint in ACTUATED_J
 STATE_KEY = "observation.state"
 ACTION_KEY = "action"
 IMAGE_KEY = "observation.images.front"
+# A task's frames (so101.tasks), named as LeRobot's simulation datasets name them: the objects'
+# poses (object_state), whether the task is done after this frame's action, and its reward.
+ENVIRONMENT_KEY = "observation.environment_state"
+REWARD_KEY = "next.reward"
+SUCCESS_KEY = "next.success"
 # LeRobot's gripper range, and the URDF's in degrees: its limits, -0.174533 and 1.74533 rad, are
 # these to within 0.00002°; mapped on the round values, fully open (100°) is exactly 100.
 GRIPPER_RANGE = (0.0, 100.0)

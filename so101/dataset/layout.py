@@ -23,13 +23,13 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from so101.dataset.features import ACTION_KEY, MOTOR_NAMES, STATE_KEY
+from so101.dataset.features import ACTION_KEY, ENVIRONMENT_KEY, MOTOR_NAMES, REWARD_KEY, STATE_KEY, SUCCESS_KEY
 from so101.dataset.stats import STAT_KEYS
 
 CODEBASE_VERSION = "v3.0"
@@ -70,16 +70,25 @@ class EpisodeSummary:
     duration_s: float
 
 
-def recorder_features(video_sizes: Mapping[str, tuple[int, int]]) -> dict[str, dict[str, Any]]:
+def recorder_features(video_sizes: Mapping[str, tuple[int, int]],
+                      environment_names: Sequence[str] = ()) -> dict[str, dict[str, Any]]:
     """The features a DatasetWriter writes, in LeRobot's order: ours, then LeRobot's defaults.
 
-    video_sizes: each video feature's (width, height), e.g. {IMAGE_KEY: (320, 240)}; {} for none."""
+    video_sizes: each video feature's (width, height), e.g. {IMAGE_KEY: (320, 240)}; {} for none.
+    environment_names: a task's object_state names (so101.tasks); with them, a frame also holds
+    the environment state, the reward and success, as LeRobot's simulation datasets do."""
     features: dict[str, dict[str, Any]] = {
         ACTION_KEY: {"dtype": "float32", "shape": [len(MOTOR_NAMES)], "names": list(MOTOR_NAMES)},
         STATE_KEY: {"dtype": "float32", "shape": [len(MOTOR_NAMES)], "names": list(MOTOR_NAMES)},
     }
+    if environment_names:
+        features[ENVIRONMENT_KEY] = {"dtype": "float32", "shape": [len(environment_names)],
+                                     "names": list(environment_names)}
     for key, (width, height) in video_sizes.items():
         features[key] = {"dtype": "video", "shape": [height, width, 3], "names": ["height", "width", "channels"]}
+    if environment_names:
+        features[REWARD_KEY] = {"dtype": "float32", "shape": [1], "names": None}
+        features[SUCCESS_KEY] = {"dtype": "bool", "shape": [1], "names": None}
     return {**features, **json.loads(json.dumps(DEFAULT_FEATURES))}
 
 
@@ -220,6 +229,7 @@ def episode_row_schema(features: dict[str, dict[str, Any]]) -> pa.Schema:
     for key, feature in features.items():
         is_image = feature["dtype"] in ("video", "image")
         is_int = not is_image and np.issubdtype(np.dtype(feature["dtype"]), np.integer)
+        is_bool = feature["dtype"] == "bool"
         for stat in STAT_KEYS:
             if stat == "count":
                 fields.append((f"stats/{key}/{stat}", pa.list_(pa.int64())))
@@ -227,6 +237,8 @@ def episode_row_schema(features: dict[str, dict[str, Any]]) -> pa.Schema:
                 fields.append((f"stats/{key}/{stat}", pa.list_(pa.list_(pa.list_(pa.float64())))))
             elif is_int and stat in ("min", "max"):
                 fields.append((f"stats/{key}/{stat}", pa.list_(pa.int64())))
+            elif is_bool and stat in ("min", "max"):  # numpy's min and max of bools are bools
+                fields.append((f"stats/{key}/{stat}", pa.list_(pa.bool_())))
             else:
                 fields.append((f"stats/{key}/{stat}", pa.list_(pa.float64())))
     fields += [("meta/episodes/chunk_index", pa.int64()), ("meta/episodes/file_index", pa.int64())]

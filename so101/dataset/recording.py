@@ -2,8 +2,8 @@
 prompt's commands, and save episodes in the background.
 
 The node (nodes/recorder.py) hands `Recording` the body's latest `joint_state`, `gripper_state`
-and `joint_target`, the camera's latest `image`, the prompt's `record_cmd` messages and the
-time at each of its ticks; `Recording` says what to reply. Each frame samples the latest state
+and `joint_target` (and, with a task, `object_state` and `task_status`), the camera's latest
+`image`, the prompt's `record_cmd` messages and the time at each of its ticks; `Recording` says what to reply. Each frame samples the latest state
 and target at the frame's tick; its timestamp is frame_index / fps (LeRobot's rule), so a
 recorder that fell behind adds the frames it owes, each with the latest sample, and the episode
 keeps the wall clock's length. Saving runs in a thread: the recorder goes on answering and
@@ -19,9 +19,10 @@ from typing import Any, Callable, Mapping, Protocol, Sequence
 import numpy as np
 import numpy.typing as npt
 
-from so101.dataset.features import ACTION_KEY, IMAGE_KEY, STATE_KEY, to_lerobot
+from so101.dataset.features import ACTION_KEY, ENVIRONMENT_KEY, IMAGE_KEY, REWARD_KEY, STATE_KEY, SUCCESS_KEY, to_lerobot
 from so101.dataset.messages import COMMANDS, RecordCommand
 from so101.robot import ACTUATED_JOINTS, NUM_ARM_JOINTS
+from so101.tasks.cube_to_box import CubeToBox
 
 # A recorder that stalled longer than this many frames (a suspended laptop) starts counting
 # afresh rather than fill the gap with copies of one sample.
@@ -113,10 +114,12 @@ class Recording:
 
     `say(line)` reports what happens later (a save that ended); commands return their replies.
     `needs_image`: the dataset has video, so a frame waits for the first picture.
+    `task`: the body runs this task (so101.tasks), so a frame holds its objects' poses, its reward
+    and whether it succeeded, and waits for the first object_state.
     """
 
     def __init__(self, writer: Writer, root: str, fps: int, lang: str, needs_image: bool,
-                 say: Callable[[str], None], clock: Callable[[], float] = time.monotonic):
+                 say: Callable[[str], None], clock: Callable[[], float] = time.monotonic, task: CubeToBox | None = None):
         self.writer, self.root, self.fps = writer, root, fps
         self.text = TEXT[lang]
         self.needs_image = needs_image
@@ -126,6 +129,9 @@ class Recording:
         self.gripper_deg: float | None = None
         self.targets_deg: tuple[float, ...] | None = None
         self.image: npt.NDArray[np.uint8] | None = None
+        self.task = task
+        self.object_state: npt.NDArray[np.float32] | None = None
+        self.success = False
         self.episode: Episode | None = None
         self.episode_index = 0  # the index of the episode recording (or of the next one)
         self._frame_clock: FrameClock | None = None
@@ -150,6 +156,13 @@ class Recording:
     def on_image(self, rgb: npt.NDArray[np.uint8]) -> None:
         self.image = rgb
 
+    def on_object_state(self, values: Sequence[float]) -> None:
+        if self.task is not None and len(values) == len(self.task.object_state_names):
+            self.object_state = np.array(values, dtype=np.float32)
+
+    def on_task_status(self, success: bool) -> None:
+        self.success = bool(success)
+
     def state_deg(self) -> tuple[float, ...] | None:
         if self.arm_deg is None or self.gripper_deg is None:
             return None
@@ -161,7 +174,7 @@ class Recording:
         if self.episode is None:
             return 0
         state = self.state_deg()
-        if state is None or (self.needs_image and self.image is None):
+        if state is None or (self.needs_image and self.image is None) or (self.task is not None and self.object_state is None):
             return 0
         now_s = self.clock()
         if self._frame_clock is None:  # the first frame: everything it needs has come
@@ -173,6 +186,10 @@ class Recording:
                                      ACTION_KEY: to_lerobot(self.targets_deg if self.targets_deg is not None else state)}
             if self.needs_image:
                 frame[IMAGE_KEY] = self.image
+            if self.task is not None:
+                frame[ENVIRONMENT_KEY] = self.object_state
+                frame[REWARD_KEY] = np.array([self.task.reward(self.success)], dtype=np.float32)
+                frame[SUCCESS_KEY] = np.array([self.success])
             for _ in range(due):
                 self.episode.add_frame(frame)
         return due

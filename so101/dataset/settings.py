@@ -61,6 +61,9 @@ class RecorderSettings(EnvironSettings):
         "WIDTHxHEIGHT of the `image` input's pictures, stored as video; empty = no video (the `image` input unconnected)",
         read_image_size)
     lang: str = setting(LANG_ENV_VAR, DEFAULT_LANGUAGE, "reply language, `zh` or `en`", read_language)
+    task: str = setting(
+        "SO101_TASK", "", "the body's task: frames also hold its `object_state`, reward and success; empty = none",
+        read_task)
 
 
 @dataclass(frozen=True)

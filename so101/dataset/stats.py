@@ -69,6 +69,8 @@ def _quantiles(column: np.ndarray, weights: np.ndarray | None = None) -> list[fl
 
     `column` keeps its dtype (float32 actions give float32 bin edges, as in LeRobot); `weights`
     counts each value's occurrences (the image histograms)."""
+    if column.dtype == np.bool_:  # what np.histogram would make of it, said here rather than warned about
+        column = column.astype(np.uint8)
     if weights is None:
         low, high, total = column.min(), column.max(), len(column)
     else:

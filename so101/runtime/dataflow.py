@@ -163,6 +163,10 @@ def with_recorder(descriptor: dict, body_node_id: str, recorder_env: dict[str, s
         # Every command must arrive: the default queue keeps 10.
         "record_cmd": {"source": f"{PROMPT_NODE_ID}/record_cmd", "queue_size": 100},
     }
+    if "object_state" in body["outputs"]:  # a task's: the frames hold its objects, reward and success
+        recorder_inputs["object_state"] = _queued(f"{body_node_id}/object_state", STATE_QUEUE)
+        recorder_inputs["task_status"] = {"source": f"{body_node_id}/task_status", "queue_size": 100}
+        recorder_env = {**recorder_env, "SO101_TASK": body["env"]["SO101_TASK"]}
     if camera_env is not None:
         recorder_inputs["image"] = _queued("camera/image", TICK_QUEUE)
         camera_inputs = {
