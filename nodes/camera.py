@@ -3,7 +3,8 @@
 Each `tick` (the picture rate's timer) draws the latest `joint_state` + `gripper_state` (and, with a
 task, its objects where the latest `object_state` puts them) with the body's own renderer (PyBullet's
 or MuJoCo's, SO101_CAMERA_BODY) and publishes it on `image` (uint8 RGB, metadata width, height,
-encoding "rgb8"), when something moved since the last one.
+encoding "rgb8"), when something moved since the last one; with a task, the wrist camera's
+picture too, on `wrist_image`.
 A picture of this arm takes a CPU renderer tens of milliseconds (`so101 bench` measures it):
 drawn inside the body's physics loop it would hold the loop back, so it is drawn here, below the
 body's priority. The recorder takes the latest picture at each of its frames.
@@ -29,6 +30,7 @@ import pyarrow as pa  # noqa: E402
 from dora import Node  # noqa: E402
 
 from so101.assets import ModelFilesError  # noqa: E402
+from so101.bodies.camera import WRIST_CAMERA  # noqa: E402
 from so101.bodies.node_loop import cannot_start  # noqa: E402
 from so101.dataset.features import DEFAULT_FPS  # noqa: E402
 from so101.dataset.settings import CameraSettings  # noqa: E402
@@ -107,6 +109,10 @@ def main() -> int:
                 rgb = sim.render_rgb(width, height)
                 drawn_deg, drawn_objects = pose_deg, objects
                 node.send_output("image", pa.array(rgb.ravel()), {"width": width, "height": height, "encoding": "rgb8"})
+                if sim.scene is not None:
+                    wrist = sim.render_rgb(width, height, WRIST_CAMERA)
+                    node.send_output("wrist_image", pa.array(wrist.ravel()),
+                                     {"width": width, "height": height, "encoding": "rgb8"})
     return 0
 
 

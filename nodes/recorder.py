@@ -3,7 +3,7 @@
 `so101 teleop --record DIR` adds this node. Each `tick` (a 5 ms timer) adds the frames due at
 the dataset's rate, each with the latest `joint_state` + `gripper_state` (observation.state),
 `joint_target` (action: what the body was told) and `image` (the camera node's picture, stored
-as video), and with a task (SO101_TASK) its `object_state` (observation.environment_state) and
+as video; with a task, `wrist_image` too), and with a task (SO101_TASK) its `object_state` (observation.environment_state) and
 `task_status` (next.success, and next.reward from it); `record_cmd` messages from the prompt start, stop, discard and list episodes, and
 each gets its reply on `record_status`, whose metadata also says which episode is recording (the
 web view's marker). Saving runs in the background. STOP saves an episode
@@ -29,7 +29,7 @@ import pyarrow as pa  # noqa: E402
 from dora import Node  # noqa: E402
 
 from so101.bodies.node_loop import cannot_start  # noqa: E402
-from so101.dataset.features import IMAGE_KEY  # noqa: E402
+from so101.dataset.features import video_keys_and_sizes  # noqa: E402
 from so101.dataset.layout import DatasetError  # noqa: E402
 from so101.dataset.messages import decode_record_cmd, recording_metadata  # noqa: E402
 from so101.dataset.recording import Recording  # noqa: E402
@@ -60,8 +60,8 @@ def main() -> int:
     try:
         settings = RecorderSettings.from_environ(os.environ)
         # Opened before joining: a folder that is not this dataset stops the node in one line.
-        video_sizes = {IMAGE_KEY: settings.image_size} if settings.image_size else {}
         task = task_named(settings.task) if settings.task else None
+        video_sizes = video_keys_and_sizes(settings.image_size, task is not None)
         writer = DatasetWriter.open(settings.root, settings.fps, video_sizes,
                                     environment_names=task.object_state_names if task else ())
     except (ValueError, DatasetError) as error:
@@ -105,6 +105,10 @@ def main() -> int:
                     rgb = picture(event, settings.image_size)
                     if rgb is not None:
                         recording.on_image(rgb)
+                elif name == "wrist_image" and settings.image_size:
+                    rgb = picture(event, settings.image_size)
+                    if rgb is not None:
+                        recording.on_wrist_image(rgb)
                 elif name == "record_cmd":
                     texts = event["value"].to_pylist()
                     reply_to = (event.get("metadata") or {}).get("request", "")

@@ -303,12 +303,14 @@ class Kinematics:
         orientation: the errors say how near it came. The starts are tried as `solve` tries them
         (`seed_deg`, default home, first), until one comes within EXACT_MM and 0.1°."""
         import numpy as np
-        from mujoco import mju_mat2Quat  # a well-kept matrix-to-quaternion; PyBullet has none
+        # MuJoCo's matrix-to-quaternion (PyBullet has none); mujoco_model first: it chooses MuJoCo's OpenGL back end.
+        import so101.bodies.mujoco_model  # noqa: F401
+        import mujoco
 
         target_m = [coordinate / 1000.0 for coordinate in point_mm(target_mm)]
         matrix = np.asarray(rotation, dtype=np.float64).reshape(3, 3)
         wxyz = np.zeros(4)
-        mju_mat2Quat(wxyz, matrix.ravel())
+        mujoco.mju_mat2Quat(wxyz, matrix.ravel())
         quat_xyzw = [wxyz[1], wxyz[2], wxyz[3], wxyz[0]]
         seed = arm_angles_deg(seed_deg) if seed_deg is not None else (0.0,) * NUM_ARM_JOINTS
         p = self._p

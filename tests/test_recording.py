@@ -421,6 +421,7 @@ def test_a_tasks_frames_hold_its_objects_reward_and_success_from_the_first_objec
     from so101.tasks import CUBE_TO_BOX
 
     rec, writer, clock, said = recording(task=CUBE_TO_BOX)
+    assert not rec.needs_wrist_image  # no video: no wrist picture either
     record_for(rec, clock, "put the cube in the box", 0.2)
     assert rec.episode.frames == 0  # no object_state yet: no frame
     objects = [0.2, -0.1, 0.0125, 0, 0, 0, 1, 0.16, 0.19, 0]
@@ -454,3 +455,23 @@ def test_record_with_a_task_gives_the_recorder_the_bodys_objects_and_success():
     assert recorder["env"] == {"SO101_RECORD_DIR": "/d", "SO101_TASK": "cube_to_box"}
     assert camera["inputs"]["object_state"]["source"] == "simulation/object_state"
     assert camera["env"] == {"SO101_CAMERA_BODY": "mujoco", "SO101_TASK": "cube_to_box"}
+    assert camera["outputs"] == ["image", "wrist_image"]
+    assert recorder["inputs"]["wrist_image"]["source"] == "camera/wrist_image"
+
+
+
+def test_a_tasks_frames_with_video_wait_for_both_cameras():
+    from so101.dataset.features import WRIST_IMAGE_KEY
+    from so101.tasks import CUBE_TO_BOX
+
+    rec, writer, clock, said = recording(needs_image=True, task=CUBE_TO_BOX)
+    rec.on_object_state([0.2, -0.1, 0.0125, 0, 0, 0, 1, 0.16, 0.19, 0])
+    front = np.zeros((240, 320, 3), np.uint8)
+    wrist = np.full((240, 320, 3), 7, np.uint8)
+    rec.on_image(front)
+    record_for(rec, clock, "put the cube in the box", 0.2)
+    assert rec.episode.frames == 0  # the wrist camera has not drawn yet
+    rec.on_wrist_image(wrist)
+    feed(rec, clock, 0.2)
+    assert rec.episode.frames > 0
+    assert rec.episode.frames_given[0][WRIST_IMAGE_KEY] is wrist and rec.episode.frames_given[0][IMAGE_KEY] is front

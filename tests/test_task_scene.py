@@ -136,3 +136,32 @@ def test_each_pads_inner_face_looks_at_the_other_pad():
     between = centres["moving_jaw_pad"] - centres["fixed_jaw_pad"]
     assert np.dot(axes["fixed_jaw_pad"] * INNER_FACE_SIGN["fixed_jaw_pad"], between) > 0.99 * np.linalg.norm(between)
     assert np.dot(axes["moving_jaw_pad"] * INNER_FACE_SIGN["moving_jaw_pad"], -between) > 0.99 * np.linalg.norm(between)
+
+
+def test_the_wrist_camera_sees_the_cube_between_the_jaws_alike_on_both_simulators(grasp):
+    from so101.bodies.camera import WRIST_CAMERA
+
+    layout = Layout(0, (0.2, -0.05, CUBE_TO_BOX.cube.half_size_m), 0.3, (*CUBE_TO_BOX.box.xy_m, 0.0))
+    above = grasp.pose(np.array(layout.cube_xyz_m) + [0, 0, 0.05], layout.cube_yaw_rad)
+    centres = {}
+    for body_name in SIMULATED_BODIES:
+        sim = BODIES[body_name].body_class()(mode="direct", log=lambda line: None, task=CUBE_TO_BOX)
+        with sim:
+            sim.scene.lay_out(layout)
+            sim.show_pose_deg([*above.arm_deg, 35.0])
+            rgb = sim.render_rgb(160, 120, WRIST_CAMERA).astype(int)
+        red = (rgb[..., 0] > 150) & (rgb[..., 1] < 90) & (rgb[..., 2] < 90)  # the cube's colour, lit or shaded
+        assert red.sum() > 30, f"{body_name}: the cube is not in the wrist camera's picture"
+        rows, columns = np.nonzero(red)
+        centres[body_name] = (rows.mean(), columns.mean())
+    (row_a, column_a), (row_b, column_b) = centres.values()
+    assert abs(row_a - row_b) < 6 and abs(column_a - column_b) < 6, centres  # pixels, of 160x120
+
+
+def test_the_wrist_camera_is_a_tasks():
+    from so101.bodies.camera import WRIST_CAMERA
+
+    for body_name in SIMULATED_BODIES:
+        with BODIES[body_name].body_class()(mode="direct", log=lambda line: None) as sim:
+            with pytest.raises(ValueError, match="the wrist camera is a task's"):
+                sim.render_rgb(64, 48, WRIST_CAMERA)

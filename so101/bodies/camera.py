@@ -1,4 +1,5 @@
-"""The camera for headless pictures (`so101 snapshot`, the simulation's `image` output).
+"""The cameras for headless pictures: the orbiting one (`so101 snapshot`, the simulation's `image`
+output, a task's front view) and the one on the gripper (a task's wrist view).
 
 Apart from the simulator so that `so101 snapshot --help` can show its defaults without
 loading PyBullet.
@@ -20,6 +21,18 @@ class Camera:
     fov_deg: float = 50.0
 
 
+@dataclass(frozen=True)
+class WristCamera:
+    """A camera fixed to the gripper: beside the jaws, 6 cm out to their side, looking at the point
+    between their tips, the moving jaw at the picture's top. In the frame of the URDF's
+    `gripper_link` (the MJCF's body `gripper`, the same frame), metres."""
+
+    eye_m: tuple[float, float, float] = (0.012, 0.06, -0.015)
+    target_m: tuple[float, float, float] = (0.012, 0.0, -0.10)
+    up: tuple[float, float, float] = (1.0, 0.0, 0.0)
+    fov_deg: float = 70.0
+
+
 def check_picture(renders: bool, width: int, height: int) -> None:
     """What every body refuses before drawing: no renderer (made with renders=False), or no pixels."""
     if not renders:
@@ -31,3 +44,5 @@ def check_picture(renders: bool, width: int, height: int) -> None:
 # Frames the whole arm from the front-right and a little above, whether it reaches
 # along +x (home) or is panned ±90° toward ∓y.
 DEFAULT_CAMERA = Camera()
+# What a task's episodes see from the gripper (observation.images.wrist).
+WRIST_CAMERA = WristCamera()

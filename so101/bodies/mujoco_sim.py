@@ -18,7 +18,7 @@ import numpy as np
 import numpy.typing as npt
 
 from so101 import assets
-from so101.bodies.camera import DEFAULT_CAMERA, Camera, check_picture
+from so101.bodies.camera import DEFAULT_CAMERA, Camera, WristCamera, check_picture
 from so101.bodies.mujoco_model import collision_hulls, scene_model
 from so101.bodies.protocol import BodyName, RgbImage
 from so101.bodies.settings import MuJoCoSettings, NodeSettings
@@ -28,7 +28,7 @@ from so101.runtime.dataflow import TICK_PERIOD_S
 from so101.gui.viewer import WINDOW_SHOWING, Window
 from so101.tasks import task_named
 from so101.tasks.cube_to_box import CubeToBox
-from so101.tasks.mujoco_scene import MuJoCoScene
+from so101.tasks.mujoco_scene import WRIST_CAMERA_NAME, MuJoCoScene
 
 import mujoco  # after so101.bodies.mujoco_model, which chooses its OpenGL back end
 
@@ -163,10 +163,14 @@ class SO101MuJoCo:
         """Put the joints at these six angles at once, without physics: a pose to draw (the camera node)."""
         self.data.qpos[self._qpos] = np.radians(goal_deg(angles_deg))
         mujoco.mj_kinematics(self.model, self.data)
+        mujoco.mj_camlight(self.model, self.data)  # the cameras fixed to bodies (a task's wrist camera) follow
 
-    def render_rgb(self, width: int = 640, height: int = 480, camera: Camera = DEFAULT_CAMERA) -> RgbImage:
-        """The scene as an RGB image, uint8 of shape (height, width, 3), drawn offscreen."""
+    def render_rgb(self, width: int = 640, height: int = 480, camera: Camera | WristCamera = DEFAULT_CAMERA) -> RgbImage:
+        """The scene as an RGB image, uint8 of shape (height, width, 3), drawn offscreen from `camera`
+        (the orbiting one, or the one on the gripper: a task's scene has it)."""
         check_picture(self.renders, width, height)
+        if isinstance(camera, WristCamera) and self.scene is None:
+            raise ValueError("the wrist camera is a task's: start the simulation with a task")
         if self._renderer is None or (self._renderer.width, self._renderer.height) != (width, height):
             self._close_renderer()
             self.model.vis.global_.offwidth = max(self.model.vis.global_.offwidth, width)
@@ -178,6 +182,9 @@ class SO101MuJoCo:
                     f"MuJoCo cannot draw offscreen ({type(error).__name__}: {error}); "
                     f"without a display it needs EGL: apt-get install {EGL_PACKAGES}"
                 ) from None
+        if isinstance(camera, WristCamera):
+            self._renderer.update_scene(self.data, WRIST_CAMERA_NAME)
+            return np.array(self._renderer.render(), dtype=np.uint8)
         view = mujoco.MjvCamera()
         view.lookat[:] = camera.target_xyz_m
         view.distance = camera.distance_m

@@ -20,7 +20,7 @@ import pybullet_data
 
 from so101 import assets
 from so101.bodies import pybullet_hulls
-from so101.bodies.camera import DEFAULT_CAMERA, Camera, check_picture
+from so101.bodies.camera import DEFAULT_CAMERA, Camera, WristCamera, check_picture
 from so101.bodies.jaw_pads import jaw_pads, urdf_with_pads
 from so101.bodies.protocol import BodyName, RgbImage
 from so101.bodies.settings import NodeSettings, PyBulletSettings, check_control_mode
@@ -351,18 +351,30 @@ class SO101Sim:
         for joint_index, angle_rad in zip(self._indices, np.radians(goal_deg(angles_deg)).tolist()):
             p.resetJointState(self.robot_id, joint_index, angle_rad, physicsClientId=self.client)
 
-    def render_rgb(self, width: int = 640, height: int = 480, camera: Camera = DEFAULT_CAMERA) -> RgbImage:
-        """The scene as an RGB image, uint8 of shape (height, width, 3).
+    def render_rgb(self, width: int = 640, height: int = 480, camera: Camera | WristCamera = DEFAULT_CAMERA) -> RgbImage:
+        """The scene as an RGB image, uint8 of shape (height, width, 3), from `camera` (the orbiting
+        one, or the one on the gripper).
 
         Uses the CPU renderer (ER_TINY_RENDERER), so it works in DIRECT mode with no
         display or GPU.
         """
         check_picture(self.renders, width, height)
-        view = p.computeViewMatrixFromYawPitchRoll(
-            cameraTargetPosition=list(camera.target_xyz_m), distance=camera.distance_m,
-            yaw=camera.yaw_deg, pitch=camera.pitch_deg, roll=0.0, upAxisIndex=2,
-            physicsClientId=self.client,
-        )
+        if isinstance(camera, WristCamera):
+            if self.scene is None:  # as in MuJoCo, whose scene gets the camera with the task
+                raise ValueError("the wrist camera is a task's: start the simulation with a task")
+            state = p.getLinkState(self.robot_id, GRIPPER_LINK_INDEX, computeForwardKinematics=True,
+                                   physicsClientId=self.client)
+            origin = np.asarray(state[4])
+            rotation = np.asarray(p.getMatrixFromQuaternion(state[5])).reshape(3, 3)
+            view = p.computeViewMatrix(
+                (origin + rotation @ camera.eye_m).tolist(), (origin + rotation @ camera.target_m).tolist(),
+                (rotation @ camera.up).tolist(), physicsClientId=self.client)
+        else:
+            view = p.computeViewMatrixFromYawPitchRoll(
+                cameraTargetPosition=list(camera.target_xyz_m), distance=camera.distance_m,
+                yaw=camera.yaw_deg, pitch=camera.pitch_deg, roll=0.0, upAxisIndex=2,
+                physicsClientId=self.client,
+            )
         projection = p.computeProjectionMatrixFOV(
             fov=camera.fov_deg, aspect=width / height, nearVal=0.01, farVal=10.0, physicsClientId=self.client,
         )

@@ -36,7 +36,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from so101.bodies.registry import BODIES, DEFAULT_BODY, BodyKind, body_node_env
-from so101.dataset.features import DEFAULT_FPS, IMAGE_KEY
+from so101.dataset.features import DEFAULT_FPS, video_keys_and_sizes
 from so101.runtime.dataflow import (
     LEADER_READY_MARKS, LOADED_MARKS, PROMPT_NODE_FILE, ROOT, WEB_VIEW_MARKS, dataflow_copy, with_leader, with_recorder,
     with_task, with_web_view, write_dataflow,
@@ -395,7 +395,7 @@ def add_recorder(descriptor: dict, body: BodyKind, dataset_dir: Path, fps: int, 
 
     image_size = IMAGE_SIZE if body.simulated else None  # the real arm has no camera of its own
     try:  # checked now, and let go: the recorder node opens it again
-        DatasetWriter.open(dataset_dir, fps, {IMAGE_KEY: image_size} if image_size else {},
+        DatasetWriter.open(dataset_dir, fps, video_keys_and_sizes(image_size, task is not None),
                            environment_names=task_named(task).object_state_names if task else ()).close()
     except DatasetError as error:
         return str(error)

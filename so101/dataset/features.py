@@ -21,6 +21,8 @@ MOTOR_NAMES: tuple[str, ...] = tuple(f"{joint.name}.pos" for joint in ACTUATED_J
 STATE_KEY = "observation.state"
 ACTION_KEY = "action"
 IMAGE_KEY = "observation.images.front"
+# A task's episodes also see from the gripper (so101.bodies.camera.WRIST_CAMERA).
+WRIST_IMAGE_KEY = "observation.images.wrist"
 # A task's frames (so101.tasks), named as LeRobot's simulation datasets name them: the objects'
 # poses (object_state), whether the task is done after this frame's action, and its reward.
 ENVIRONMENT_KEY = "observation.environment_state"
@@ -55,3 +57,11 @@ def from_lerobot(values: Sequence[float] | npt.NDArray[np.floating]) -> Float64A
         raise ValueError(f"expected {len(ACTUATED_JOINTS)} values per frame, got shape {angles.shape}")
     angles[..., GRIPPER_COMMAND_INDEX] = GRIPPER_DEG_RANGE[0] + (angles[..., GRIPPER_COMMAND_INDEX] - GRIPPER_RANGE[0]) / _gripper_scale()
     return angles
+
+
+def video_keys_and_sizes(image_size: tuple[int, int] | None, task: bool) -> dict[str, tuple[int, int]]:
+    """The videos an episode holds, each with its (width, height): the front camera's where there
+    are pictures, and with a task the wrist camera's too, the same size; {} without pictures."""
+    if image_size is None:
+        return {}
+    return {IMAGE_KEY: image_size, **({WRIST_IMAGE_KEY: image_size} if task else {})}

@@ -19,7 +19,9 @@ from typing import Any, Callable, Mapping, Protocol, Sequence
 import numpy as np
 import numpy.typing as npt
 
-from so101.dataset.features import ACTION_KEY, ENVIRONMENT_KEY, IMAGE_KEY, REWARD_KEY, STATE_KEY, SUCCESS_KEY, to_lerobot
+from so101.dataset.features import (
+    ACTION_KEY, ENVIRONMENT_KEY, IMAGE_KEY, REWARD_KEY, STATE_KEY, SUCCESS_KEY, WRIST_IMAGE_KEY, to_lerobot,
+)
 from so101.dataset.messages import COMMANDS, RecordCommand
 from so101.robot import ACTUATED_JOINTS, NUM_ARM_JOINTS
 from so101.tasks.cube_to_box import CubeToBox
@@ -115,7 +117,8 @@ class Recording:
     `say(line)` reports what happens later (a save that ended); commands return their replies.
     `needs_image`: the dataset has video, so a frame waits for the first picture.
     `task`: the body runs this task (so101.tasks), so a frame holds its objects' poses, its reward
-    and whether it succeeded, and waits for the first object_state.
+    and whether it succeeded, and waits for the first object_state; with video, the wrist camera's
+    picture too, and it waits for the first of those.
     """
 
     def __init__(self, writer: Writer, root: str, fps: int, lang: str, needs_image: bool,
@@ -131,6 +134,8 @@ class Recording:
         self.image: npt.NDArray[np.uint8] | None = None
         self.task = task
         self.object_state: npt.NDArray[np.float32] | None = None
+        self.wrist_image: npt.NDArray[np.uint8] | None = None
+        self.needs_wrist_image = needs_image and task is not None
         self.success = False
         self.episode: Episode | None = None
         self.episode_index = 0  # the index of the episode recording (or of the next one)
@@ -156,6 +161,9 @@ class Recording:
     def on_image(self, rgb: npt.NDArray[np.uint8]) -> None:
         self.image = rgb
 
+    def on_wrist_image(self, rgb: npt.NDArray[np.uint8]) -> None:
+        self.wrist_image = rgb
+
     def on_object_state(self, values: Sequence[float]) -> None:
         if self.task is not None and len(values) == len(self.task.object_state_names):
             self.object_state = np.array(values, dtype=np.float32)
@@ -174,7 +182,9 @@ class Recording:
         if self.episode is None:
             return 0
         state = self.state_deg()
-        if state is None or (self.needs_image and self.image is None) or (self.task is not None and self.object_state is None):
+        if (state is None or (self.needs_image and self.image is None)
+                or (self.needs_wrist_image and self.wrist_image is None)
+                or (self.task is not None and self.object_state is None)):
             return 0
         now_s = self.clock()
         if self._frame_clock is None:  # the first frame: everything it needs has come
@@ -186,6 +196,8 @@ class Recording:
                                      ACTION_KEY: to_lerobot(self.targets_deg if self.targets_deg is not None else state)}
             if self.needs_image:
                 frame[IMAGE_KEY] = self.image
+            if self.needs_wrist_image:
+                frame[WRIST_IMAGE_KEY] = self.wrist_image
             if self.task is not None:
                 frame[ENVIRONMENT_KEY] = self.object_state
                 frame[REWARD_KEY] = np.array([self.task.reward(self.success)], dtype=np.float32)

@@ -174,12 +174,15 @@ def with_recorder(descriptor: dict, body_node_id: str, recorder_env: dict[str, s
             "joint_state": _queued(f"{body_node_id}/joint_state", STATE_QUEUE),
             "gripper_state": _queued(f"{body_node_id}/gripper_state", STATE_QUEUE),
         }
-        if "object_state" in body["outputs"]:  # a task's objects are in the pictures too
+        camera_outputs = ["image"]
+        if "object_state" in body["outputs"]:  # a task's objects are in the pictures, and the wrist camera's too
             camera_inputs["object_state"] = _queued(f"{body_node_id}/object_state", STATE_QUEUE)
             camera_env = {**camera_env, "SO101_TASK": body["env"]["SO101_TASK"]}
+            camera_outputs.append("wrist_image")
+            recorder_inputs["wrist_image"] = _queued("camera/wrist_image", TICK_QUEUE)
         descriptor["nodes"].append({
             "id": "camera", "path": str(root / CAMERA_NODE_FILE.relative_to(ROOT)), "restart_policy": "never",
-            "inputs": camera_inputs, "outputs": ["image"], "env": camera_env,
+            "inputs": camera_inputs, "outputs": camera_outputs, "env": camera_env,
         })
     descriptor["nodes"].append({
         "id": "recorder", "path": str(root / RECORDER_NODE_FILE.relative_to(ROOT)), "restart_policy": "never",

@@ -12,6 +12,7 @@ import numpy as np
 import numpy.typing as npt
 
 from so101.bodies import mujoco_model  # noqa: F401  (first: it chooses MuJoCo's OpenGL back end)
+from so101.bodies.camera import WRIST_CAMERA, WristCamera
 from so101.bodies.jaw_pads import JawPad
 from so101.tasks.cube_to_box import CubeToBox, Layout
 
@@ -19,6 +20,8 @@ import mujoco  # noqa: E402
 
 CUBE_BODY = "cube"
 BOX_BODY = "box"
+WRIST_CAMERA_NAME = "wrist"
+GRIPPER_BODY = "gripper"  # the MJCF's; its frame is the URDF's gripper_link
 # MuJoCo's rolling and torsional friction coefficients beside the sliding one (its defaults).
 SPIN_ROLL_FRICTION = (0.005, 0.0001)
 NOSLIP_ITERATIONS = 3
@@ -35,6 +38,7 @@ def add_to_spec(spec: Any, task: CubeToBox, pads: tuple[JawPad, ...]) -> None:
         if geom.name in by_name:
             geom.contype, geom.conaffinity = 1, 1
             geom.pos, geom.size = list(by_name[geom.name].pos_m), list(by_name[geom.name].half_size_m)
+    add_wrist_camera(spec, WRIST_CAMERA)
     cube = task.cube
     cube_body = spec.worldbody.add_body(name=CUBE_BODY, pos=[0, 0, cube.half_size_m])
     cube_body.add_freejoint(name=CUBE_BODY)
@@ -48,6 +52,19 @@ def add_to_spec(spec: Any, task: CubeToBox, pads: tuple[JawPad, ...]) -> None:
             name=f"{BOX_BODY}_{index}", type=mujoco.mjtGeom.mjGEOM_BOX, pos=list(centre), size=list(half_extents),
             rgba=list(task.box.rgba), friction=[task.box.friction, *SPIN_ROLL_FRICTION],
         )
+
+
+def add_wrist_camera(spec: Any, camera: WristCamera) -> None:
+    """`camera` as a camera of the gripper's body (MuJoCo's look along their -z, their +y up)."""
+    eye, target, up = (np.asarray(vector, dtype=np.float64) for vector in (camera.eye_m, camera.target_m, camera.up))
+    backward = (eye - target) / np.linalg.norm(eye - target)
+    right = np.cross(up, backward)
+    right /= np.linalg.norm(right)
+    rotation = np.column_stack([right, np.cross(backward, right), backward])
+    quat = np.zeros(4)
+    mujoco.mju_mat2Quat(quat, rotation.ravel())
+    gripper = spec.body(GRIPPER_BODY)
+    gripper.add_camera(name=WRIST_CAMERA_NAME, pos=eye.tolist(), quat=quat.tolist(), fovy=camera.fov_deg)
 
 
 class MuJoCoScene:
