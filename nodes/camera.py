@@ -80,7 +80,7 @@ def main() -> int:
     arm_deg: list[float] | None = None
     gripper_deg = 0.0
     drawn_deg: np.ndarray | None = None
-    objects: list[float] = []  # the latest object_state (a task's)
+    objects_value = None  # the latest object_state (a task's), as it came
     drawn_objects: list[float] = []
     node = Node()
     period_s = timer_period_s(node.node_config()) or 1.0 / DEFAULT_FPS  # a tick that is no timer: the usual rate
@@ -95,10 +95,11 @@ def main() -> int:
                 if len(values) == 1:
                     gripper_deg = values[0]
             elif event["id"] == "object_state":
-                objects = event["value"].to_pylist()
+                objects_value = event["value"]  # read at the next picture, not at each of the 250 a second
             elif event["id"] == "tick" and arm_deg is not None:
                 if stale(event["metadata"].get("timestamp"), period_s):  # waited while drawing: newer states came
                     continue
+                objects = objects_value.to_pylist() if objects_value is not None else []
                 pose_deg = np.array(arm_deg + [gripper_deg])
                 if (drawn_deg is not None and np.all(np.abs(pose_deg - drawn_deg) < REDRAW_DEG)
                         and not objects_moved(objects, drawn_objects)):

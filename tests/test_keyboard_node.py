@@ -490,12 +490,14 @@ def test_reset_lays_the_next_or_the_given_seed_out_and_says_where_the_cube_is(tm
 
 def test_task_shows_the_layout_where_the_cube_is_and_whether_it_is_in_the_box(tmp_path):
     control, _, news = task_control(tmp_path)
-    assert control.handle_line("task")[0] == ["  no object_state received yet (is the simulation running?)"]
-    control.task.on_status(False, {"task": "cube_to_box", "seed": 3, "reply_to": ""})
-    control.task.on_objects([0.2123, -0.0456, 0.0125, 0, 0, 0, 1, 0.16, 0.19, 0])
+    assert control.handle_line("task", state_wait_s=0.1)[0] == [
+        "  no object_state received yet (is the simulation running?)"]
+    # A prompt that just joined waits for the body's next task_status (one a second).
+    control.task.on_objects(pa.array([0.2123, -0.0456, 0.0126, 0, 0, 0, 1, 0.16, 0.19, 0], type=pa.float32()))
+    threading.Timer(0.3, control.task.on_status, (False, {"task": "cube_to_box", "seed": 3, "reply_to": ""})).start()
     lines = control.handle_line("task")[0]
     assert lines[0].startswith("  task cube_to_box, seed 3: cube at (")
-    assert lines[1] == "  the cube is now at (212, -46, 12) mm: not in the box"
+    assert lines[1] == "  the cube is now at (212, -46, 13) mm: not in the box"
     # The cube lands in the box: one line of news, and `task` says so; the same status again says nothing more.
     control.task.on_status(True, {"task": "cube_to_box", "seed": 3, "reply_to": ""})
     control.task.on_status(True, {"task": "cube_to_box", "seed": 3, "reply_to": ""})

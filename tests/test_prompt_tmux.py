@@ -107,6 +107,27 @@ def test_ctrl_c_or_d_on_teleop_stops_everything_and_keeps_poses_and_history(tmp_
     assert [pid for pid in spawned if _alive(pid)] == []
 
 
+def test_closing_the_terminal_stops_everything_and_saves_the_episode_recording(tmp_path):
+    # The terminal closing hangs teleop up: it stops the dataflow, and the recorder saves the episode.
+    dataset_dir = tmp_path / "demos"
+    terminal, _, log_file = start_teleop(tmp_path, "en", extra=f"--record {dataset_dir}")
+    try:
+        terminal.seen = terminal.wait_for(r"^=+\n>$", timeout_s=120).start()
+        terminal.command("record closing time", r"  ● recording episode 0: .*")
+        time.sleep(1.0)
+    finally:
+        terminal.close()  # tmux kill-session: the terminal is gone
+    deadline = time.monotonic() + 40
+    spawned = [int(pid) for pid in re.findall(r"spawned node with pid (\d+)", log_file.read_text())]
+    assert spawned, log_file.read_text()[-2000:]
+    while [pid for pid in spawned if _alive(pid)] and time.monotonic() < deadline:
+        time.sleep(0.5)
+    assert [pid for pid in spawned if _alive(pid)] == []
+    from so101.dataset.reader import Dataset
+
+    assert [episode.tasks for episode in Dataset.open(dataset_dir).episodes] == [("closing time",)]
+
+
 @pytest.mark.skipif(shutil.which("Xvfb") is None, reason="Xvfb is not installed (Debian package xvfb)")
 def test_no_dora_log_line_reaches_the_prompt_with_the_window_open(tmp_path):
     """The GUI on a software-rendered display is the busiest case: the prompt's input queues

@@ -219,3 +219,50 @@ def test_a_person_drives_the_simulation_from_the_emulated_leader_records_and_rep
     # A hand's smooth motion, not typed steps: the body tracks it within a few degrees throughout.
     p50, p99, worst = (float(value) for value in match.groups())
     assert p50 < 3.0 and worst < 15.0, replay.stdout
+
+
+@pytest.mark.skipif(shutil.which("tmux") is None, reason="tmux is not installed (.ci/run installs it)")
+@pytest.mark.parametrize("body", ["pybullet", "mujoco"])
+def test_a_person_records_an_episode_of_the_task_resets_it_and_quits(tmp_path, body):
+    from so101.dataset.features import ENVIRONMENT_KEY, SUCCESS_KEY, WRIST_IMAGE_KEY
+    from so101.tasks import CUBE_TO_BOX
+
+    dataset_dir = tmp_path / "task-demos"
+    terminal, _, log_file = start_teleop(tmp_path, "en", body=body,
+                                         extra=f"--task cube_to_box --seed 3 --record {dataset_dir}")
+    layout = CUBE_TO_BOX.layout(3)
+    try:
+        terminal.seen = terminal.wait_for(r"^=+\n>$", timeout_s=120).start()
+        terminal.command("task", r"  task cube_to_box, seed 3: cube at \(173, -62\) mm, yaw -12°; box at \(160, 190\) mm\n"
+                                 r"  the cube is now at \(173, -62, 12\) mm: not in the box")
+        terminal.command("record put the cube in the box", r"  ● recording episode 0: task 'put the cube in the box'.*")
+        time.sleep(1.0)  # both cameras' first pictures
+        terminal.command("0 40", re.escape("  → joint 0 (shoulder_pan) → 40°"))
+        time.sleep(2.0)
+        terminal.command("batch -30 30 20 40 0 60", r"  → all joints → .*")
+        time.sleep(2.0)
+        terminal.command("stop", r"  ■ episode 0: \d+ frames .*")
+        terminal.wait_for(r"^  ✓ episode 0 saved: \d+ frames", timeout_s=90, after=terminal.seen)
+        terminal.command("reset", r"  → laid out from seed 4, the arm at home: cube at \(122, -137\) mm, yaw -9°; "
+                                  r"box at \(160, 190\) mm")
+        terminal.command("reset seven", re.escape("  reset format: reset [SEED]") + ".*")
+        terminal.type_line("quit")
+        terminal.wait_for(r"^TELEOP_EXIT=0$", timeout_s=60, after=terminal.seen)
+    finally:
+        terminal.close()
+    log = log_file.read_text(encoding="utf-8", errors="replace")
+    assert "task cube_to_box: laid out from seed 4, the arm at home" in log
+
+    dataset = Dataset.open(dataset_dir)
+    frames = dataset.episode_frames(0)
+    objects = frames[ENVIRONMENT_KEY]
+    assert objects.shape == (dataset.episodes[0].length, 10)
+    assert np.allclose(objects[0, 0:3], layout.cube_xyz_m, atol=0.002)  # the cube where seed 3 put it
+    assert not frames[SUCCESS_KEY].any()
+    states_deg = from_lerobot(frames[STATE_KEY])
+    assert states_deg[:, 0].max() > 35  # the arm went to 40°
+    for key in ("observation.images.front", WRIST_IMAGE_KEY):
+        pictures = np.array([picture.astype(np.int16) for picture in dataset.episode_images(0, key)])
+        assert pictures.shape == (dataset.episodes[0].length, 240, 320, 3), key
+        changes = np.abs(np.diff(pictures, axis=0)).mean(axis=(1, 2, 3))
+        assert (changes > 1.0).sum() >= 2, f"{key}: the pictures did not change while the arm moved"

@@ -116,3 +116,27 @@ def test_a_bad_reset_command_is_refused_in_one_line(text):
 def test_a_typed_seed_must_be_a_whole_number(text):
     with pytest.raises(ValueError, match="a seed is a whole number >= 0"):
         parse_seed(text)
+
+
+@pytest.mark.parametrize("options, message", [
+    (["--task", "cube_to_bin"], "so101 teleop: error: argument --task: unknown task 'cube_to_bin'; the tasks are: cube_to_box"),
+    (["--task", "cube_to_box", "--seed", "seven"], "so101 teleop: error: argument --seed: a seed is a whole number >= 0, "
+                                                   "got 'seven'"),
+    (["--seed", "3"], "so101 teleop: --seed goes with --task NAME"),
+    (["--task", "cube_to_box", "--body", "real", "--port", "/dev/ttyACM0", "--calibration", "arm.json"],
+     "so101 teleop: --task cube_to_box is for a simulated body (--body pybullet or mujoco): nothing reports where a "
+     "real cube is, so the real arm has no task scene and no object_state"),
+])
+def test_teleop_refuses_a_task_it_cannot_run_in_one_line_before_starting_anything(tmp_path, capsys, options, message):
+    from so101.cli import main as cli
+
+    log_file = tmp_path / "dora.log"
+    try:
+        code = cli.main(["teleop", "--mode", "direct", "--lang", "en", "--log", str(log_file), *options])
+    except SystemExit as exit:  # argparse's refusals
+        code = exit.code
+    assert code == 2
+    error_lines = [line for line in capsys.readouterr().err.splitlines() if not line.startswith("usage:")
+                   and not line.startswith(" ")]
+    assert error_lines == [message]
+    assert not log_file.exists()  # no dataflow was started

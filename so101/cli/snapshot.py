@@ -1,6 +1,8 @@
 """`so101 snapshot`: the arm in a given pose, rendered headless to a PNG.
 
-No window and no GPU: DIRECT mode and PyBullet's CPU renderer.
+No window and no GPU: DIRECT mode and PyBullet's CPU renderer. `--task NAME [--seed N]` puts the
+task's scene on the floor, laid out from the seed; `--camera wrist` draws from the camera on the
+gripper that a task's episodes record.
 
 `--axes` draws the base frame (the URDF's base_link, the simulation's world origin: x forward,
 y to the arm's left, z up, the floor at z = 0) over the finished picture: each point is
@@ -73,6 +75,14 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
     parser.add_argument("--pitch", type=float, default=DEFAULT_CAMERA.pitch_deg, help="camera pitch in degrees (default %(default)s)")
     parser.add_argument(
         "--distance", type=float, default=DEFAULT_CAMERA.distance_m, help="camera distance in metres (default %(default)s)",
+    )
+    from so101.cli.teleop import add_task_arguments
+
+    add_task_arguments(parser)
+    parser.add_argument(
+        "--camera", choices=("front", "wrist"), default="front",
+        help="front: the orbiting camera (--yaw, --pitch, --distance); wrist: the camera on the gripper, which a "
+        "task's episodes record (needs --task)",
     )
     parser.add_argument(
         "--axes", action="store_true",
@@ -221,11 +231,18 @@ def draw_axes(image, projector: Projector) -> None:
 def run(args: argparse.Namespace) -> int:
     from PIL import Image
 
-    from so101.bodies.camera import DEFAULT_CAMERA, Camera
+    from so101.bodies.camera import DEFAULT_CAMERA, WRIST_CAMERA, Camera
+    from so101.tasks import task_named
 
     error = pose_error(args.pose)
     if not args.distance > 0:
         error = f"--distance must be a positive number of metres, got {args.distance:g}"
+    elif args.seed is not None and args.task is None:
+        error = "--seed goes with --task NAME"
+    elif args.camera == "wrist" and args.task is None:
+        error = "--camera wrist is a task's camera: add --task cube_to_box"
+    elif args.camera == "wrist" and args.axes:
+        error = "--axes is drawn for the front camera only"
     if error:
         print(f"so101 snapshot: {error}", file=sys.stderr)
         return 2
@@ -237,7 +254,9 @@ def run(args: argparse.Namespace) -> int:
         yaw_deg=args.yaw, pitch_deg=args.pitch, fov_deg=DEFAULT_CAMERA.fov_deg,
     )
     simulator = BODIES[args.body].body_class()
-    with simulator(mode="direct", time_step_s=TICK_PERIOD_S, log=lambda message: None) as sim:
+    task = task_named(args.task) if args.task else None
+    with simulator(mode="direct", time_step_s=TICK_PERIOD_S, log=lambda message: None, task=task,
+                   seed=args.seed or 0) as sim:
         sim.set_targets_deg(targets_deg)
         for _ in range(round(SETTLE_BUDGET_S / TICK_PERIOD_S)):
             sim.step()
@@ -248,7 +267,7 @@ def run(args: argparse.Namespace) -> int:
             ):
                 break
         reached_deg = sim.joint_angles_deg()
-        rgb = sim.render_rgb(args.width, args.height, camera)
+        rgb = sim.render_rgb(args.width, args.height, WRIST_CAMERA if args.camera == "wrist" else camera)
         image = Image.fromarray(rgb)
         if args.axes:
             if args.body == "mujoco":

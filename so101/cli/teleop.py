@@ -463,14 +463,17 @@ def _run_node(dataflow: Dataflow, node_file: Path, env: dict[str, str], text: di
     except _HungUp as hang_up:
         return 128 + hang_up.args[0]
     finally:
-        if prompt is not None and prompt.poll() is None:
-            prompt.terminate()
-            prompt.wait()
-        _show(text["stopping"])
-        # A second Ctrl-C must not cut the clean-up short and leave dora running.
-        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+        # A second Ctrl-C, or the hang-up a closing terminal sends twice (the kernel's and the shell's),
+        # must not cut the clean-up short and leave dora running.
+        ending = (signal.SIGINT, signal.SIGHUP, signal.SIGTERM)
+        handlers = {signum: signal.signal(signum, signal.SIG_IGN) for signum in ending}
         try:
+            if prompt is not None and prompt.poll() is None:
+                prompt.terminate()
+                prompt.wait()
+            _show(text["stopping"])
             dataflow.stop()
         finally:
-            signal.signal(signal.SIGINT, previous)
+            for signum, handler in handlers.items():
+                signal.signal(signum, handler)
         _show(text["stopped"])

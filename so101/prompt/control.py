@@ -27,7 +27,8 @@ from so101.prompt.task_link import TaskLink, TaskStatus
 from so101.robot import ACTUATED_JOINTS, NUM_ARM_JOINTS
 from so101.runtime.dataflow import ROOT
 
-# How long `save` waits for a first joint_state (a piped script may start before one arrives).
+# How long `save` (and `task`) wait for a first joint_state (task_status) (a piped script may start
+# before one arrives; the body sends task_status once a second).
 FIRST_STATE_WAIT_S = 2.0
 # A body publishes joint_state every tick (4 or 20 ms): none for this long means it, its machine
 # or the network between is gone (on a cluster nothing else tells the prompt).
@@ -82,7 +83,7 @@ class KeyboardControl:
             if len(values) == 1:
                 self.task.on_status(bool(values[0]), dict(event.get("metadata") or {}))
         elif event["type"] == "INPUT" and event["id"] == "object_state" and self.task is not None:
-            self.task.on_objects([float(value) for value in event["value"].to_pylist()])
+            self.task.on_objects(event["value"])  # 250 a second: read when `task` asks, not here
         elif event["type"] == "INPUT" and event["id"] == "leader_status" and self.show_news is not None:
             for line in event["value"].to_pylist():
                 self.show_news(f"  {line}")
@@ -221,7 +222,7 @@ class KeyboardControl:
         if isinstance(command, ResetTask):
             return [self._reset_task(command.seed)], False
         if isinstance(command, ShowTask):
-            return self._task_lines(), False
+            return self._task_lines(state_wait_s), False
         if isinstance(command, JogKeys):
             if self.keys_fd is None:
                 return [text["jog_needs_terminal"]], False
@@ -266,10 +267,11 @@ class KeyboardControl:
             return self.text["task_silent"].format(seconds=task_link.REPLY_WAIT_S)
         return self.text["laid_out"].format(seed=status.seed, layout=self._layout_text(status.task, status.seed))
 
-    def _task_lines(self) -> list[str]:
+    def _task_lines(self, state_wait_s: float) -> list[str]:
         if self.task is None:
             return [self.text["task_off"]]
-        status, objects = self.task.status, self.task.object_state
+        # A prompt that just joined waits for the body's next task_status (one a second).
+        status, objects = self.task.wait_for_status(state_wait_s), self.task.object_state
         if status is None or objects is None:
             return [self.text["no_task_state"]]
         x, y, z = (value * 1000 + 0.0 for value in objects[0:3])

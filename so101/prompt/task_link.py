@@ -7,7 +7,7 @@ from __future__ import annotations
 import itertools
 import threading
 from dataclasses import dataclass
-from typing import Callable
+from typing import Any, Callable
 
 # The body answers at its next event (a 4 ms tick); this allows for a loaded machine.
 REPLY_WAIT_S = 3.0
@@ -31,7 +31,7 @@ class TaskLink:
         self._answers: dict[str, TaskStatus] = {}
         self._changed = threading.Condition()
         self.status: TaskStatus | None = None  # the latest task_status
-        self.object_state: tuple[float, ...] | None = None  # the latest object_state
+        self._objects: Any = None  # the latest object_state, as it came (a list or an Arrow array)
 
     def reset(self, seed: int | None) -> TaskStatus | None:
         """Lay the scene out again from `seed` (None: the next one): the body's answer, or None if none
@@ -50,10 +50,23 @@ class TaskLink:
             previous, self.status = self.status, status
             if reply_to:
                 self._answers[reply_to] = status
-                self._changed.notify_all()
+            self._changed.notify_all()
         if not reply_to and previous is not None and previous.seed == status.seed and previous.success != status.success:
             self.on_change(status)
 
-    def on_objects(self, values: list[float]) -> None:
+    def wait_for_status(self, timeout_s: float) -> TaskStatus | None:
+        """The latest task_status, once one came (the body sends one a second) or `timeout_s` passed."""
         with self._changed:
-            self.object_state = tuple(values)
+            self._changed.wait_for(lambda: self.status is not None, timeout_s)
+            return self.status
+
+    def on_objects(self, values: Any) -> None:
+        """The latest `object_state` (from the pump thread, at the body's rate): kept as it came."""
+        self._objects = values
+
+    @property
+    def object_state(self) -> tuple[float, ...] | None:
+        values = self._objects
+        if values is None:
+            return None
+        return tuple(float(value) for value in (values.to_pylist() if hasattr(values, "to_pylist") else values))
