@@ -71,7 +71,8 @@ def main() -> int:
         else:
             from so101.bodies.pybullet_sim import SO101Sim as Simulator  # type: ignore[assignment]
         sim = Simulator(mode="direct", time_step_s=TICK_PERIOD_S, assets_dir=settings.assets_dir,
-                        log=lambda line: None, task=task_named(settings.task) if settings.task else None)
+                        log=lambda line: None, task=task_named(settings.task) if settings.task else None,
+                        light_pictures=bool(settings.task))  # a task's: two cameras to keep up; without, as before
         width, height = settings.image_size or (0, 0)
         sim.render_rgb(width, height)  # a renderer that cannot work says so now, in one line
     except (ValueError, ModelFilesError, DisplayError, RuntimeError) as error:

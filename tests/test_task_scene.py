@@ -165,3 +165,21 @@ def test_the_wrist_camera_is_a_tasks():
         with BODIES[body_name].body_class()(mode="direct", log=lambda line: None) as sim:
             with pytest.raises(ValueError, match="the wrist camera is a task's"):
                 sim.render_rgb(64, 48, WRIST_CAMERA)
+
+
+def test_light_pictures_leave_out_shadows_and_multisampling_and_still_show_the_scene():
+    import mujoco
+
+    from so101.bodies.mujoco_sim import SO101MuJoCo
+
+    with SO101MuJoCo(mode="direct", log=lambda line: None, task=CUBE_TO_BOX, light_pictures=True) as light, \
+            SO101MuJoCo(mode="direct", log=lambda line: None, task=CUBE_TO_BOX) as full:
+        pictures = {name: sim.render_rgb(160, 120).astype(int) for name, sim in (("light", light), ("full", full))}
+        flags = light._renderer.scene.flags
+        assert not flags[mujoco.mjtRndFlag.mjRND_SHADOW] and not flags[mujoco.mjtRndFlag.mjRND_REFLECTION]
+        assert light.model.vis.quality.offsamples == 0 and full.model.vis.quality.offsamples > 0
+        assert full._renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW]
+    for name, rgb in pictures.items():
+        red = (rgb[..., 0] > rgb[..., 1] + 60) & (rgb[..., 0] > rgb[..., 2] + 60)
+        assert red.sum() > 10, f"{name}: no cube in the picture"
+    assert np.abs(pictures["light"] - pictures["full"]).mean() > 1.0  # the shadows are gone

@@ -137,6 +137,7 @@ class SO101Sim:
         hull_collisions: bool = True,
         task: CubeToBox | None = None,
         seed: int = 0,
+        light_pictures: bool = False,  # as MuJoCo's: its CPU renderer draws no shadows or multisampling anyway
     ):
         check_control_mode(control_mode)
         if not servo_torque_limit_nm > 0:
