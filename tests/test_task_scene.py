@@ -168,9 +168,9 @@ def test_the_wrist_camera_is_a_tasks():
 
 
 def test_light_pictures_leave_out_shadows_and_multisampling_and_still_show_the_scene():
-    import mujoco
+    from so101.bodies.mujoco_sim import SO101MuJoCo  # first: it chooses MuJoCo's OpenGL back end
 
-    from so101.bodies.mujoco_sim import SO101MuJoCo
+    import mujoco
 
     with SO101MuJoCo(mode="direct", log=lambda line: None, task=CUBE_TO_BOX, light_pictures=True) as light, \
             SO101MuJoCo(mode="direct", log=lambda line: None, task=CUBE_TO_BOX) as full:
