@@ -8,12 +8,13 @@ updates the targets, which the next tick applies; bad ones are logged and ignore
 commands, marked so in their metadata, is not logged command by command). Where the
 dataflow declares a `joint_target` output (`so101 teleop --record` does, for the recorder), the
 targets the body applies go out on it at the first tick, whenever they change, and once a second
-for a node that joined late. A body running a task (so101.tasks) also publishes, where the dataflow declares them, `object_state`
-each tick (float32, the task's object names in its metadata) and `task_status` (the success
-function's answer, a bool, with the task and seed in its metadata) at the first tick, whenever it
-changes, after each reset and once a second; a `task_cmd` (`reset` or `reset SEED`) lays the scene out again and
-homes the arm. STOP or Ctrl-C closes the body and ends with 0, as every node's loop
-does (so101/runtime/node_events.py). The real arm differs only where hardware must: it
+for a node that joined late. A body running a task (so101.tasks) also publishes, where the
+dataflow declares them, `object_state` each tick (float32, the task's object names in its
+metadata) and `task_status` (the success function's answer, a bool, with the task and seed in its
+metadata) at the first tick, whenever it changes, after each reset and once a second; a
+`task_cmd` (`reset` or `reset SEED`) lays the scene out again and homes the arm (TaskReport).
+STOP or Ctrl-C closes the body and ends with 0, as every node's loop does
+(so101/runtime/node_events.py). The real arm differs only where hardware must: it
 starts from where it stands (`start_targets_deg`), a tick whose read failed publishes
 nothing (`joint_angles_deg` is None), and a bus past saving ends the node with one line and
 exit code 1 (BodyFailed).
@@ -33,7 +34,7 @@ from typing import TYPE_CHECKING, Iterable, Iterator, Mapping, Protocol, cast
 import numpy as np
 import pyarrow as pa
 
-from so101.bodies.protocol import Body, BodyFailed
+from so101.bodies.protocol import Body, BodyFailed, TaskScene
 from so101.bodies.settings import NodeSettings
 from so101.joint_cmd import decode_joint_cmd
 from so101.robot import GRIPPER_COMMAND_INDEX, NUM_ARM_JOINTS
@@ -127,6 +128,44 @@ def fast_events(node: Polled) -> Iterator[Event]:
         yield FAST_TICK if event is None else event
 
 
+class TaskReport:
+    """A task's outputs (where the dataflow declares them): `object_state` each tick, `task_status` at
+    the first tick, whenever success changes, after a reset (answering its request) and every
+    `refresh_steps` for a node that joined late."""
+
+    def __init__(self, scene: TaskScene, outputs: Iterable[str], refresh_steps: int, text: Mapping[str, str]):
+        self.scene, self.refresh_steps, self.text = scene, refresh_steps, text
+        self.sends_objects = "object_state" in outputs
+        self.sends_status = "task_status" in outputs
+        self.object_names = ",".join(scene.task.object_state_names)
+        self.last_success: bool | None = None  # None: task_status is due at the next tick
+        self.reply_to = ""  # the task_cmd request the next task_status answers
+        self.status_sent_at_step = 0
+
+    def tick(self, node: Node, steps: int) -> None:
+        scene = self.scene
+        if self.sends_objects:
+            node.send_output("object_state", pa.array(scene.object_state()), {"names": self.object_names})
+        success = scene.succeeded()
+        if success and success != self.last_success:
+            logger.info(self.text["succeeded"].format(task=scene.task.name, seed=scene.layout.seed))
+        if self.sends_status and (success != self.last_success or steps - self.status_sent_at_step >= self.refresh_steps):
+            node.send_output("task_status", pa.array([success]),
+                             {"task": scene.task.name, "seed": scene.layout.seed, "reply_to": self.reply_to})
+            self.status_sent_at_step = steps
+        self.last_success, self.reply_to = success, ""
+
+    def seed_asked(self, words: list[object]) -> int:
+        """The seed a task_cmd asks for: the one it names, or the next; ValueError in one line otherwise."""
+        asked = parse_reset(" ".join(str(word) for word in words))
+        return self.scene.layout.seed + 1 if asked is None else asked
+
+    def laid_out(self, seed: int, request: str) -> None:
+        """After a reset: the next tick's task_status answers `request`."""
+        self.last_success, self.reply_to = None, request
+        logger.info(self.text["laid_out"].format(task=self.scene.task.name, seed=seed))
+
+
 def run_body_node(body: Body, node: Node, settings: NodeSettings, identity: str, detail: Mapping[str, str],
                   node_id: str = "simulation") -> int:
     """The event loop, until STOP; closes `body`. `identity` and `detail[lang]` go into the
@@ -165,12 +204,7 @@ def run_body_node(body: Body, node: Node, settings: NodeSettings, identity: str,
     targets_sent_at_step: int | None = None  # body.steps when joint_target last went out; None: to send
     target_refresh_steps = max(1, round(TARGET_REFRESH_S / tick_s))
     scene = body.scene
-    sends_objects = scene is not None and "object_state" in outputs
-    sends_status = scene is not None and "task_status" in outputs
-    object_names = ",".join(scene.task.object_state_names) if scene is not None else ""
-    last_success: bool | None = None  # None: task_status is due at the next tick
-    status_reply_to = ""  # the task_cmd request the next task_status answers
-    status_sent_at_step = 0  # body.steps when task_status last went out
+    report = TaskReport(scene, outputs, target_refresh_steps, text) if scene is not None else None
 
     def finish() -> None:  # however the loop ends: the window, the bus let go; the tick log kept
         body.close()
@@ -197,19 +231,8 @@ def run_body_node(body: Body, node: Node, settings: NodeSettings, identity: str,
                                           or body.steps - targets_sent_at_step >= target_refresh_steps):
                         node.send_output("joint_target", pa.array(joint_targets_deg, type=pa.float64()))
                         targets_sent_at_step = body.steps
-                    if scene is not None:
-                        if sends_objects:
-                            node.send_output("object_state", pa.array(scene.object_state()), {"names": object_names})
-                        success = scene.succeeded()
-                        if success and success != last_success:
-                            logger.info(text["succeeded"].format(task=scene.task.name, seed=scene.layout.seed))
-                        # Also once a second unchanged, for a prompt that joined late.
-                        if sends_status and (success != last_success
-                                             or body.steps - status_sent_at_step >= target_refresh_steps):
-                            node.send_output("task_status", pa.array([success]), {
-                                "task": scene.task.name, "seed": scene.layout.seed, "reply_to": status_reply_to})
-                            status_sent_at_step = body.steps
-                        last_success, status_reply_to = success, ""
+                    if report is not None:
+                        report.tick(node, body.steps)
                     if tick_log is not None:
                         tick_log.extend((time.monotonic_ns(), body.steps))
                     if steps_per_image and body.steps >= next_image_step:
@@ -222,18 +245,16 @@ def run_body_node(body: Body, node: Node, settings: NodeSettings, identity: str,
                         )
                 elif event["id"] == "task_cmd":
                     try:
-                        if scene is None:
+                        if report is None:
                             raise ValueError("this body runs no task")
-                        asked = parse_reset(" ".join(str(word) for word in event["value"].to_pylist()))
-                        seed = scene.layout.seed + 1 if asked is None else asked
+                        seed = report.seed_asked(event["value"].to_pylist())
                         body.reset_task(seed)
                     except ValueError as error:
                         logger.warning(text["bad_task_cmd"].format(error=error))
                         continue
                     joint_targets_deg = body.start_targets_deg()
                     targets_sent_at_step = None
-                    last_success, status_reply_to = None, str((event.get("metadata") or {}).get("request", ""))
-                    logger.info(text["laid_out"].format(task=scene.task.name, seed=seed))
+                    report.laid_out(seed, str((event.get("metadata") or {}).get("request", "")))
                 elif event["id"] == "joint_cmd":
                     decoded = decode_joint_cmd(event["value"], joint_targets_deg)
                     if decoded.targets_deg is None:  # what arrived is not a command: decoded.error says why
