@@ -56,7 +56,9 @@ from so101.stats import summary  # noqa: E402
 DEFAULT_OUT = {"pybullet": ROOT / "bench" / "results" / "latest.json", "mujoco": ROOT / "bench" / "results" / "latest-mujoco.json",
                "real": ROOT / "bench" / "results" / "latest-real.json",
                "cluster": ROOT / "bench" / "results" / "latest-cluster.json",
-               "web": ROOT / "bench" / "results" / "latest-web.json"}
+               "web": ROOT / "bench" / "results" / "latest-web.json",
+               "cameras": ROOT / "bench" / "results" / "latest-cameras.json",
+               "cameras-mujoco": ROOT / "bench" / "results" / "latest-cameras-mujoco.json"}
 # The engine's own call for one 4 ms tick, as the table names it.
 RAW_STEP_LABEL = {"pybullet": "raw stepSimulation, DIRECT", "mujoco": "raw mj_step x 2 (one 4 ms tick)"}
 
@@ -383,6 +385,29 @@ def run_web_only(duration_s: float, body: str, browsers: bool) -> dict:
             "targets": web_bench.targets(web, TARGETS["joint_state_per_s"], TARGETS["sim_over_wall_error"])}
 
 
+def run_cameras_only(duration_s: float, body: str) -> dict:
+    """`--cameras`: a task's two cameras, alone and beside the physics."""
+    from bench import camera_bench
+
+    if body == "real":
+        raise RuntimeError("--cameras measures a simulation's pictures: --body pybullet or mujoco")
+    load_start = os.getloadavg()
+    with tempfile.TemporaryDirectory(prefix="so101-bench-") as tmp:
+        cameras = camera_bench.run_camera_benchmark(Path(tmp), duration_s, body)
+    return {"body": body, "only": "cameras", "machine": machine_facts(),
+            "load_average_1_5_15min": {"start": list(load_start), "end": list(os.getloadavg())},
+            "settings": {"duration_s": duration_s}, "cameras": cameras,
+            "targets": camera_bench.targets(cameras, TARGETS["joint_state_per_s"], TARGETS["sim_over_wall_error"])}
+
+
+def cameras_table(result: dict) -> str:
+    from bench import camera_bench
+
+    machine = result["machine"]
+    return "\n".join([f"SO-101 task cameras benchmark ({result['body']}), {machine['date']}", machine_line(result), "",
+                      *camera_bench.table_lines(result["cameras"]), "", *target_lines(result["targets"])])
+
+
 def web_table(result: dict) -> str:
     from bench import web_bench
 
@@ -476,6 +501,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--web", action="store_true",
                         help="measure only the web view: the body with five viewers on `so101 teleop --web`'s page, "
                         "then five browsers, --duration seconds each (600 shows whether its memory grows)")
+    parser.add_argument("--cameras", action="store_true",
+                        help="measure only a task's two cameras (cube_to_box, 320x240): pictures a second each, drawn "
+                        "alone and while `so101 teleop --task cube_to_box --record`'s dataflow runs, --duration seconds")
     parser.add_argument("--out", type=Path, default=None,
                         help="JSON file to write (default " + ", ".join(f"{path.relative_to(ROOT)} for {body}" for body, path in DEFAULT_OUT.items()) + ")")
     parser.add_argument("--quick", action="store_true",
@@ -497,7 +525,7 @@ def run(args: argparse.Namespace) -> int:
     # serial bus, the fake arm and the cluster (about 0.1 s of imports) that only a run needs.
     from bench import cluster_bench, real_bench
 
-    tables = {"real": real_bench.table, "cluster": cluster_bench.table, "web": web_table}
+    tables = {"real": real_bench.table, "cluster": cluster_bench.table, "web": web_table, "cameras": cameras_table}
     if args.show is not None:
         try:
             shown = json.loads(args.show.read_text(encoding="utf-8"))
@@ -514,12 +542,14 @@ def run(args: argparse.Namespace) -> int:
                         saved_episode_s=5.0, web_browsers=False)
     else:
         settings = dict(duration_s=args.duration, fast_s=5.0, fast_steps=[1, 10, 100], raw_steps=40000, node_ticks=10000, after_sleep_steps=1000)
-    kind = "cluster" if args.cluster else "web" if args.web else args.body
+    kind = "cluster" if args.cluster else "web" if args.web else "cameras" if args.cameras else args.body
     try:
         if args.cluster:
             result = cluster_bench.run_cluster_benchmark(settings["duration_s"])
         elif args.web:
             result = run_web_only(settings["duration_s"], args.body, browsers=not args.quick)
+        elif args.cameras:
+            result = run_cameras_only(settings["duration_s"], args.body)
         elif args.body == "real":
             result = real_bench.run_real_benchmark(settings["duration_s"], exchanges=500 if args.quick else 3000)
         else:
@@ -530,7 +560,7 @@ def run(args: argparse.Namespace) -> int:
     result["settings"]["quick"] = args.quick
     print()
     print(tables.get(kind, table)(result))
-    out = args.out or DEFAULT_OUT[kind]
+    out = args.out or DEFAULT_OUT["cameras-mujoco" if kind == "cameras" and args.body == "mujoco" else kind]
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(result, indent=2) + "\n")
     print(f"\nwrote {out}")

@@ -372,3 +372,23 @@ def test_show_prints_the_saved_web_result(capsys):
     shown = capsys.readouterr().out
     assert shown.startswith("SO-101 web view benchmark (pybullet), ")
     assert f"{json.loads(latest.read_text())['web']['sockets']['joint_state_per_s']:.2f}" in shown
+
+
+@pytest.mark.parametrize("name", ["latest-cameras.json", "latest-cameras-mujoco.json"])
+def test_the_saved_camera_results_show_each_cameras_rates_and_the_targets(name, capsys):
+    saved = run_bench.ROOT / "bench" / "results" / name
+    result = json.loads(saved.read_text())
+    assert run_bench.main(["--show", str(saved)]) == 0
+    shown = capsys.readouterr().out
+    assert shown.startswith(f"SO-101 task cameras benchmark ({result['body']}), ")
+    for camera, key in (("front", "observation.images.front"), ("wrist", "observation.images.wrist")):
+        alone = result["cameras"]["alone"][key]
+        beside = result["cameras"]["beside_physics"]["new_pictures_per_s"][key]
+        assert f"{alone['pictures_per_s']:.1f} | {beside:.1f}" in shown, camera
+        assert f"camera: new pictures per s while recording" in shown
+    assert f"{result['cameras']['beside_physics']['joint_state_per_s']:.2f}" in shown
+
+
+def test_cameras_refuse_the_real_arm_in_one_line(capsys):
+    assert run_bench.main(["--cameras", "--body", "real"]) == 1
+    assert capsys.readouterr().err == "so101 bench: --cameras measures a simulation's pictures: --body pybullet or mujoco\n"
