@@ -1,7 +1,7 @@
 """A task's cameras (issue "Something to pick up"): `so101 bench --cameras` runs these for a simulated body.
 
   1. pictures alone: the camera node's simulator (the task's scene, MuJoCo's pictures light) draws
-     the front and the wrist camera at 320x240 in turn, nothing else running: ms a picture, and
+     the front and the wrist camera at 320x240 (or --image-size) in turn, nothing else running: ms a picture, and
      so the pictures a second each camera could give;
   2. beside the physics: `so101 teleop --task cube_to_box --record`'s dataflow (the body, the
      camera node, the recorder with both videos) while the prober moves the arm: the body's
@@ -29,30 +29,30 @@ NEW_PICTURE_LEVELS = 1.0  # as bench/record_bench.py: mean difference between tw
 CAMERAS = {IMAGE_KEY: None, WRIST_IMAGE_KEY: WRIST_CAMERA}  # None: the body's default (front) camera
 
 
-def measure_pictures_alone(body: str) -> dict:
+def measure_pictures_alone(body: str, image_size: tuple[int, int]) -> dict:
     """Each camera's pictures of the task's scene, drawn as the camera node draws them, ms each."""
     with BODIES[body].body_class()(mode="direct", time_step_s=TICK_PERIOD_S, log=lambda message: None,
                                    task=CUBE_TO_BOX, light_pictures=True) as sim:
         figures = {}
         for key, camera in CAMERAS.items():
             options = {} if camera is None else {"camera": camera}
-            sim.render_rgb(*IMAGE_SIZE, **options)
+            sim.render_rgb(*image_size, **options)
             each_ms = []
             for index in range(PICTURES):
                 sim.show_pose_deg([3.0 * index, -2.0 * index, 2.0 * index, 10, 4.0 * index, 30])
                 start = time.perf_counter()
-                sim.render_rgb(*IMAGE_SIZE, **options)
+                sim.render_rgb(*image_size, **options)
                 each_ms.append((time.perf_counter() - start) * 1e3)
             figures[key] = {"ms": summary(each_ms), "pictures_per_s": 1e3 / float(np.median(each_ms))}
     return figures
 
 
-def measure_beside_physics(run_dir: Path, duration_s: float, body: str) -> dict:
+def measure_beside_physics(run_dir: Path, duration_s: float, body: str, image_size: tuple[int, int]) -> dict:
     """The task's recording dataflow, an episode recorded throughout while the prober moves the arm."""
     from so101.dataset.reader import Dataset
 
     dataset_dir = run_dir / "dataset"
-    size = f"{IMAGE_SIZE[0]}x{IMAGE_SIZE[1]}"
+    size = f"{image_size[0]}x{image_size[1]}"
     node_id = BODIES[body].node_id
 
     def add_task_and_recorder(descriptor: dict) -> None:
@@ -81,17 +81,17 @@ def measure_beside_physics(run_dir: Path, duration_s: float, body: str) -> dict:
             "ticks_missed": flow["ticks_missed"], "recorded_s": recorded_s, "new_pictures_per_s": new_per_s}
 
 
-def run_camera_benchmark(work_dir: Path, duration_s: float, body: str) -> dict:
+def run_camera_benchmark(work_dir: Path, duration_s: float, body: str, image_size: tuple[int, int] = IMAGE_SIZE) -> dict:
     print(f"cameras: {PICTURES} pictures from each of the task's cameras, alone ...", flush=True)
-    figures = {"alone": measure_pictures_alone(body)}
+    figures: dict = {"image_size": list(image_size), "alone": measure_pictures_alone(body, image_size)}
     print(f"cameras: so101 teleop --task cube_to_box --record's dataflow, {duration_s:g} s ...", flush=True)
-    figures["beside_physics"] = measure_beside_physics(work_dir / "cameras", duration_s, body)
+    figures["beside_physics"] = measure_beside_physics(work_dir / "cameras", duration_s, body, image_size)
     return figures
 
 
 def table_lines(figures: dict) -> list[str]:
     alone, beside = figures["alone"], figures["beside_physics"]
-    size = "x".join(map(str, IMAGE_SIZE))
+    size = "x".join(map(str, figures.get("image_size", IMAGE_SIZE)))
     lines = []
     for key in CAMERAS:
         name = key.rsplit(".", 1)[-1]

@@ -48,7 +48,8 @@ from bench.common import (  # noqa: E402
     target_lines, target_row, tick_figures, tick_records,
 )
 from so101.bodies.registry import BODIES  # noqa: E402
-from so101.cli.argtypes import number  # noqa: E402
+from so101.cli.argtypes import image_size, number  # noqa: E402
+from so101.dataset.settings import DEFAULT_IMAGE_SIZE  # noqa: E402
 from so101.gui.display import DisplayError, display_available, virtual_display  # noqa: E402
 from so101.runtime.dataflow import ROOT, TICK_PERIOD_S  # noqa: E402
 from so101.stats import summary  # noqa: E402
@@ -385,7 +386,7 @@ def run_web_only(duration_s: float, body: str, browsers: bool) -> dict:
             "targets": web_bench.targets(web, TARGETS["joint_state_per_s"], TARGETS["sim_over_wall_error"])}
 
 
-def run_cameras_only(duration_s: float, body: str) -> dict:
+def run_cameras_only(duration_s: float, body: str, image_size: tuple[int, int]) -> dict:
     """`--cameras`: a task's two cameras, alone and beside the physics."""
     from bench import camera_bench
 
@@ -393,10 +394,10 @@ def run_cameras_only(duration_s: float, body: str) -> dict:
         raise RuntimeError("--cameras measures a simulation's pictures: --body pybullet or mujoco")
     load_start = os.getloadavg()
     with tempfile.TemporaryDirectory(prefix="so101-bench-") as tmp:
-        cameras = camera_bench.run_camera_benchmark(Path(tmp), duration_s, body)
+        cameras = camera_bench.run_camera_benchmark(Path(tmp), duration_s, body, image_size)
     return {"body": body, "only": "cameras", "machine": machine_facts(),
             "load_average_1_5_15min": {"start": list(load_start), "end": list(os.getloadavg())},
-            "settings": {"duration_s": duration_s}, "cameras": cameras,
+            "settings": {"duration_s": duration_s, "image_size": list(image_size)}, "cameras": cameras,
             "targets": camera_bench.targets(cameras, TARGETS["joint_state_per_s"], TARGETS["sim_over_wall_error"])}
 
 
@@ -504,6 +505,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--cameras", action="store_true",
                         help="measure only a task's two cameras (cube_to_box, 320x240): pictures a second each, drawn "
                         "alone and while `so101 teleop --task cube_to_box --record`'s dataflow runs, --duration seconds")
+    parser.add_argument("--image-size", type=image_size, default=DEFAULT_IMAGE_SIZE, metavar="WxH",
+                        help=f"--cameras: the pictures' size (default {DEFAULT_IMAGE_SIZE})")
     parser.add_argument("--out", type=Path, default=None,
                         help="JSON file to write (default " + ", ".join(f"{path.relative_to(ROOT)} for {body}" for body, path in DEFAULT_OUT.items()) + ")")
     parser.add_argument("--quick", action="store_true",
@@ -549,7 +552,7 @@ def run(args: argparse.Namespace) -> int:
         elif args.web:
             result = run_web_only(settings["duration_s"], args.body, browsers=not args.quick)
         elif args.cameras:
-            result = run_cameras_only(settings["duration_s"], args.body)
+            result = run_cameras_only(settings["duration_s"], args.body, args.image_size)
         elif args.body == "real":
             result = real_bench.run_real_benchmark(settings["duration_s"], exchanges=500 if args.quick else 3000)
         else:

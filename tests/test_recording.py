@@ -475,3 +475,14 @@ def test_a_tasks_frames_with_video_wait_for_both_cameras():
     feed(rec, clock, 0.2)
     assert rec.episode.frames > 0
     assert rec.episode.frames_given[0][WRIST_IMAGE_KEY] is wrist and rec.episode.frames_given[0][IMAGE_KEY] is front
+
+
+def test_a_picture_size_is_width_x_height_in_even_pixels():
+    import argparse
+
+    from so101.cli.argtypes import image_size
+
+    assert image_size("640x480") == (640, 480) and image_size(" 320X240 ") == (320, 240)
+    for bad in ("641x480", "640", "x", "", "8x8", "640x480x3"):
+        with pytest.raises(argparse.ArgumentTypeError, match=r"is not WIDTHxHEIGHT in even pixels from 16 to 4096, e.g. 640x480$"):
+            image_size(bad)

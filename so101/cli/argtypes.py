@@ -53,3 +53,16 @@ def whole_number(lowest: int, highest: int) -> Callable[[str], int]:
         return int(text)
 
     return parse
+
+
+def image_size(text: str) -> tuple[int, int]:
+    """An argparse `type` for a picture size, "WIDTHxHEIGHT" (so101.dataset.settings.parse_image_size's rule)."""
+    from so101.dataset.settings import parse_image_size
+
+    try:
+        size = parse_image_size(text)
+    except ValueError:
+        size = None
+    if size is None:
+        raise argparse.ArgumentTypeError(f"{text!r} is not WIDTHxHEIGHT in even pixels from 16 to 4096, e.g. 640x480")
+    return size

@@ -37,6 +37,7 @@ from pathlib import Path
 
 from so101.bodies.registry import BODIES, DEFAULT_BODY, BodyKind, body_node_env
 from so101.dataset.features import DEFAULT_FPS, video_keys_and_sizes
+from so101.dataset.settings import DEFAULT_IMAGE_SIZE
 from so101.runtime.dataflow import (
     LEADER_READY_MARKS, LOADED_MARKS, PROMPT_NODE_FILE, ROOT, WEB_VIEW_MARKS, dataflow_copy, with_leader, with_recorder,
     with_task, with_web_view, write_dataflow,
@@ -47,7 +48,7 @@ from so101.web.settings import (
 )
 from so101.prompt.join import port_holder
 from so101.runtime.processes import DAEMON_PORT_TAKEN_MARK, alive, descendants, kill_until_gone, stop_process, who_runs
-from so101.cli.argtypes import add_language_option, whole_number
+from so101.cli.argtypes import add_language_option, image_size, whole_number
 from so101.tasks import TASKS, parse_seed, task_named
 from so101.runtime.venv import dora_executable, env_with_bin_first
 from so101.runtime.versions import DAEMON_DEFAULT_LOCAL_PORT, dora_version_problem
@@ -127,6 +128,11 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
     parser.add_argument(
         "--fps", type=whole_number(1, 1000), default=DEFAULT_FPS, metavar="N",
         help=f"--record: frames per second (default {DEFAULT_FPS}, LeRobot's)",
+    )
+    parser.add_argument(
+        "--image-size", type=image_size, default=DEFAULT_IMAGE_SIZE, metavar="WxH",
+        help=f"--record on a simulation: each camera's pictures, stored as video (default {DEFAULT_IMAGE_SIZE}; "
+        "640x480 draws each picture about twice as long: `so101 bench --cameras --image-size 640x480`)",
     )
     parser.add_argument(
         "--leader", metavar="PORT", default=None,
@@ -330,7 +336,7 @@ def run(args: argparse.Namespace) -> int:
         ready_marks += (LEADER_READY_MARKS,)
     if args.record is not None:
         problem = add_recorder(descriptor, launch.body, args.record.expanduser().resolve(), args.fps, args.lang,
-                               args.task)
+                               args.task, args.image_size)
         if problem:
             print(f"so101 teleop: {problem}", file=sys.stderr)
             return 2
@@ -386,23 +392,22 @@ def add_leader(descriptor: dict, body: BodyKind, port: str | None, calibration_f
 
 
 def add_recorder(descriptor: dict, body: BodyKind, dataset_dir: Path, fps: int, lang: str,
-                 task: str | None = None) -> str | None:
+                 task: str | None, image_size: tuple[int, int]) -> str | None:
     """The recorder (and a simulation's camera) added to `descriptor`; or why DIR cannot take
     these episodes, in one line, before anything starts."""
-    from so101.bodies.node_loop import IMAGE_SIZE
     from so101.dataset.layout import DatasetError
     from so101.dataset.writer import DatasetWriter
 
-    image_size = IMAGE_SIZE if body.simulated else None  # the real arm has no camera of its own
+    pictures = image_size if body.simulated else None  # the real arm has no camera of its own
     try:  # checked now, and let go: the recorder node opens it again
-        DatasetWriter.open(dataset_dir, fps, video_keys_and_sizes(image_size, task is not None),
+        DatasetWriter.open(dataset_dir, fps, video_keys_and_sizes(pictures, task is not None),
                            environment_names=task_named(task).object_state_names if task else ()).close()
     except DatasetError as error:
         return str(error)
-    size_text = f"{image_size[0]}x{image_size[1]}" if image_size else ""
+    size_text = f"{pictures[0]}x{pictures[1]}" if pictures else ""
     recorder_env = {"SO101_RECORD_DIR": str(dataset_dir), "SO101_RECORD_FPS": str(fps),
                     "SO101_RECORD_IMAGE_SIZE": size_text, "SO101_LANG": lang}
-    camera_env = {"SO101_CAMERA_BODY": body.name, "SO101_RECORD_IMAGE_SIZE": size_text} if image_size else None
+    camera_env = {"SO101_CAMERA_BODY": body.name, "SO101_RECORD_IMAGE_SIZE": size_text} if pictures else None
     with_recorder(descriptor, body.node_id, recorder_env, camera_env, picture_hz=fps)
     return None
 
