@@ -1,21 +1,17 @@
 """Contact pads on the gripper's two fingertips, so that a simulated gripper can hold a cube.
 
-Both simulators collide the jaws through their meshes' convex hulls. The fixed jaw's hull
-wraps the jaw and its housing, and each hull is rounded off at the fingertip, so a 25 mm
-cube between the jaws is touched on its top edges, one point a jaw, and squeezes out
-(measured in PyBullet: contacts at 24-27 mm above the floor on a cube 25 mm high, normals
-20-40° off the horizontal; the cube stays on the floor when the gripper rises). The model
-files carry two flat pads for this, `fixed_jaw_pad` and `moving_jaw_pad` in the MJCF,
-parallel when the pads' faces are 40 mm apart, and switched off there (their collision bits
-match nothing). But the fixed jaw's hull reaches past its pad: it runs straight from the
-fingertip to the housing, so above the pad it stands up to 3 mm proud of the pad's face, and
-a cube held at the pad touches that slanted face and is pushed down, out of the jaws
-(measured in PyBullet: contact normals 13-22° off the horizontal; the cube fell within 1 s).
-So each pad is grown by `PAD_GROWTH_M` on its inner face, toward the other jaw (34 mm apart
-when parallel instead of 40): the cube then touches pads only. With a task, MuJoCo's pads are
-these grown boxes, switched on, and PyBullet gets the same boxes as extra `<collision>` shapes
-of the same links: one source, the MJCF, for both. Without a task neither simulator has
-them, and the arm moves as it always has.
+Both simulators collide the jaws through their meshes' convex hulls. The fixed jaw's hull wraps
+the jaw and its housing and runs straight from the fingertip to the housing, so above the
+fingertip it stands up to 3 mm proud of the jaw's face. A 25 mm cube between the jaws touched
+the hulls on its top edges only, one point a jaw, and was squeezed out, down (measured in
+PyBullet: contact normals 13-40° off the horizontal; the cube stayed on the floor, or fell
+within a second of the lift). The model files carry two flat pads for this, `fixed_jaw_pad` and
+`moving_jaw_pad` in the MJCF, parallel when their faces are 40 mm apart, and switched off there
+(their collision bits match nothing). Each is grown by `PAD_GROWTH_M` on its inner face, toward
+the other jaw (34 mm apart when parallel), so that the cube touches pads only. With a task,
+MuJoCo's pads are these grown boxes, switched on, and PyBullet gets the same boxes as extra
+`<collision>` shapes of the same links: one source, the MJCF, for both. Without a task neither
+simulator has them, and the arm moves as it always has.
 """
 
 from __future__ import annotations
@@ -28,7 +24,7 @@ from pathlib import Path
 from so101.assets import ModelFilesError
 
 PAD_GEOM_NAMES = ("fixed_jaw_pad", "moving_jaw_pad")
-# Which way each pad's inner face looks, along its own x axis (tests/test_tasks.py checks it with the kinematics).
+# Which way each pad's inner face looks, along its own x axis (tests/test_task_scene.py checks it with the kinematics).
 INNER_FACE_SIGN = {"fixed_jaw_pad": 1.0, "moving_jaw_pad": -1.0}
 # How much each pad grows on its inner face: past the fixed jaw's hull, where it stands proud of the pad.
 PAD_GROWTH_M = 0.003
