@@ -15,17 +15,16 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.common import PACED_PROBE_ENV, WARMUP_S, realtime_figures, run_dataflow
+from bench.record_bench import record_run
 from so101.bodies.camera import WRIST_CAMERA
 from so101.bodies.node_loop import IMAGE_SIZE
 from so101.bodies.registry import BODIES
 from so101.dataset.features import DEFAULT_FPS, IMAGE_KEY, WRIST_IMAGE_KEY
-from so101.runtime.dataflow import TICK_PERIOD_S, with_recorder, with_task
+from so101.runtime.dataflow import TICK_PERIOD_S
 from so101.stats import summary
 from so101.tasks import CUBE_TO_BOX
 
 PICTURES = 20  # poses drawn by each camera in the in-process timing
-NEW_PICTURE_LEVELS = 1.0  # as bench/record_bench.py: mean difference between two decoded frames of different pictures
 CAMERAS = {IMAGE_KEY: None, WRIST_IMAGE_KEY: WRIST_CAMERA}  # None: the body's default (front) camera
 
 
@@ -49,36 +48,10 @@ def measure_pictures_alone(body: str, image_size: tuple[int, int]) -> dict:
 
 def measure_beside_physics(run_dir: Path, duration_s: float, body: str, image_size: tuple[int, int]) -> dict:
     """The task's recording dataflow, an episode recorded throughout while the prober moves the arm."""
-    from so101.dataset.reader import Dataset
-
-    dataset_dir = run_dir / "dataset"
-    size = f"{image_size[0]}x{image_size[1]}"
-    node_id = BODIES[body].node_id
-
-    def add_task_and_recorder(descriptor: dict) -> None:
-        with_task(descriptor, node_id, CUBE_TO_BOX.name, 0)
-        with_recorder(descriptor, node_id,
-                      {"SO101_RECORD_DIR": str(dataset_dir), "SO101_RECORD_FPS": str(DEFAULT_FPS),
-                       "SO101_RECORD_IMAGE_SIZE": size, "SO101_LANG": "en"},
-                      {"SO101_CAMERA_BODY": body, "SO101_RECORD_IMAGE_SIZE": size}, picture_hz=DEFAULT_FPS)
-
-    record = run_dataflow(run_dir, duration_s + WARMUP_S, {"SO101_FAST_STEPS": "0"},
-                          {**PACED_PROBE_ENV, "PROBE_RECORD_TASK": "so101 bench"}, body=body,
-                          extend=add_task_and_recorder)
-    flow = realtime_figures(record, TICK_PERIOD_S)["dataflow"]
-    dataset = Dataset.open(dataset_dir)
-    if not dataset.episodes:
-        raise RuntimeError(f"the recorder saved no episode (see {run_dir / 'dora.log'})")
-    episode = dataset.episodes[-1]
-    recorded_s = episode.length / dataset.fps
-    new_per_s = {}
-    for key in CAMERAS:
-        pictures = [frame.astype(np.int16) for frame in dataset.episode_images(episode.index, key)]
-        changes = sum(1 for before, after in zip(pictures, pictures[1:])
-                      if np.abs(after - before).mean() > NEW_PICTURE_LEVELS)
-        new_per_s[key] = changes / recorded_s if recorded_s else 0.0
+    flow, episode = record_run(run_dir, duration_s, body, image_size, task=CUBE_TO_BOX.name)
     return {"joint_state_per_s": flow["joint_state_per_s"], "sim_over_wall": flow["sim_over_wall"],
-            "ticks_missed": flow["ticks_missed"], "recorded_s": recorded_s, "new_pictures_per_s": new_per_s}
+            "ticks_missed": flow["ticks_missed"], "recorded_s": episode["recorded_s"],
+            "new_pictures_per_s": {key: episode["new_pictures_per_s"][key] for key in CAMERAS}}
 
 
 def run_camera_benchmark(work_dir: Path, duration_s: float, body: str, image_size: tuple[int, int] = IMAGE_SIZE) -> dict:

@@ -23,7 +23,8 @@ from bench.common import PACED_PROBE_ENV, WARMUP_S, run_dataflow, realtime_figur
 from so101.bodies.node_loop import IMAGE_SIZE
 from so101.bodies.registry import BODIES
 from so101.dataset.features import ACTION_KEY, DEFAULT_FPS, IMAGE_KEY, STATE_KEY, to_lerobot
-from so101.runtime.dataflow import TICK_PERIOD_S, with_recorder
+from so101.dataset.video import new_pictures
+from so101.runtime.dataflow import TICK_PERIOD_S, with_recorder, with_task
 from so101.stats import summary
 
 SAVED_EPISODE_S = 60.0
@@ -54,15 +55,21 @@ def measure_in_loop(run_dir: Path, duration_s: float, body: str) -> dict:
             "ticks_missed": flow["ticks_missed"]}
 
 
-def measure_recording(run_dir: Path, duration_s: float, body: str) -> dict:
-    """The body, the camera and the recorder, an episode with video recorded throughout."""
+def record_run(run_dir: Path, duration_s: float, body: str, image_size: tuple[int, int] = IMAGE_SIZE,
+               task: str | None = None) -> tuple[dict, dict]:
+    """`so101 teleop --record`'s dataflow (with `task`: `--task`'s) while the prober moves the arm, an
+    episode with video recorded throughout: (the dataflow's real-time figures, the episode's:
+    frames, seconds recorded and wall-clock seconds, and each video's new pictures a second)."""
     from so101.dataset.reader import Dataset
 
     dataset_dir = run_dir / "dataset"
-    size = f"{IMAGE_SIZE[0]}x{IMAGE_SIZE[1]}"
+    size = f"{image_size[0]}x{image_size[1]}"
+    node_id = BODIES[body].node_id
 
     def add_recorder(descriptor: dict) -> None:
-        with_recorder(descriptor, BODIES[body].node_id,
+        if task is not None:
+            with_task(descriptor, node_id, task, 0)
+        with_recorder(descriptor, node_id,
                       {"SO101_RECORD_DIR": str(dataset_dir), "SO101_RECORD_FPS": str(DEFAULT_FPS),
                        "SO101_RECORD_IMAGE_SIZE": size, "SO101_LANG": "en"},
                       {"SO101_CAMERA_BODY": body, "SO101_RECORD_IMAGE_SIZE": size}, picture_hz=DEFAULT_FPS)
@@ -77,15 +84,20 @@ def measure_recording(run_dir: Path, duration_s: float, body: str) -> dict:
     if not dataset.episodes:
         raise RuntimeError(f"the recorder saved no episode (see {run_dir / 'dora.log'})")
     episode = dataset.episodes[-1]
-    pictures = [frame.astype(np.int16) for frame in dataset.episode_images(episode.index, dataset.video_keys[0])]
-    # A repeated picture decodes a little differently each time (lossy video): a new one differs by more.
-    changes = sum(1 for before, after in zip(pictures, pictures[1:])
-                  if np.abs(after - before).mean() > NEW_PICTURE_LEVELS)
     recorded_s = episode.length / dataset.fps
+    new_per_s = {key: new_pictures(dataset.episode_images(episode.index, key), NEW_PICTURE_LEVELS) / recorded_s
+                 if recorded_s else 0.0 for key in dataset.video_keys}
+    return flow, {"frames": episode.length, "recorded_s": recorded_s, "wall_s": episode_wall_s,
+                  "new_pictures_per_s": new_per_s}
+
+
+def measure_recording(run_dir: Path, duration_s: float, body: str) -> dict:
+    """The body, the camera and the recorder, an episode with video recorded throughout."""
+    flow, episode = record_run(run_dir, duration_s, body)
     return {"joint_state_per_s": flow["joint_state_per_s"], "sim_over_wall": flow["sim_over_wall"],
-            "ticks_missed": flow["ticks_missed"], "frames": episode.length, "recorded_s": recorded_s,
-            "frames_per_wall_s": episode.length / episode_wall_s if episode_wall_s > 0 else 0.0,
-            "new_pictures_per_s": changes / recorded_s if recorded_s else 0.0}
+            "ticks_missed": flow["ticks_missed"], "frames": episode["frames"], "recorded_s": episode["recorded_s"],
+            "frames_per_wall_s": episode["frames"] / episode["wall_s"] if episode["wall_s"] > 0 else 0.0,
+            "new_pictures_per_s": episode["new_pictures_per_s"][IMAGE_KEY]}
 
 
 def measure_saving(body: str, seconds: float = SAVED_EPISODE_S) -> dict:

@@ -39,6 +39,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Callable
 
 if __package__ in (None, ""):  # run as a script (python bench/run_bench.py): the checkout holds `bench`
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
@@ -371,50 +372,49 @@ def run_benchmark(duration_s: float, fast_s: float, fast_steps: list[int], raw_s
     }
 
 
+def run_alone(only: str, measures: str, body: str, settings: dict, measure: Callable[[Path], dict],
+              targets: Callable[[dict, float, float], list[dict]]) -> dict:
+    """One part of the benchmark run by itself (`--web`, `--cameras`): `measure(work_dir)` gives its
+    figures, kept under `only`, with the machine, its load and the part's targets. `measures` says
+    what, for the refusal of the real arm."""
+    if body == "real":
+        raise RuntimeError(f"--{only} measures {measures}: --body pybullet or mujoco")
+    load_start = os.getloadavg()
+    with tempfile.TemporaryDirectory(prefix="so101-bench-") as tmp:
+        figures = measure(Path(tmp))
+    return {"body": body, "only": only, "machine": machine_facts(),
+            "load_average_1_5_15min": {"start": list(load_start), "end": list(os.getloadavg())},
+            "settings": settings, only: figures,
+            "targets": targets(figures, TARGETS["joint_state_per_s"], TARGETS["sim_over_wall_error"])}
+
+
 def run_web_only(duration_s: float, body: str, browsers: bool) -> dict:
     """`--web`: the web view's runs alone."""
     from bench import web_bench
 
-    if body == "real":
-        raise RuntimeError("--web measures a simulation: --body pybullet or mujoco")
-    load_start = os.getloadavg()
-    with tempfile.TemporaryDirectory(prefix="so101-bench-") as tmp:
-        web = web_bench.run_web_benchmark(Path(tmp), duration_s, body, browsers)
-    return {"body": body, "only": "web", "machine": machine_facts(),
-            "load_average_1_5_15min": {"start": list(load_start), "end": list(os.getloadavg())},
-            "settings": {"duration_s": duration_s}, "web": web,
-            "targets": web_bench.targets(web, TARGETS["joint_state_per_s"], TARGETS["sim_over_wall_error"])}
+    return run_alone("web", "a simulation", body, {"duration_s": duration_s},
+                     lambda work_dir: web_bench.run_web_benchmark(work_dir, duration_s, body, browsers), web_bench.targets)
 
 
 def run_cameras_only(duration_s: float, body: str, image_size: tuple[int, int]) -> dict:
     """`--cameras`: a task's two cameras, alone and beside the physics."""
     from bench import camera_bench
 
-    if body == "real":
-        raise RuntimeError("--cameras measures a simulation's pictures: --body pybullet or mujoco")
-    load_start = os.getloadavg()
-    with tempfile.TemporaryDirectory(prefix="so101-bench-") as tmp:
-        cameras = camera_bench.run_camera_benchmark(Path(tmp), duration_s, body, image_size)
-    return {"body": body, "only": "cameras", "machine": machine_facts(),
-            "load_average_1_5_15min": {"start": list(load_start), "end": list(os.getloadavg())},
-            "settings": {"duration_s": duration_s, "image_size": list(image_size)}, "cameras": cameras,
-            "targets": camera_bench.targets(cameras, TARGETS["joint_state_per_s"], TARGETS["sim_over_wall_error"])}
+    return run_alone("cameras", "a simulation's pictures", body, {"duration_s": duration_s, "image_size": list(image_size)},
+                     lambda work_dir: camera_bench.run_camera_benchmark(work_dir, duration_s, body, image_size),
+                     camera_bench.targets)
 
 
-def cameras_table(result: dict) -> str:
-    from bench import camera_bench
+def alone_table(result: dict) -> str:
+    """The table of a part run by itself (`run_alone`'s result)."""
+    from bench import camera_bench, web_bench
 
+    only = result["only"]
+    title = {"web": "web view", "cameras": "task cameras"}[only]
+    lines = {"web": web_bench.table_lines, "cameras": camera_bench.table_lines}[only](result[only])
     machine = result["machine"]
-    return "\n".join([f"SO-101 task cameras benchmark ({result['body']}), {machine['date']}", machine_line(result), "",
-                      *camera_bench.table_lines(result["cameras"]), "", *target_lines(result["targets"])])
-
-
-def web_table(result: dict) -> str:
-    from bench import web_bench
-
-    machine = result["machine"]
-    return "\n".join([f"SO-101 web view benchmark ({result['body']}), {machine['date']}", machine_line(result), "",
-                      *web_bench.table_lines(result["web"]), "", *target_lines(result["targets"])])
+    return "\n".join([f"SO-101 {title} benchmark ({result['body']}), {machine['date']}", machine_line(result), "",
+                      *lines, "", *target_lines(result["targets"])])
 
 
 def table(result: dict) -> str:
@@ -528,7 +528,7 @@ def run(args: argparse.Namespace) -> int:
     # serial bus, the fake arm and the cluster (about 0.1 s of imports) that only a run needs.
     from bench import cluster_bench, real_bench
 
-    tables = {"real": real_bench.table, "cluster": cluster_bench.table, "web": web_table, "cameras": cameras_table}
+    tables = {"real": real_bench.table, "cluster": cluster_bench.table, "web": alone_table, "cameras": alone_table}
     if args.show is not None:
         try:
             shown = json.loads(args.show.read_text(encoding="utf-8"))

@@ -17,16 +17,9 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-import numpy as np  # noqa: E402
-
 from so101.dataset.layout import DatasetError, video_keys  # noqa: E402
 from so101.dataset.reader import Dataset  # noqa: E402
-
-
-def new_pictures(pictures: list[np.ndarray], threshold: float) -> int:
-    """How many pictures differ from the one before by more than `threshold` grey levels on average."""
-    return sum(float(np.abs(after.astype(np.int16) - before.astype(np.int16)).mean()) > threshold
-               for before, after in zip(pictures, pictures[1:]))
+from so101.dataset.video import new_pictures  # noqa: E402
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -43,8 +36,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"picture_changes: {error or f'no episode {args.episode}'}", file=sys.stderr)
         return 2
     for key in video_keys(dataset.features):
-        pictures = list(dataset.episode_images(args.episode, key))
-        print(f"{key}: {new_pictures(pictures, args.threshold)} new pictures in {length} frames "
+        print(f"{key}: {new_pictures(dataset.episode_images(args.episode, key), args.threshold)} new pictures in {length} frames "
               f"({length / dataset.fps:.1f} s at {dataset.fps} fps)")
     return 0
 

@@ -16,7 +16,7 @@ import threading
 from dataclasses import dataclass, field
 from fractions import Fraction
 from pathlib import Path
-from typing import Any, Callable, Iterator, cast
+from typing import Any, Callable, Iterable, Iterator, cast
 
 import numpy as np
 import numpy.typing as npt
@@ -280,3 +280,16 @@ def decode(path: Path, from_s: float, to_s: float, fps: int) -> Iterator[Image]:
             if frame.time >= to_s - half_frame_s:
                 break
             yield cast(Image, frame.to_ndarray(format="rgb24"))
+
+
+def new_pictures(pictures: Iterable[Image], threshold_levels: float) -> int:
+    """How many of a video's decoded `pictures` differ from the one before by more than
+    `threshold_levels` grey levels on average: a camera that fell behind repeats its last picture,
+    and a repeat decodes a little differently each time (lossy video), a new picture by more."""
+    count, before = 0, None
+    for picture in pictures:
+        now = picture.astype(np.int16)
+        if before is not None and float(np.abs(now - before).mean()) > threshold_levels:
+            count += 1
+        before = now
+    return count
