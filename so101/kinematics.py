@@ -267,11 +267,17 @@ class Kinematics:
         with self._lock:
             return self._solve(target_m, seed)
 
+    def _starts(self, seed_deg: Sequence[float]) -> list[list[float]]:
+        """The poses IK starts from, in order (radians, the gripper's too): `seed_deg` clamped to the
+        limits, home where it differs, then the fixed pseudo-random ones."""
+        current = self._clamped([math.radians(angle) for angle in seed_deg] + [self._gripper_rad])
+        home = self._clamped([0.0] * NUM_ARM_JOINTS + [self._gripper_rad])
+        return [current] + ([home] if home != current else []) + self._seeds_rad
+
     def _solve(self, target_m: list[float], seed: Sequence[float]) -> Reach:
         self._connected()
-        current = self._clamped([math.radians(angle) for angle in seed] + [self._gripper_rad])
-        home = self._clamped([0.0] * NUM_ARM_JOINTS + [self._gripper_rad])
-        starts = [current] + ([home] if home != current else []) + self._seeds_rad
+        starts = self._starts(seed)
+        current = starts[0]
         # The nearest answer, and the exact answer whose way is least blocked (see _path_margin_mm).
         nearest: list[float] = current
         nearest_error_m = math.inf
@@ -333,10 +339,8 @@ class Kinematics:
 
         with self._lock:
             self._connected()
-            current = self._clamped([math.radians(angle) for angle in seed] + [self._gripper_rad])
-            home = self._clamped([0.0] * NUM_ARM_JOINTS + [self._gripper_rad])
             best: tuple[list[float], float, float] | None = None
-            for start in [current, home] + self._seeds_rad:
+            for start in self._starts(seed):
                 found = refined(start)
                 if best is None or found[1] + found[2] < best[1] + best[2]:
                     best = found

@@ -502,7 +502,7 @@ def test_task_shows_the_layout_where_the_cube_is_and_whether_it_is_in_the_box(tm
     control.task.on_status(True, {"task": "cube_to_box", "seed": 3, "reply_to": ""})
     control.task.on_status(True, {"task": "cube_to_box", "seed": 3, "reply_to": ""})
     assert news == ["  ★ the cube is in the box (task cube_to_box, seed 3)"]
-    control.task.on_objects([0.16, 0.19, 0.0175, 0, 0, 0, 1, 0.16, 0.19, 0])
+    control.task.on_objects(pa.array([0.16, 0.19, 0.0175, 0, 0, 0, 1, 0.16, 0.19, 0], type=pa.float32()))
     assert control.handle_line("task")[0][1] == "  the cube is now at (160, 190, 18) mm: in the box"
 
 

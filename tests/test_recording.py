@@ -403,7 +403,7 @@ def test_a_task_adds_its_outputs_to_the_body_its_line_to_the_prompt_and_its_obje
     from so101.runtime.dataflow import with_task
 
     descriptor = with_web_view(with_task(dataflow_copy({}), "simulation", "cube_to_box", 5), "simulation",
-                               {"SO101_TASK": "cube_to_box"})
+                               {"SO101_WEB_PORT": "8200"})
     nodes = {node["id"]: node for node in descriptor["nodes"]}
     body, prompt, web = nodes["simulation"], nodes["keyboard_control"], nodes["web_view"]
     assert body["env"]["SO101_TASK"] == "cube_to_box" and body["env"]["SO101_SEED"] == "5"
@@ -413,6 +413,7 @@ def test_a_task_adds_its_outputs_to_the_body_its_line_to_the_prompt_and_its_obje
     assert {prompt["inputs"][name]["source"] for name in ("task_status", "object_state")} == {
         "simulation/task_status", "simulation/object_state"}
     assert web["inputs"]["object_state"]["source"] == "simulation/object_state"
+    assert web["env"] == {"SO101_WEB_PORT": "8200", "SO101_TASK": "cube_to_box"}  # the task the body runs
 
 
 

@@ -160,17 +160,16 @@ def add_web_arguments(parser: argparse.ArgumentParser) -> None:
                         "0.0.0.0 serves every network this machine is on)")
 
 
-def add_web_view(args: argparse.Namespace, descriptor: dict, body: BodyKind, command: str, task: str = "") -> str:
+def add_web_view(args: argparse.Namespace, descriptor: dict, body: BodyKind, command: str) -> str:
     """With --web, the web view added to `descriptor` (and a warning printed when it serves beyond this
-    machine), drawing `task`'s objects if one is given; the line to print once it serves, or "" without --web."""
+    machine); the line to print once it serves, or "" without --web."""
     if not args.web:
         return ""
     if args.web_host not in LOCAL_HOSTS:
         where = "every address of this machine" if args.web_host in EVERY_ADDRESS else args.web_host
         print(f"so101 {command}: the web view serves on {where}: anyone who can reach port {args.web_port} "
               "there sees the arm", flush=True)
-    web_env = {"SO101_WEB_HOST": args.web_host, "SO101_WEB_PORT": str(args.web_port), **({"SO101_TASK": task} if task else {})}
-    with_web_view(descriptor, body.node_id, web_env)
+    with_web_view(descriptor, body.node_id, {"SO101_WEB_HOST": args.web_host, "SO101_WEB_PORT": str(args.web_port)})
     return f"web view: {page_address(args.web_host, args.web_port)}"
 
 
@@ -340,7 +339,7 @@ def run(args: argparse.Namespace) -> int:
         if problem:
             print(f"so101 teleop: {problem}", file=sys.stderr)
             return 2
-    web_line = add_web_view(args, descriptor, launch.body, "teleop", args.task or "")
+    web_line = add_web_view(args, descriptor, launch.body, "teleop")
     if web_line:
         ready_marks += (WEB_VIEW_MARKS,)
     print(text["starting"].format(mode=launch.mode, log=launch.log), flush=True)

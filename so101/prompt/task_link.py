@@ -31,7 +31,7 @@ class TaskLink:
         self._answers: dict[str, TaskStatus] = {}
         self._changed = threading.Condition()
         self.status: TaskStatus | None = None  # the latest task_status
-        self._objects: Any = None  # the latest object_state, as it came (a list or an Arrow array)
+        self._objects: Any = None  # the latest object_state, the Arrow array as it came
 
     def reset(self, seed: int | None) -> TaskStatus | None:
         """Lay the scene out again from `seed` (None: the next one): the body's answer, or None if none
@@ -69,4 +69,4 @@ class TaskLink:
         values = self._objects
         if values is None:
             return None
-        return tuple(float(value) for value in (values.to_pylist() if hasattr(values, "to_pylist") else values))
+        return tuple(float(value) for value in values.to_pylist())

@@ -163,10 +163,11 @@ def with_recorder(descriptor: dict, body_node_id: str, recorder_env: dict[str, s
         # Every command must arrive: the default queue keeps 10.
         "record_cmd": {"source": f"{PROMPT_NODE_ID}/record_cmd", "queue_size": 100},
     }
-    if "object_state" in body["outputs"]:  # a task's: the frames hold its objects, reward and success
+    task = body_task(descriptor, body_node_id)
+    if task:  # the frames hold its objects, reward and success
         recorder_inputs["object_state"] = _queued(f"{body_node_id}/object_state", STATE_QUEUE)
         recorder_inputs["task_status"] = {"source": f"{body_node_id}/task_status", "queue_size": 100}
-        recorder_env = {**recorder_env, "SO101_TASK": body["env"]["SO101_TASK"]}
+        recorder_env = {**recorder_env, "SO101_TASK": task}
     if camera_env is not None:
         recorder_inputs["image"] = _queued("camera/image", TICK_QUEUE)
         camera_inputs = {
@@ -175,9 +176,9 @@ def with_recorder(descriptor: dict, body_node_id: str, recorder_env: dict[str, s
             "gripper_state": _queued(f"{body_node_id}/gripper_state", STATE_QUEUE),
         }
         camera_outputs = ["image"]
-        if "object_state" in body["outputs"]:  # a task's objects are in the pictures, and the wrist camera's too
+        if task:  # its objects are in the pictures, and the wrist camera's too
             camera_inputs["object_state"] = _queued(f"{body_node_id}/object_state", STATE_QUEUE)
-            camera_env = {**camera_env, "SO101_TASK": body["env"]["SO101_TASK"]}
+            camera_env = {**camera_env, "SO101_TASK": task}
             camera_outputs.append("wrist_image")
             recorder_inputs["wrist_image"] = _queued("camera/wrist_image", TICK_QUEUE)
         descriptor["nodes"].append({
@@ -232,10 +233,16 @@ def with_task(descriptor: dict, body_node_id: str, task_name: str, seed: int) ->
     return descriptor
 
 
+def body_task(descriptor: dict, body_node_id: str) -> str:
+    """The task the body runs (with_task's), or "" for none."""
+    body = _node(descriptor, body_node_id)
+    return (body.get("env") or {}).get("SO101_TASK", "") if "object_state" in body["outputs"] else ""
+
+
 def with_web_view(descriptor: dict, body_node_id: str, web_env: dict[str, str], root: PurePath = ROOT) -> dict:
     """A dataflow (dataflow_copy's dict) with the web view added: it reads the body's state and, where the
     dataflow has them, the camera's pictures, the recorder's `record_status` and a task's `object_state`
-    (the caller gives SO101_TASK in `web_env`)."""
+    (the page then draws the task's objects)."""
     inputs = {
         "joint_state": _queued(f"{body_node_id}/joint_state", STATE_QUEUE),
         "gripper_state": _queued(f"{body_node_id}/gripper_state", STATE_QUEUE),
@@ -245,8 +252,10 @@ def with_web_view(descriptor: dict, body_node_id: str, web_env: dict[str, str], 
         inputs["image"] = _queued("camera/image", TICK_QUEUE)
     if "recorder" in node_ids:
         inputs["record_status"] = {"source": "recorder/record_status", "queue_size": 100}
-    if "object_state" in _node(descriptor, body_node_id)["outputs"]:
+    task = body_task(descriptor, body_node_id)
+    if task:
         inputs["object_state"] = _queued(f"{body_node_id}/object_state", STATE_QUEUE)
+        web_env = {**web_env, "SO101_TASK": task}
     descriptor["nodes"].append({
         "id": WEB_VIEW_NODE_ID, "path": str(root / WEB_VIEW_NODE_FILE.relative_to(ROOT)), "restart_policy": "never",
         "inputs": inputs, "env": web_env,
