@@ -44,13 +44,17 @@ class JawPad:
     def urdf_link(self) -> str:
         return f"{self.body}_link"
 
+    @property
+    def inward(self) -> tuple[float, float, float]:
+        """The unit vector its inner face looks along, toward the other jaw, in its body's frame: its
+        own x axis (the first column of its rotation), signed by INNER_FACE_SIGN."""
+        w, x, y, z = self.quat_wxyz
+        sign = INNER_FACE_SIGN[self.name]
+        return (sign * (1 - 2 * (y * y + z * z)), sign * 2 * (x * y + w * z), sign * 2 * (x * z - w * y))
+
     def grown(self, by_m: float = PAD_GROWTH_M) -> "JawPad":
         """The pad `by_m` thicker on its inner face (its outer face stays where it is)."""
-        w, x, y, z = self.quat_wxyz
-        # The pad's own x axis in its body's frame: the first column of its rotation matrix.
-        axis = (1 - 2 * (y * y + z * z), 2 * (x * y + w * z), 2 * (x * z - w * y))
-        shift = INNER_FACE_SIGN[self.name] * by_m / 2
-        pos = tuple(value + shift * component for value, component in zip(self.pos_m, axis))
+        pos = tuple(value + by_m / 2 * component for value, component in zip(self.pos_m, self.inward))
         half = (self.half_size_m[0] + by_m / 2, *self.half_size_m[1:])
         return JawPad(self.name, self.body, pos, self.quat_wxyz, half)  # type: ignore[arg-type]
 

@@ -21,7 +21,7 @@ from __future__ import annotations
 import math
 import random
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Iterable, Sequence
 
 NAME = "cube_to_box"
 
@@ -134,6 +134,11 @@ class CubeToBox:
         inner = self.box.inner_half_m
         return (abs(dx) < inner and abs(dy) < inner and dz < self.box.wall_height_m
                 and cube_speed_m_s < REST_SPEED_M_S)
+
+    def state_succeeded(self, object_state: Iterable[float], cube_speed_m_s: float) -> bool:
+        """`succeeded` on an object_state (OBJECT_STATE_NAMES' order), as the simulations publish it."""
+        values = [float(value) for value in object_state]
+        return self.succeeded(values[0:3], values[7:10], cube_speed_m_s)
 
     def reward(self, success: bool) -> float:
         """`next.reward` of a frame: 1 where the cube is in the box, else 0 (a sparse reward, as

@@ -17,7 +17,7 @@ from typing import Sequence
 
 import numpy as np
 
-from so101.bodies.jaw_pads import INNER_FACE_SIGN, JawPad
+from so101.bodies.jaw_pads import JawPad
 from so101.kinematics import TIP_LINK_INDEX, Kinematics
 from so101.robot import ARM_JOINTS
 
@@ -56,9 +56,7 @@ class TopDownGrasp:
         tip_xyz, tip_rows = kinematics.frame_m(TIP_LINK_INDEX)
         gripper_rotation = np.asarray(gripper_rows).reshape(3, 3)
         tip_rotation = np.asarray(tip_rows).reshape(3, 3)
-        w, x, y, z = fixed_pad.quat_wxyz
-        pad_x_axis = np.array([1 - 2 * (y * y + z * z), 2 * (x * y + w * z), 2 * (x * z - w * y)])
-        inward = INNER_FACE_SIGN[fixed_pad.name] * pad_x_axis
+        inward = np.asarray(fixed_pad.inward)
         # The cube's centre when it rests on the fixed pad's face, in the gripper link's frame...
         centre = np.asarray(fixed_pad.pos_m) + inward * (fixed_pad.half_size_m[0] + cube_half_m)
         world = np.asarray(gripper_xyz) + gripper_rotation @ centre

@@ -75,5 +75,4 @@ class PyBulletScene:
         return float(np.linalg.norm(linear))
 
     def succeeded(self) -> bool:
-        state = self.object_state().astype(np.float64)
-        return self.task.succeeded(state[0:3].tolist(), state[7:10].tolist(), self.cube_speed_m_s())
+        return self.task.state_succeeded(self.object_state(), self.cube_speed_m_s())
