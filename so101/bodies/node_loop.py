@@ -144,9 +144,10 @@ class TaskReport:
 
     def tick(self, node: Node, steps: int) -> None:
         scene = self.scene
+        object_state = scene.object_state()  # read once a tick: published, and judged
         if self.sends_objects:
-            node.send_output("object_state", pa.array(scene.object_state()), {"names": self.object_names})
-        success = scene.succeeded()
+            node.send_output("object_state", pa.array(object_state), {"names": self.object_names})
+        success = scene.task.state_succeeded(object_state, scene.cube_speed_m_s())
         if success and success != self.last_success:
             logger.info(self.text["succeeded"].format(task=scene.task.name, seed=scene.layout.seed))
         if self.sends_status and (success != self.last_success or steps - self.status_sent_at_step >= self.refresh_steps):

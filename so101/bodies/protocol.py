@@ -42,6 +42,9 @@ class TaskScene(Protocol):
     def object_state(self) -> ObjectState:
         """The objects' poses now, float32, in the task's `object_state_names` order (metres, base frame)."""
 
+    def cube_speed_m_s(self) -> float:
+        """How fast the cube moves now, m/s (the success function's "at rest")."""
+
     def succeeded(self) -> bool:
         """The task's success function, on the objects as they are now."""
 
