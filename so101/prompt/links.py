@@ -51,25 +51,26 @@ def news_printer(control: KeyboardControl, interactive: bool) -> Callable[[str],
     return show
 
 
-def recorder_link(node, show: Callable[[str], None]) -> RecorderLink | None:
-    """The line to the recorder, where the dataflow has one (`so101 teleop --record`)."""
-    if not has_output(node, "record_cmd"):
+def request_sender(node, output_id: str) -> Callable[[str, str], None] | None:
+    """What sends a command line on `output_id` with its request number in the metadata (the other
+    node answers with it in `reply_to`), where the dataflow declares that output; else None."""
+    if not has_output(node, output_id):
         return None
     import pyarrow as pa
 
-    def send(record_cmd: str, request: str) -> None:
-        node.send_output("record_cmd", pa.array([record_cmd]), {"request": request})
+    def send(text: str, request: str) -> None:
+        node.send_output(output_id, pa.array([text]), {"request": request})
 
-    return RecorderLink(send, show)
+    return send
+
+
+def recorder_link(node, show: Callable[[str], None]) -> RecorderLink | None:
+    """The line to the recorder, where the dataflow has one (`so101 teleop --record`)."""
+    send = request_sender(node, "record_cmd")
+    return RecorderLink(send, show) if send is not None else None
 
 
 def task_link(node, on_change: Callable[[TaskStatus], None]) -> TaskLink | None:
     """The line to a body running a task, where the dataflow has one (`so101 teleop --task`)."""
-    if not has_output(node, "task_cmd"):
-        return None
-    import pyarrow as pa
-
-    def send(task_cmd: str, request: str) -> None:
-        node.send_output("task_cmd", pa.array([task_cmd]), {"request": request})
-
-    return TaskLink(send, on_change)
+    send = request_sender(node, "task_cmd")
+    return TaskLink(send, on_change) if send is not None else None
