@@ -4,11 +4,10 @@ episode saved in the background) shown as it comes."""
 
 from __future__ import annotations
 
-import itertools
-import threading
 from typing import Callable
 
 from so101.dataset.messages import encode_record_cmd
+from so101.prompt.requests import Requests
 
 # The recorder answers at its next event (a 5 ms tick); this allows for a loaded machine.
 REPLY_WAIT_S = 3.0
@@ -18,27 +17,18 @@ class RecorderLink:
     """`send(record_cmd text, request id)` sends on `record_cmd`; `show(line)` prints news at once."""
 
     def __init__(self, send: Callable[[str, str], None], show: Callable[[str], None]):
-        self.send = send
+        self._requests: Requests[list[str]] = Requests(send)
         self.show = show
-        self._requests = itertools.count(1)
-        self._answers: dict[str, list[str]] = {}
-        self._answered = threading.Condition()
 
     def ask(self, command: str, task: str = "", timeout_s: float = REPLY_WAIT_S) -> list[str] | None:
         """The recorder's answer to one command, as lines; None if it did not answer in time."""
-        request = str(next(self._requests))
-        self.send(encode_record_cmd(command, task), request)
-        with self._answered:
-            self._answered.wait_for(lambda: request in self._answers, timeout_s)
-            return self._answers.pop(request, None)
+        return self._requests.ask(encode_record_cmd(command, task), timeout_s)
 
     def on_status(self, text: str, reply_to: str) -> None:
         """A `record_status` message (from the pump thread): an answer, or news to show now."""
         lines = text.split("\n")
         if reply_to:
-            with self._answered:
-                self._answers[reply_to] = lines
-                self._answered.notify_all()
+            self._requests.answered(reply_to, lines)
         else:
             for line in lines:
                 self.show(f"  {line}")

@@ -4,10 +4,11 @@ and news when the cube lands in the box or leaves it."""
 
 from __future__ import annotations
 
-import itertools
 import threading
 from dataclasses import dataclass
 from typing import Any, Callable
+
+from so101.prompt.requests import Requests
 
 # The body answers at its next event (a 4 ms tick); this allows for a loaded machine.
 REPLY_WAIT_S = 3.0
@@ -25,10 +26,8 @@ class TaskLink:
     thread) when success changes other than by a reset: the news to show."""
 
     def __init__(self, send: Callable[[str, str], None], on_change: Callable[[TaskStatus], None]):
-        self.send = send
+        self._requests: Requests[TaskStatus] = Requests(send)
         self.on_change = on_change
-        self._requests = itertools.count(1)
-        self._answers: dict[str, TaskStatus] = {}
         self._changed = threading.Condition()
         self.status: TaskStatus | None = None  # the latest task_status
         self._objects: Any = None  # the latest object_state, the Arrow array as it came
@@ -36,11 +35,7 @@ class TaskLink:
     def reset(self, seed: int | None) -> TaskStatus | None:
         """Lay the scene out again from `seed` (None: the next one): the body's answer, or None if none
         came within REPLY_WAIT_S."""
-        request = str(next(self._requests))
-        self.send("reset" if seed is None else f"reset {seed}", request)
-        with self._changed:
-            self._changed.wait_for(lambda: request in self._answers, REPLY_WAIT_S)
-            return self._answers.pop(request, None)
+        return self._requests.ask("reset" if seed is None else f"reset {seed}", REPLY_WAIT_S)
 
     def on_status(self, success: bool, metadata: dict) -> None:
         """A `task_status` message (from the pump thread): an answer to a reset, or news."""
@@ -48,10 +43,10 @@ class TaskLink:
         reply_to = str(metadata.get("reply_to", ""))
         with self._changed:
             previous, self.status = self.status, status
-            if reply_to:
-                self._answers[reply_to] = status
             self._changed.notify_all()
-        if not reply_to and previous is not None and previous.seed == status.seed and previous.success != status.success:
+        if reply_to:
+            self._requests.answered(reply_to, status)
+        elif previous is not None and previous.seed == status.seed and previous.success != status.success:
             self.on_change(status)
 
     def wait_for_status(self, timeout_s: float) -> TaskStatus | None:
