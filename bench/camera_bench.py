@@ -3,13 +3,23 @@
   1. pictures alone: the camera node's simulator (the task's scene, MuJoCo's pictures light) draws
      the front and the wrist camera at 320x240 (or --image-size) in turn, nothing else running: ms a picture, and
      so the pictures a second each camera could give;
-  2. beside the physics: `so101 teleop --task cube_to_box --record`'s dataflow (the body, the
+  2. the renderers' options, each in a process of its own (they are chosen at start-up): the front
+     camera's ms a picture with the model's full meshes against the cameras' meshes; PyBullet's
+     TinyRenderer (what the camera draws with) against its EGL plugin (OpenGL, here Mesa's
+     llvmpipe); MuJoCo's EGL on one Mesa thread (the camera's) against two, and OSMesa where installed;
+  3. beside the physics: `so101 teleop --task cube_to_box --record`'s dataflow (the body, the
      camera node, the recorder with both videos) while the prober moves the arm: the body's
      joint_state/s and simulated/wall time, and the new pictures a second each video holds.
 """
 
 from __future__ import annotations
 
+import argparse
+import ctypes.util
+import json
+import os
+import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -28,21 +38,92 @@ PICTURES = 20  # poses drawn by each camera in the in-process timing
 CAMERAS = {IMAGE_KEY: None, WRIST_IMAGE_KEY: WRIST_CAMERA}  # None: the body's default (front) camera
 
 
+# Renderer options: name -> (environment, full meshes, PyBullet's EGL plugin). The first of each body is the camera's own.
+RENDERERS = {
+    "pybullet": {
+        "TinyRenderer, cameras' meshes": ({}, False, False),
+        "TinyRenderer, full meshes": ({}, True, False),
+        "EGL plugin, cameras' meshes": ({}, False, True),
+    },
+    "mujoco": {
+        "EGL, 1 Mesa thread, cameras' meshes": ({"MUJOCO_GL": "egl", "LP_NUM_THREADS": "1"}, False, False),
+        "EGL, 1 Mesa thread, full meshes": ({"MUJOCO_GL": "egl", "LP_NUM_THREADS": "1"}, True, False),
+        "EGL, 2 Mesa threads, cameras' meshes": ({"MUJOCO_GL": "egl", "LP_NUM_THREADS": "2"}, False, False),
+        "OSMesa, 1 Mesa thread, cameras' meshes": ({"MUJOCO_GL": "osmesa", "PYOPENGL_PLATFORM": "osmesa",
+                                                       "LP_NUM_THREADS": "1"}, False, False),
+    },
+}
+
+
+def draw_poses(sim, image_size: tuple[int, int], camera_options: dict) -> list[float]:
+    """ms for each of PICTURES poses drawn, after one picture to set the renderer up."""
+    sim.render_rgb(*image_size, **camera_options)
+    each_ms = []
+    for index in range(PICTURES):
+        sim.show_pose_deg([3.0 * index, -2.0 * index, 2.0 * index, 10, 4.0 * index, 30])
+        start = time.perf_counter()
+        sim.render_rgb(*image_size, **camera_options)
+        each_ms.append((time.perf_counter() - start) * 1e3)
+    return each_ms
+
+
 def measure_pictures_alone(body: str, image_size: tuple[int, int]) -> dict:
     """Each camera's pictures of the task's scene, drawn as the camera node draws them, ms each."""
     with BODIES[body].body_class()(mode="direct", time_step_s=TICK_PERIOD_S, log=lambda message: None,
                                    task=CUBE_TO_BOX, light_pictures=True) as sim:
         figures = {}
         for key, camera in CAMERAS.items():
-            options = {} if camera is None else {"camera": camera}
-            sim.render_rgb(*image_size, **options)
-            each_ms = []
-            for index in range(PICTURES):
-                sim.show_pose_deg([3.0 * index, -2.0 * index, 2.0 * index, 10, 4.0 * index, 30])
-                start = time.perf_counter()
-                sim.render_rgb(*image_size, **options)
-                each_ms.append((time.perf_counter() - start) * 1e3)
+            each_ms = draw_poses(sim, image_size, {} if camera is None else {"camera": camera})
             figures[key] = {"ms": summary(each_ms), "pictures_per_s": 1e3 / float(np.median(each_ms))}
+    return figures
+
+
+def measure_renderer(body: str, name: str, image_size: tuple[int, int]) -> dict:
+    """One renderer option's front pictures, in this process (started for it by measure_renderers)."""
+    _, full_meshes, egl_plugin = RENDERERS[body][name]
+    module = sys.modules[BODIES[body].body_class().__module__]
+    if full_meshes:
+        module.camera_meshes = lambda model_dir, log: None  # type: ignore[attr-defined]
+    if egl_plugin:  # loaded before anything else: the plugin draws only the objects loaded after it
+        import pkgutil
+
+        import pybullet as p
+
+        connect, camera_image = p.connect, p.getCameraImage
+
+        def connect_with_plugin(*args: object) -> int:
+            client = connect(*args)
+            loader = pkgutil.get_loader("eglRenderer")
+            p.loadPlugin(loader.get_filename(), "_eglRendererPlugin", physicsClientId=client)  # type: ignore[union-attr]
+            return client
+
+        module.p.connect = connect_with_plugin
+        module.p.getCameraImage = lambda *args, **kwargs: camera_image(
+            *args, **{**kwargs, "renderer": p.ER_BULLET_HARDWARE_OPENGL})
+    with BODIES[body].body_class()(mode="direct", time_step_s=TICK_PERIOD_S, log=lambda message: None,
+                                   task=CUBE_TO_BOX, light_pictures=True) as sim:
+        each_ms = draw_poses(sim, image_size, {})
+    return {"ms": summary(each_ms), "pictures_per_s": 1e3 / float(np.median(each_ms))}
+
+
+def measure_renderers(body: str, image_size: tuple[int, int]) -> dict:
+    """Each of the body's renderer options in a fresh process: its front pictures' ms, or why it was not measured."""
+    figures = {}
+    for name, (environment, _, _) in RENDERERS[body].items():
+        if environment.get("MUJOCO_GL") == "osmesa" and ctypes.util.find_library("OSMesa") is None:
+            figures[name] = {"skipped": "libOSMesa is not installed"}
+            continue
+        result = subprocess.run(
+            [sys.executable, "-m", "bench.camera_bench", "--renderer", name, "--body", body,
+             "--image-size", "x".join(map(str, image_size))],
+            env={**os.environ, **environment}, capture_output=True, text=True, timeout=300,
+            cwd=Path(__file__).resolve().parents[1],
+        )
+        lines = result.stdout.strip().splitlines()
+        if result.returncode != 0 or not lines:
+            figures[name] = {"skipped": f"failed: {(result.stderr.strip().splitlines() or ['no output'])[-1]}"}
+        else:
+            figures[name] = json.loads(lines[-1])
     return figures
 
 
@@ -57,6 +138,8 @@ def measure_beside_physics(run_dir: Path, duration_s: float, body: str, image_si
 def run_camera_benchmark(work_dir: Path, duration_s: float, body: str, image_size: tuple[int, int] = IMAGE_SIZE) -> dict:
     print(f"cameras: {PICTURES} pictures from each of the task's cameras, alone ...", flush=True)
     figures: dict = {"image_size": list(image_size), "alone": measure_pictures_alone(body, image_size)}
+    print(f"cameras: the renderers' options, {PICTURES} front pictures each ...", flush=True)
+    figures["renderers"] = measure_renderers(body, image_size)
     print(f"cameras: so101 teleop --task cube_to_box --record's dataflow, {duration_s:g} s ...", flush=True)
     figures["beside_physics"] = measure_beside_physics(work_dir / "cameras", duration_s, body, image_size)
     return figures
@@ -73,6 +156,15 @@ def table_lines(figures: dict) -> list[str]:
             f"{'  pictures per s: alone | beside the physics':<52} {alone[key]['pictures_per_s']:>10.1f} | "
             f"{beside['new_pictures_per_s'][key]:<9.1f}",
         ]
+    renderers = figures.get("renderers", {})  # absent from results saved before they were measured
+    if renderers:
+        lines.append("front camera, each renderer option (ms, p50 | p99):")
+    for name, renderer in renderers.items():
+        label = f"  {name}"
+        if "skipped" in renderer:
+            lines.append(f"{label:<52} not measured: {renderer['skipped']}")
+        else:
+            lines.append(f"{label:<52} {renderer['ms']['p50']:>10.1f} | {renderer['ms']['p99']:<9.1f}")
     return lines + [
         f"{'task recording: joint_state per s':<52} {beside['joint_state_per_s']:>10.2f}",
         f"{'  simulated / wall time':<52} {beside['sim_over_wall']:>10.4f}",
@@ -95,3 +187,19 @@ def targets(figures: dict, joint_state_target: float, sim_error_target: float) -
         rows.append(target_row(f"{key.rsplit('.', 1)[-1]} camera: new pictures per s while recording", round(rate, 1),
                                f">= {DEFAULT_FPS}", rate >= DEFAULT_FPS))
     return rows
+
+
+def main() -> int:
+    """One renderer option, measured in this process (measure_renderers starts it): its figures as JSON."""
+    parser = argparse.ArgumentParser(description=main.__doc__)
+    parser.add_argument("--body", choices=sorted(RENDERERS), required=True)
+    parser.add_argument("--renderer", required=True)
+    parser.add_argument("--image-size", required=True)
+    args = parser.parse_args()
+    width, height = (int(value) for value in args.image_size.split("x"))
+    print(json.dumps(measure_renderer(args.body, args.renderer, (width, height))))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -13,6 +13,7 @@ import pytest
 
 from so101 import assets
 from so101.bodies import pybullet_hulls
+from so101.bodies.stl import stl_points
 from tests.helpers.dataflow import BROKEN_MESH, corrupt
 
 
@@ -221,7 +222,7 @@ def test_a_point_stl_holds_the_points_three_by_three(tmp_path):
     path.write_bytes(pybullet_hulls.point_stl_bytes(points, "hull points"))
     assert path.read_bytes()[:80] == b"hull points".ljust(80)
     assert path.stat().st_size == 84 + 2 * 50  # two triangles, the last point repeated to fill the second
-    assert pybullet_hulls.stl_points(path).tolist() == points.tolist() + [points[-1].tolist()]
+    assert stl_points(path).tolist() == points.tolist() + [points[-1].tolist()]
 
 
 @pytest.fixture(scope="module")
@@ -244,7 +245,7 @@ def test_pybullet_snaps_hull_vertices_to_a_grid_of_the_bounding_box(model_dir, p
     # model files"): every hull vertex lies on a grid of HULL_GRID_STEPS steps per axis, centred
     # on the points' bounding box. Another PyBullet that snaps otherwise fails here.
     mesh = model_dir / "assets" / name
-    points = pybullet_hulls.stl_points(mesh).astype(np.float64)
+    points = stl_points(mesh).astype(np.float64)
     low, high = points.min(axis=0), points.max(axis=0)
     vertices = pybullet_hulls.pybullet_hull_vertices(mesh, pybullet_client)
     grid = (vertices - (low + high) / 2) / ((high - low) / pybullet_hulls.HULL_GRID_STEPS)
@@ -280,7 +281,7 @@ def test_hull_files_are_derived_from_scratch_and_give_pybullet_the_same_hulls(de
         full = pybullet_hulls.pybullet_hull_vertices(derived_copy / "assets" / name, pybullet_client)
         from_hull_points = pybullet_hulls.pybullet_hull_vertices(folder / name, pybullet_client)
         assert pybullet_hulls.same_vertex_set(from_hull_points, full), name
-        assert len(pybullet_hulls.stl_points(folder / name)) < 1.2 * len(full) + 3, name  # little beyond the hull
+        assert len(stl_points(folder / name)) < 1.2 * len(full) + 3, name  # little beyond the hull
 
 
 @pytest.mark.slow

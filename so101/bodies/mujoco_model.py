@@ -26,6 +26,7 @@ import numpy as np
 import numpy.typing as npt
 
 from so101 import assets
+from so101.bodies.stl import stl_points
 from so101.gui.display import display_available
 
 # Offscreen drawing without a display needs an OpenGL back end: EGL, with Mesa's
@@ -50,13 +51,15 @@ def hulls_key() -> str:
     return f"mujoco {mujoco.__version__}; model {assets.manifest_digest()}"
 
 
-def scene_model(mjcf: Path, hulls: Hulls | None, visual: bool = True, task: Any = None) -> Any:
+def scene_model(mjcf: Path, hulls: Hulls | None, visual: bool = True, task: Any = None,
+                camera_meshes: dict[str, Path] | None = None) -> Any:
     """The MJCF's arm (a mujoco.MjModel) with what PyBullet's scene has too: a ground plane at z = 0 and a light.
 
     `hulls` None collides the MJCF's full meshes, as MuJoCo compiles the file; otherwise each
     collision geom uses its mesh's hull. `visual` False leaves out the visual geoms and their
     meshes: a model to step, not to draw. `task` (a so101.tasks task) adds its cube and box and
-    switches the jaw pads on (so101.tasks.mujoco_scene).
+    switches the jaw pads on (so101.tasks.mujoco_scene). `camera_meshes` (file name -> file) draws
+    the visual geoms with them (so101.bodies.camera_meshes).
     """
     spec = mujoco.MjSpec.from_file(str(mjcf))
     if hulls is not None:
@@ -66,6 +69,10 @@ def scene_model(mjcf: Path, hulls: Hulls | None, visual: bool = True, task: Any 
         for geom in spec.geoms:
             if geom.type == mujoco.mjtGeom.mjGEOM_MESH and (geom.contype or geom.conaffinity):
                 geom.meshname = geom.meshname + HULL_SUFFIX
+    if camera_meshes is not None:  # after the hulls: only the visual geoms use the model's meshes now
+        for mesh in spec.meshes:
+            if mesh.file:
+                mesh.file = str(camera_meshes[Path(mesh.file).name].resolve())
     spec.compiler.discardvisual = not visual
     spec.worldbody.add_geom(
         name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 0.05], rgba=[0.85, 0.87, 0.92, 1],
@@ -81,10 +88,7 @@ def scene_model(mjcf: Path, hulls: Hulls | None, visual: bool = True, task: Any 
 
 def stl_vertices(path: Path) -> npt.NDArray[np.float32]:
     """A binary STL's distinct vertices in the order they first appear: the order MuJoCo numbers them."""
-    data = path.read_bytes()
-    count = int(np.frombuffer(data, "<u4", 1, 80)[0])
-    triangle = np.dtype([("normal", "<f4", 3), ("corners", "<f4", (3, 3)), ("attribute", "<u2")])
-    corners = np.frombuffer(data, triangle, count, 84)["corners"].reshape(-1, 3)
+    corners = stl_points(path)
     _, first = np.unique(corners, axis=0, return_index=True)
     return corners[np.sort(first)]
 

@@ -19,6 +19,7 @@ import numpy.typing as npt
 
 from so101 import assets
 from so101.bodies.camera import DEFAULT_CAMERA, Camera, WristCamera, check_picture
+from so101.bodies.camera_meshes import camera_meshes
 from so101.bodies.mujoco_model import collision_hulls, scene_model
 from so101.bodies.protocol import BodyName, RgbImage
 from so101.bodies.settings import MuJoCoSettings, NodeSettings
@@ -49,9 +50,9 @@ class SO101MuJoCo:
     `renders` False: a body that draws no pictures, compiled without the visual meshes.
     `task` puts that task's scene (so101.tasks) on the floor, laid out from `seed`, and switches
     the gripper's jaw pads on (so101.bodies.jaw_pads); None: the arm alone.
-    `light_pictures` draws without shadows, multisampling, reflections and skybox: on Mesa's
-    software renderer a 320x240 picture of the task's scene takes 51-68 ms instead of 360-600
-    (the camera node's pictures, which a policy learns from, need none of them).
+    `light_pictures` draws the cameras' meshes (so101.bodies.camera_meshes), without shadows,
+    multisampling, reflections and skybox: on Mesa's software renderer these cost far more than
+    a picture a policy learns from needs (`so101 bench --cameras` measures it).
     """
 
     kind: BodyName = "mujoco"
@@ -77,7 +78,8 @@ class SO101MuJoCo:
             log(notice)
         # Without pictures the visual meshes stay out: they are most of the model, and the
         # window, when there is one, is another process with its own model.
-        self.model = scene_model(mjcf, collision_hulls(mjcf, log), visual=renders, task=task)
+        meshes = camera_meshes(mjcf.parent, log) if renders and light_pictures else None
+        self.model = scene_model(mjcf, collision_hulls(mjcf, log), visual=renders, task=task, camera_meshes=meshes)
         self.data = mujoco.MjData(self.model)
         self.model_step_s = float(self.model.opt.timestep)
         self.joint_names = [self.model.joint(i).name for i in range(self.model.njnt)]

@@ -30,6 +30,7 @@ import numpy as np
 import numpy.typing as npt
 
 from so101 import assets
+from so101.bodies.stl import TRIANGLE, stl_points
 
 # Beside the URDF, made by `so101 assets` or on demand (never committed); valid for one PyBullet version.
 HULLS_DIR_NAME = "pybullet_hulls"
@@ -40,7 +41,6 @@ FALLBACK = "the simulator loads the full meshes instead (the same physics, more 
 # btConvexHullComputer's grid: the bounding box's extent on each axis, divided by this.
 HULL_GRID_STEPS = 10216
 
-_TRIANGLE = np.dtype([("normal", "<f4", 3), ("corners", "<f4", (3, 3)), ("attribute", "<u2")])
 _COLLISION_BLOCK = re.compile(r"<collision>.*?</collision>", re.S)
 _MESH_FILE = re.compile(r'filename="([^"]+)"')
 
@@ -66,18 +66,11 @@ def hulls_key() -> str:
 # -- STL files ---------------------------------------------------------------------------
 
 
-def stl_points(path: Path) -> PointArray:
-    """A binary STL's triangle corners, float32 (3 · triangles, 3), as the file holds them."""
-    data = path.read_bytes()
-    count = int(np.frombuffer(data, "<u4", 1, 80)[0])
-    return np.frombuffer(data, _TRIANGLE, count, 84)["corners"].reshape(-1, 3)
-
-
 def point_stl_bytes(points: PointArray, header: str) -> bytes:
     """A binary STL whose triangles are `points` three by three (the last repeated to fill the
     last triangle): a point set for PyBullet's hull, not a surface to draw."""
     padded = np.concatenate([points, np.repeat(points[-1:], (-len(points)) % 3, axis=0)])
-    triangles = np.zeros(len(padded) // 3, _TRIANGLE)
+    triangles = np.zeros(len(padded) // 3, TRIANGLE)  # no normals: these are points, not faces
     triangles["corners"] = padded.reshape(-1, 3, 3)
     return header.encode()[:80].ljust(80, b" ") + np.uint32(len(triangles)).tobytes() + triangles.tobytes()
 

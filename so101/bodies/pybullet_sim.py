@@ -21,6 +21,7 @@ import pybullet_data
 from so101 import assets
 from so101.bodies import pybullet_hulls
 from so101.bodies.camera import DEFAULT_CAMERA, Camera, WristCamera, check_picture
+from so101.bodies.camera_meshes import camera_meshes, urdf_for_cameras
 from so101.bodies.jaw_pads import jaw_pads, urdf_with_pads
 from so101.bodies.protocol import BodyName, RgbImage
 from so101.bodies.settings import NodeSettings, PyBulletSettings, check_control_mode
@@ -137,7 +138,7 @@ class SO101Sim:
         hull_collisions: bool = True,
         task: CubeToBox | None = None,
         seed: int = 0,
-        light_pictures: bool = False,  # as MuJoCo's: its CPU renderer draws no shadows or multisampling anyway
+        light_pictures: bool = False,  # the cameras' meshes (so101.bodies.camera_meshes); no shadows to leave out here
     ):
         check_control_mode(control_mode)
         if not servo_torque_limit_nm > 0:
@@ -173,7 +174,8 @@ class SO101Sim:
         p.setGravity(0, 0, -9.81, physicsClientId=cid)
         p.setPhysicsEngineParameter(fixedTimeStep=self.time_step_s, physicsClientId=cid)
         self.plane_id: int = p.loadURDF("plane.urdf", physicsClientId=cid)
-        self.robot_id: int = self._load_arm(physics_urdf, assets_dir, with_pads=task is not None)
+        meshes = camera_meshes(urdf.parent, log) if renders and light_pictures else None
+        self.robot_id: int = self._load_arm(physics_urdf, assets_dir, with_pads=task is not None, meshes=meshes)
         self.scene: PyBulletScene | None = None if task is None else PyBulletScene(cid, task, task.layout(seed))
         if self.display_mode == "gui":
             self._window = Window(["so101.gui.viewer", "--urdf", str(urdf), *(["--task", task.name] if task else [])],
@@ -205,19 +207,27 @@ class SO101Sim:
             )
 
     # -- set-up helpers --------------------------------------------------------------
-    def _load_arm(self, physics_urdf: Path, assets_dir: Path | str | None, with_pads: bool) -> int:
-        """The arm on its fixed base; `with_pads`, with the MJCF's jaw pads as extra collision boxes,
-        loaded from a copy of the URDF that names its meshes by absolute path."""
+    def _load_arm(self, physics_urdf: Path, assets_dir: Path | str | None, with_pads: bool,
+                  meshes: dict[str, Path] | None) -> int:
+        """The arm on its fixed base; `with_pads`, with the MJCF's jaw pads as extra collision boxes;
+        with `meshes`, drawn with the cameras' meshes. Either loads from a copy of the URDF that names
+        its meshes by absolute path."""
         options = dict(basePosition=[0, 0, 0], baseOrientation=[0, 0, 0, 1], useFixedBase=True, physicsClientId=self.client)
-        if not with_pads:
+        if not with_pads and meshes is None:
             return int(p.loadURDF(str(physics_urdf), **options))
-        pads = tuple(pad.grown() for pad in jaw_pads(assets.mjcf_path(None if assets_dir is None else Path(assets_dir))))
-        rpy = {pad.name: tuple(p.getEulerFromQuaternion([*pad.quat_wxyz[1:], pad.quat_wxyz[0]])) for pad in pads}
-        text = urdf_with_pads(physics_urdf.read_text(encoding="utf-8"), physics_urdf.parent, pads, rpy)
-        with tempfile.NamedTemporaryFile("w", suffix=".urdf", prefix="so101-pads-", encoding="utf-8") as copy:
+        text = physics_urdf.read_text(encoding="utf-8")
+        if meshes is not None:
+            text = urdf_for_cameras(text, physics_urdf.parent, meshes)
+        if with_pads:
+            pads = tuple(pad.grown() for pad in jaw_pads(assets.mjcf_path(None if assets_dir is None else Path(assets_dir))))
+            rpy = {pad.name: tuple(p.getEulerFromQuaternion([*pad.quat_wxyz[1:], pad.quat_wxyz[0]])) for pad in pads}
+            text = urdf_with_pads(text, physics_urdf.parent, pads, rpy)
+        with tempfile.NamedTemporaryFile("w", suffix=".urdf", prefix="so101-arm-", encoding="utf-8") as copy:
             copy.write(text)
             copy.flush()
             robot_id = int(p.loadURDF(copy.name, **options))
+        if not with_pads:
+            return robot_id
         # Bullet's friction lets a held cube creep out of the jaws (measured: 13 mm down and sideways
         # in 4 s, then dropped); a friction anchor holds each contact where it started.
         for link in {GRIPPER_LINK_INDEX, GRIPPER.index}:

@@ -28,4 +28,7 @@ def run(args: argparse.Namespace) -> int:
     from so101.bodies.pybullet_hulls import collision_hulls_urdf
 
     collision_hulls_urdf(urdf)  # PyBullet's: each collision mesh's hull points, derived once
+    from so101.bodies.camera_meshes import camera_meshes
+
+    camera_meshes(urdf.parent)  # a task's cameras' meshes, with fewer triangles, derived once
     return 0

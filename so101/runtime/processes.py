@@ -156,10 +156,19 @@ def dora_run_dataflow(pid: int) -> Path | None:
         return None
 
 
+def on_our_network(pid: int) -> bool:
+    """Whether `pid` shares this process's network namespace, whose ports it could hold (a
+    container's or another namespace's `dora run` cannot take ours); True where that cannot be read."""
+    try:
+        return os.readlink(f"/proc/{pid}/ns/net") == os.readlink("/proc/self/ns/net")
+    except OSError:
+        return True
+
+
 def dora_runs() -> list[int]:
-    """The pids of the `dora run` processes of this machine that are ours, in pid order."""
+    """The pids of the `dora run` processes of this machine that are ours and share our network, in pid order."""
     pids = [int(entry.name) for entry in Path("/proc").iterdir() if entry.name.isdigit()]
-    return sorted(pid for pid in pids if dora_run_dataflow(pid) is not None and alive(pid))
+    return sorted(pid for pid in pids if dora_run_dataflow(pid) is not None and alive(pid) and on_our_network(pid))
 
 
 def who_runs(pid: int) -> str:
