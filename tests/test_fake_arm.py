@@ -771,10 +771,15 @@ def test_cli_prints_the_port_and_serves_it_and_takes_commands(start_cli):
 
 def test_cli_sigterm_ends_it_cleanly(start_cli):
     process, lines, port_path = start_cli()
-    process.send_signal(signal.SIGTERM)
-    assert process.wait(timeout=10) == 0
-    assert process.stderr.read() == b""
-    assert not os.path.exists(port_path)
+    # Held open here, the port's number cannot go to another pseudo-terminal (a parallel test's) meanwhile.
+    held = os.open(port_path, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+    try:
+        process.send_signal(signal.SIGTERM)
+        assert process.wait(timeout=10) == 0
+        assert process.stderr.read() == b""
+        assert not os.path.exists(port_path)  # its end closed: the port is gone
+    finally:
+        os.close(held)
 
 
 def test_cli_runs_on_after_end_of_input_until_sigterm(start_cli):

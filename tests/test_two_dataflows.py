@@ -9,8 +9,10 @@ so in one line, and `0 77` must move the arm of the prompt's own dataflow, not t
 from __future__ import annotations
 
 import json
+import os
 import re
 import shutil
+import subprocess
 import time
 import uuid
 from pathlib import Path
@@ -20,7 +22,7 @@ import pytest
 from so101.bodies.registry import BODIES
 from so101.runtime.cluster import CLUSTER_DATAFLOW
 from so101.runtime.dataflow import LEADER_DATAFLOW_FILE, LEADER_NODE_ID, has_dynamic_node
-from so101.runtime.processes import DAEMON_PORT_TAKEN_MARK, running_with_env
+from so101.runtime.processes import DAEMON_PORT_TAKEN_MARK, on_our_network, running_with_env
 from tests.helpers.dataflow import PROMPT_COMMAND, DoraRun, write_test_dataflow
 from tests.helpers.terminal import Terminal, start_teleop
 
@@ -65,6 +67,22 @@ def joint_0_reaches(terminal: Terminal, target_deg: float) -> float:
             return angle_deg
         time.sleep(0.5)
     raise AssertionError(f"joint 0 did not reach {target_deg}°: last state {reply.group(0)}")
+
+
+@pytest.mark.skipif(os.geteuid() != 0 or shutil.which("unshare") is None, reason="needs root and unshare")
+def test_a_process_in_another_network_namespace_cannot_hold_our_port():
+    # A container's `dora run`, or a parallel test worker's, has a port 53291 of its own.
+    elsewhere = subprocess.Popen(["unshare", "--net", "sleep", "30"])
+    try:
+        deadline = time.monotonic() + 10
+        while on_our_network(elsewhere.pid) and time.monotonic() < deadline:  # until unshare has moved
+            time.sleep(0.05)
+        assert not on_our_network(elsewhere.pid)
+    finally:
+        elsewhere.kill()
+        elsewhere.wait()
+    assert on_our_network(os.getpid())
+    assert on_our_network(elsewhere.pid)  # gone: what cannot be read counts as ours, the careful side
 
 
 @pytest.mark.person
