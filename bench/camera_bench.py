@@ -22,6 +22,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -55,16 +56,18 @@ RENDERERS = {
 }
 
 
-def draw_poses(sim, image_size: tuple[int, int], camera_options: dict) -> list[float]:
-    """ms for each of PICTURES poses drawn, after one picture to set the renderer up."""
+def draw_timed(sim, image_size: tuple[int, int], camera_options: dict) -> tuple[list[float], np.ndarray]:
+    """ms for each of PICTURES poses drawn, after one picture to set the renderer up; and the first pose's picture."""
     sim.render_rgb(*image_size, **camera_options)
+    first = None
     each_ms = []
     for index in range(PICTURES):
         sim.show_pose_deg([3.0 * index, -2.0 * index, 2.0 * index, 10, 4.0 * index, 30])
         start = time.perf_counter()
-        sim.render_rgb(*image_size, **camera_options)
+        picture = sim.render_rgb(*image_size, **camera_options)
         each_ms.append((time.perf_counter() - start) * 1e3)
-    return each_ms
+        first = picture if first is None else first
+    return each_ms, first
 
 
 def measure_pictures_alone(body: str, image_size: tuple[int, int]) -> dict:
@@ -73,13 +76,14 @@ def measure_pictures_alone(body: str, image_size: tuple[int, int]) -> dict:
                                    task=CUBE_TO_BOX, light_pictures=True) as sim:
         figures = {}
         for key, camera in CAMERAS.items():
-            each_ms = draw_poses(sim, image_size, {} if camera is None else {"camera": camera})
+            each_ms, _ = draw_timed(sim, image_size, {} if camera is None else {"camera": camera})
             figures[key] = {"ms": summary(each_ms), "pictures_per_s": 1e3 / float(np.median(each_ms))}
     return figures
 
 
-def measure_renderer(body: str, name: str, image_size: tuple[int, int]) -> dict:
-    """One renderer option's front pictures, in this process (started for it by measure_renderers)."""
+def measure_renderer(body: str, name: str, image_size: tuple[int, int], picture_file: Path) -> dict:
+    """One renderer option's front pictures, in this process (started for it by measure_renderers);
+    the first one saved to `picture_file` (.npy) to compare."""
     _, full_meshes, egl_plugin = RENDERERS[body][name]
     module = sys.modules[BODIES[body].body_class().__module__]
     if full_meshes:
@@ -102,20 +106,26 @@ def measure_renderer(body: str, name: str, image_size: tuple[int, int]) -> dict:
             *args, **{**kwargs, "renderer": p.ER_BULLET_HARDWARE_OPENGL})
     with BODIES[body].body_class()(mode="direct", time_step_s=TICK_PERIOD_S, log=lambda message: None,
                                    task=CUBE_TO_BOX, light_pictures=True) as sim:
-        each_ms = draw_poses(sim, image_size, {})
+        each_ms, first = draw_timed(sim, image_size, {})
+    np.save(picture_file, first)
     return {"ms": summary(each_ms), "pictures_per_s": 1e3 / float(np.median(each_ms))}
 
 
-def measure_renderers(body: str, image_size: tuple[int, int]) -> dict:
-    """Each of the body's renderer options in a fresh process: its front pictures' ms, or why it was not measured."""
+def measure_renderers(body: str, image_size: tuple[int, int], work_dir: Path) -> dict:
+    """Each of the body's renderer options in a fresh process: its front pictures' ms and how far its
+    picture is from the camera's own (the first option's: the mean difference of a channel, of 255),
+    or why it was not measured."""
     figures = {}
-    for name, (environment, _, _) in RENDERERS[body].items():
+    work_dir.mkdir(parents=True, exist_ok=True)
+    camera_picture = None
+    for index, (name, (environment, _, _)) in enumerate(RENDERERS[body].items()):
+        picture_file = work_dir / f"renderer-{index}.npy"
         if environment.get("MUJOCO_GL") == "osmesa" and ctypes.util.find_library("OSMesa") is None:
             figures[name] = {"skipped": "libOSMesa is not installed"}
             continue
         result = subprocess.run(
             [sys.executable, "-m", "bench.camera_bench", "--renderer", name, "--body", body,
-             "--image-size", "x".join(map(str, image_size))],
+             "--image-size", "x".join(map(str, image_size)), "--picture", str(picture_file)],
             env={**os.environ, **environment}, capture_output=True, text=True, timeout=300,
             cwd=Path(__file__).resolve().parents[1],
         )
@@ -124,22 +134,67 @@ def measure_renderers(body: str, image_size: tuple[int, int]) -> dict:
             figures[name] = {"skipped": f"failed: {(result.stderr.strip().splitlines() or ['no output'])[-1]}"}
         else:
             figures[name] = json.loads(lines[-1])
+            picture = np.load(picture_file).astype(np.int16)
+            camera_picture = picture if camera_picture is None else camera_picture
+            figures[name]["differs_from_camera"] = float(np.mean(np.abs(picture - camera_picture)))
     return figures
 
 
+def cpu_seconds(folder: Path) -> dict[int, tuple[str, float]]:
+    """Each process working in `folder` (a dataflow's: dora and its nodes, which dora starts there):
+    pid -> (its name: a Python script's stem, else its program's, its CPU seconds so far)."""
+    ticks_per_s = os.sysconf("SC_CLK_TCK")
+    found = {}
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            if Path(os.readlink(entry / "cwd")) != folder:
+                continue
+            arguments = (entry / "cmdline").read_bytes().decode(errors="replace").split("\0")
+            fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        scripts = [Path(argument).stem for argument in arguments if argument.endswith(".py")]
+        modules = [module for flag, module in zip(arguments, arguments[1:]) if flag == "-m"]
+        program = arguments[1:] if Path(arguments[0]).name.startswith("python") else arguments  # `dora run` is Python's
+        name = scripts[0] if scripts else modules[0] if modules else " ".join(Path(part).name for part in program[:2])
+        found[int(entry.name)] = (name, (int(fields[11]) + int(fields[12])) / ticks_per_s)  # utime + stime
+    return found
+
+
+def cpu_shares_during(folder: Path, shares: dict[str, float]) -> Callable[[float], None]:
+    """A run_dataflow `during` that waits out the measured time and fills `shares`: each process
+    name's CPU time over it, in cores (1.0: a whole core throughout)."""
+
+    def during(duration_s: float) -> None:
+        before, start = cpu_seconds(folder), time.monotonic()
+        time.sleep(duration_s)
+        after, elapsed_s = cpu_seconds(folder), time.monotonic() - start
+        for pid, (name, seconds) in after.items():
+            if pid in before:
+                shares[name] = shares.get(name, 0.0) + (seconds - before[pid][1]) / elapsed_s
+
+    return during
+
+
 def measure_beside_physics(run_dir: Path, duration_s: float, body: str, image_size: tuple[int, int]) -> dict:
-    """The task's recording dataflow, an episode recorded throughout while the prober moves the arm."""
-    flow, episode = record_run(run_dir, duration_s, body, image_size, task=CUBE_TO_BOX.name)
+    """The task's recording dataflow, an episode recorded throughout while the prober moves the arm,
+    and where the CPU time goes meanwhile."""
+    shares: dict[str, float] = {}
+    flow, episode = record_run(run_dir, duration_s, body, image_size, task=CUBE_TO_BOX.name,
+                               during=cpu_shares_during(run_dir.resolve(), shares))
     return {"joint_state_per_s": flow["joint_state_per_s"], "sim_over_wall": flow["sim_over_wall"],
             "ticks_missed": flow["ticks_missed"], "recorded_s": episode["recorded_s"],
-            "new_pictures_per_s": {key: episode["new_pictures_per_s"][key] for key in CAMERAS}}
+            "new_pictures_per_s": {key: episode["new_pictures_per_s"][key] for key in CAMERAS},
+            "cpu_cores": dict(sorted(shares.items(), key=lambda item: -item[1]))}
 
 
 def run_camera_benchmark(work_dir: Path, duration_s: float, body: str, image_size: tuple[int, int] = IMAGE_SIZE) -> dict:
     print(f"cameras: {PICTURES} pictures from each of the task's cameras, alone ...", flush=True)
     figures: dict = {"image_size": list(image_size), "alone": measure_pictures_alone(body, image_size)}
     print(f"cameras: the renderers' options, {PICTURES} front pictures each ...", flush=True)
-    figures["renderers"] = measure_renderers(body, image_size)
+    figures["renderers"] = measure_renderers(body, image_size, work_dir / "renderers")
     print(f"cameras: so101 teleop --task cube_to_box --record's dataflow, {duration_s:g} s ...", flush=True)
     figures["beside_physics"] = measure_beside_physics(work_dir / "cameras", duration_s, body, image_size)
     return figures
@@ -158,17 +213,25 @@ def table_lines(figures: dict) -> list[str]:
         ]
     renderers = figures.get("renderers", {})  # absent from results saved before they were measured
     if renderers:
-        lines.append("front camera, each renderer option (ms, p50 | p99):")
+        lines.append("front camera, each renderer option (ms, p50 | p99; the picture's mean difference from the camera's, of 255):")
     for name, renderer in renderers.items():
         label = f"  {name}"
         if "skipped" in renderer:
             lines.append(f"{label:<52} not measured: {renderer['skipped']}")
         else:
-            lines.append(f"{label:<52} {renderer['ms']['p50']:>10.1f} | {renderer['ms']['p99']:<9.1f}")
-    return lines + [
+            lines.append(f"{label:<52} {renderer['ms']['p50']:>10.1f} | {renderer['ms']['p99']:<9.1f}"
+                         f"{renderer.get('differs_from_camera', float('nan')):>6.1f}")
+    lines += [
         f"{'task recording: joint_state per s':<52} {beside['joint_state_per_s']:>10.2f}",
         f"{'  simulated / wall time':<52} {beside['sim_over_wall']:>10.4f}",
     ]
+    cores = beside.get("cpu_cores", {})  # absent from results saved before it was measured
+    if cores:
+        lines.append(f"{'  CPU while recording, in cores: all of it':<52} {sum(cores.values()):>10.2f}")
+    for name, share in cores.items():
+        if share >= 0.005:
+            lines.append(f"{'    ' + name:<52} {share:>10.2f}")
+    return lines
 
 
 def targets(figures: dict, joint_state_target: float, sim_error_target: float) -> list[dict]:
@@ -195,9 +258,10 @@ def main() -> int:
     parser.add_argument("--body", choices=sorted(RENDERERS), required=True)
     parser.add_argument("--renderer", required=True)
     parser.add_argument("--image-size", required=True)
+    parser.add_argument("--picture", type=Path, required=True)
     args = parser.parse_args()
     width, height = (int(value) for value in args.image_size.split("x"))
-    print(json.dumps(measure_renderer(args.body, args.renderer, (width, height))))
+    print(json.dumps(measure_renderer(args.body, args.renderer, (width, height), args.picture)))
     return 0
 
 

@@ -16,6 +16,7 @@ import shutil
 import tempfile
 import time
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -56,10 +57,11 @@ def measure_in_loop(run_dir: Path, duration_s: float, body: str) -> dict:
 
 
 def record_run(run_dir: Path, duration_s: float, body: str, image_size: tuple[int, int] = IMAGE_SIZE,
-               task: str | None = None) -> tuple[dict, dict]:
+               task: str | None = None, during: Callable[[float], None] | None = None) -> tuple[dict, dict]:
     """`so101 teleop --record`'s dataflow (with `task`: `--task`'s) while the prober moves the arm, an
     episode with video recorded throughout: (the dataflow's real-time figures, the episode's:
-    frames, seconds recorded and wall-clock seconds, and each video's new pictures a second)."""
+    frames, seconds recorded and wall-clock seconds, and each video's new pictures a second).
+    `during`: as run_dataflow's."""
     from so101.dataset.reader import Dataset
 
     dataset_dir = run_dir / "dataset"
@@ -75,7 +77,8 @@ def record_run(run_dir: Path, duration_s: float, body: str, image_size: tuple[in
                       {"SO101_CAMERA_BODY": body, "SO101_RECORD_IMAGE_SIZE": size}, picture_hz=DEFAULT_FPS)
 
     record = run_dataflow(run_dir, duration_s + WARMUP_S, {"SO101_FAST_STEPS": "0"},
-                          {**PACED_PROBE_ENV, "PROBE_RECORD_TASK": "so101 bench"}, body=body, extend=add_recorder)
+                          {**PACED_PROBE_ENV, "PROBE_RECORD_TASK": "so101 bench"}, body=body, extend=add_recorder,
+                          during=during)
     flow = realtime_figures(record, TICK_PERIOD_S)["dataflow"]
     states = record["probe"]["states"]
     # The episode starts at the prober's RECORD_AT_STATE-th state and ends at STOP, just after the last.

@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -18,7 +19,7 @@ import pyarrow as pa
 import pytest
 
 from so101.bodies import node_loop as body_node
-from bench import common, leader_bench, real_bench, run_bench, web_bench
+from bench import camera_bench, common, leader_bench, real_bench, run_bench, web_bench
 from tests.helpers.dataflow import TICK, run_simulation_node
 
 MS = 1_000_000  # ns
@@ -387,6 +388,18 @@ def test_the_saved_camera_results_show_each_cameras_rates_and_the_targets(name, 
         assert f"{alone['pictures_per_s']:.1f} | {beside:.1f}" in shown, camera
         assert f"camera: new pictures per s while recording" in shown
     assert f"{result['cameras']['beside_physics']['joint_state_per_s']:.2f}" in shown
+    # Each renderer option with its time and its picture's difference from the camera's own, the first's being 0.
+    renderers = result["cameras"]["renderers"]
+    assert list(renderers) == list(camera_bench.RENDERERS[result["body"]])
+    for option, figures in renderers.items():
+        assert re.search(rf"^  {re.escape(option)} +{figures['ms']['p50']:.1f} \| {figures['ms']['p99']:.1f} +"
+                         rf"{figures['differs_from_camera']:.1f}$", shown, re.M), option
+    assert renderers[list(renderers)[0]]["differs_from_camera"] == 0
+    # Where the CPU went while recording: each process of the dataflow, in cores.
+    cores = result["cameras"]["beside_physics"]["cpu_cores"]
+    assert {"camera", "recorder", "dora run"} <= set(cores)
+    assert 0.5 * result["machine"]["cores"] < sum(cores.values()) <= 1.02 * result["machine"]["cores"]
+    assert re.search(rf"^    camera +{cores['camera']:.2f}$", shown, re.M)
 
 
 def test_cameras_refuse_the_real_arm_in_one_line(capsys):
