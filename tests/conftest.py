@@ -9,7 +9,6 @@ must not turn a slow example into a failure.
 
 import fcntl
 import os
-import shutil
 import time
 from pathlib import Path
 
@@ -108,13 +107,9 @@ def model_dir() -> Path:
 @pytest.fixture
 def model_copy(model_dir, tmp_path) -> Path:
     """A private copy of the verified model, to break."""
-    from so101 import assets
+    from tests.helpers.dataflow import copy_model
 
-    copy = tmp_path / "SO101"
-    for relpath in assets.manifest():
-        (copy / relpath).parent.mkdir(parents=True, exist_ok=True)
-        shutil.copyfile(model_dir / relpath, copy / relpath)
-    return copy
+    return copy_model(tmp_path / "SO101")
 
 
 # -- simulators ------------------------------------------------------------------------

@@ -14,7 +14,7 @@ import pytest
 from so101 import assets
 from so101.bodies import pybullet_hulls
 from so101.bodies.stl import stl_points
-from tests.helpers.dataflow import BROKEN_MESH, corrupt
+from tests.helpers.dataflow import BROKEN_MESH, copy_model, corrupt
 
 
 @pytest.fixture
@@ -256,11 +256,7 @@ def test_pybullet_snaps_hull_vertices_to_a_grid_of_the_bounding_box(model_dir, p
 @pytest.fixture(scope="module")
 def derived_copy(tmp_path_factory) -> Path:
     """A copy of the model with its hull files derived from scratch, once for this module."""
-    model = assets.urdf_path().parent
-    copy = tmp_path_factory.mktemp("derived") / "SO101"
-    for relpath in assets.manifest():
-        (copy / relpath).parent.mkdir(parents=True, exist_ok=True)
-        shutil.copyfile(model / relpath, copy / relpath)
+    copy = copy_model(tmp_path_factory.mktemp("derived") / "SO101")
     assert pybullet_hulls.hulls_problem(copy / assets.URDF_NAME) == "missing"
     pybullet_hulls.derive_hulls(copy / assets.URDF_NAME)
     return copy

@@ -14,7 +14,7 @@ from so101.bodies import camera_meshes
 from so101.bodies.camera import DEFAULT_CAMERA, WRIST_CAMERA
 from so101.bodies.stl import stl_bytes, stl_points
 from so101.tasks import task_named
-from tests.helpers.dataflow import corrupt
+from tests.helpers.dataflow import copy_model, corrupt
 
 CELL = camera_meshes.CELL_M
 
@@ -76,11 +76,7 @@ def mesh_names() -> list[str]:
 @pytest.fixture(scope="module")
 def derived_copy(tmp_path_factory) -> Path:
     """A copy of the model with the cameras' meshes derived from scratch, once for this module."""
-    model = assets.urdf_path().parent
-    copy = tmp_path_factory.mktemp("derived") / "SO101"
-    for relpath in assets.manifest():
-        (copy / relpath).parent.mkdir(parents=True, exist_ok=True)
-        shutil.copyfile(model / relpath, copy / relpath)
+    copy = copy_model(tmp_path_factory.mktemp("derived") / "SO101")
     assert camera_meshes.meshes_problem(copy) == "missing"
     derived = camera_meshes.derive_camera_meshes(copy)
     assert derived.model_triangles == 322_564 and derived.triangles < derived.model_triangles / 5

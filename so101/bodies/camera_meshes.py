@@ -2,9 +2,9 @@
 
 A CPU renderer (PyBullet's TinyRenderer, MuJoCo through Mesa's llvmpipe) spends much of a
 picture on the model's 322,564 triangles, most of them smaller than a pixel of a 320x240
-picture. So each visual mesh is decimated by vertex clustering: its corners snap to a grid of
-`CELL_M`, the corners in one cell become their mean, and the triangles that lose an edge
-go. A face keeps its corners' order, so it keeps facing out. Derived once (`so101 assets`,
+picture. So each visual mesh is decimated by vertex clustering: the corners in one cell of a
+grid of `CELL_M` become their mean, and a triangle left without three distinct corners goes.
+A face keeps its corners' order, so it keeps facing out. Derived once (`so101 assets`,
 or on demand), written beside the model with a manifest keyed like the collision hulls';
 used only with `light_pictures` (a task's cameras), so the course's pictures are unchanged.
 `so101 bench --cameras` measures what they save.
@@ -12,10 +12,7 @@ used only with `light_pictures` (a task's cameras), so the course's pictures are
 
 from __future__ import annotations
 
-import hashlib
-import os
 import re
-import tempfile
 from pathlib import Path
 from typing import Callable, NamedTuple
 
@@ -23,14 +20,15 @@ import numpy as np
 import numpy.typing as npt
 
 from so101 import assets
+from so101.bodies.derived_files import folder_problem, writing_folder
 from so101.bodies.stl import stl_bytes, stl_points
 
 # Beside the URDF, made by `so101 assets` or on demand (never committed).
 CAMERA_MESHES_DIR_NAME = "camera_meshes"
 MANIFEST_NAME = "camera_meshes.sha256"
-# The grid the corners snap to: a pixel of the task's front camera at 320x240 spans about 2 mm
-# of the arm, so 1 mm keeps every edge a picture shows (bench --cameras; the pictures compared
-# in tests/test_camera_meshes.py).
+# The grid the corners snap to: a pixel of the front camera at 320x240 spans about 2.5 mm at the
+# arm; the wrist camera sees the jaws from closer, and tests/test_camera_meshes.py bounds how far
+# both cameras' pictures move.
 CELL_M = 0.001
 # What the cameras draw where the meshes cannot be derived.
 FALLBACK = "the cameras draw the full meshes instead (the same pictures, slower)"
@@ -71,10 +69,6 @@ def camera_meshes_dir(model_dir: Path) -> Path:
     return model_dir / CAMERA_MESHES_DIR_NAME
 
 
-def _digest(path: Path) -> str:
-    return hashlib.sha256(path.read_bytes()).hexdigest()
-
-
 def model_meshes() -> list[str]:
     """The model's mesh files (relative paths), from its manifest."""
     return sorted(relpath for relpath in assets.manifest() if relpath.lower().endswith(".stl"))
@@ -82,31 +76,14 @@ def model_meshes() -> list[str]:
 
 def meshes_problem(model_dir: Path) -> str | None:
     """Why the derived files in `model_dir` cannot be used ("missing", ...), or None when they can."""
-    folder = camera_meshes_dir(model_dir)
-    try:
-        first, *entries = (folder / MANIFEST_NAME).read_text().splitlines()
-    except (OSError, UnicodeDecodeError, ValueError):
-        return "missing"
-    if first != f"# {meshes_key()}":
-        return "derived from another model or grid"
-    listed = {name: digest for digest, _, name in (entry.partition("  ") for entry in entries)}
-    if set(listed) != {Path(relpath).name for relpath in model_meshes()}:
-        return "missing"
-    for name, digest in listed.items():
-        if not (folder / name).is_file():
-            return "missing"
-        if _digest(folder / name) != digest:
-            return "corrupt"
-    return None
+    return folder_problem(camera_meshes_dir(model_dir), MANIFEST_NAME, meshes_key(),
+                          {Path(relpath).name for relpath in model_meshes()}, "derived from another model or grid")
 
 
 def derive_camera_meshes(model_dir: Path) -> Decimated:
     """Write the decimated meshes into `model_dir` (a verified model); OSError where it cannot be written."""
-    folder = camera_meshes_dir(model_dir)
-    folder.mkdir(exist_ok=True)
     triangles = model_triangles = 0
-    with tempfile.TemporaryDirectory(prefix=".staging-", dir=folder) as staging_dir:
-        staging = Path(staging_dir)
+    with writing_folder(camera_meshes_dir(model_dir), MANIFEST_NAME, meshes_key()) as staging:
         for relpath in model_meshes():
             corners = stl_points(model_dir / relpath).reshape(-1, 3, 3)
             kept = cluster_vertices(corners)
@@ -114,14 +91,7 @@ def derive_camera_meshes(model_dir: Path) -> Decimated:
             (staging / name).write_bytes(stl_bytes(kept, f"{name} for cameras, derived by `{assets.FIX_COMMAND}`"))
             triangles += len(kept)
             model_triangles += len(corners)
-        names = sorted(path.name for path in staging.iterdir())
-        (staging / MANIFEST_NAME).write_text(
-            "\n".join([f"# {meshes_key()}"] + [f"{_digest(staging / name)}  {name}" for name in names]) + "\n"
-        )
-        # The manifest last: a reader sees it only once every file it lists is in place.
-        for name in names + [MANIFEST_NAME]:
-            os.replace(staging / name, folder / name)
-    return Decimated(folder, triangles, model_triangles)
+    return Decimated(camera_meshes_dir(model_dir), triangles, model_triangles)
 
 
 def camera_meshes(model_dir: Path, log: Callable[[str], None] = print) -> dict[str, Path] | None:

@@ -18,10 +18,7 @@ with the full meshes.
 
 from __future__ import annotations
 
-import hashlib
-import os
 import re
-import tempfile
 from importlib import metadata
 from pathlib import Path
 from typing import Callable, NamedTuple
@@ -30,6 +27,7 @@ import numpy as np
 import numpy.typing as npt
 
 from so101 import assets
+from so101.bodies.derived_files import folder_problem, writing_folder
 from so101.bodies.stl import TRIANGLE, stl_points
 
 # Beside the URDF, made by `so101 assets` or on demand (never committed); valid for one PyBullet version.
@@ -138,28 +136,10 @@ def hulls_dir(urdf: Path) -> Path:
     return urdf.parent / HULLS_DIR_NAME
 
 
-def _digest(path: Path) -> str:
-    return hashlib.sha256(path.read_bytes()).hexdigest()
-
-
 def hulls_problem(urdf: Path) -> str | None:
     """Why the derived files beside `urdf` cannot be used ("missing", ...), or None when they can."""
-    folder = hulls_dir(urdf)
-    try:
-        first, *entries = (folder / HULLS_MANIFEST_NAME).read_text().splitlines()
-    except (OSError, UnicodeDecodeError, ValueError):
-        return "missing"
-    if first != f"# {hulls_key()}":
-        return "derived with another PyBullet or model"
-    listed = {name: digest for digest, _, name in (entry.partition("  ") for entry in entries)}
-    if urdf.name not in listed:
-        return "missing"
-    for name, digest in listed.items():
-        if not (folder / name).is_file():
-            return "missing"
-        if _digest(folder / name) != digest:
-            return "corrupt"
-    return None
+    return folder_problem(hulls_dir(urdf), HULLS_MANIFEST_NAME, hulls_key(), {urdf.name},
+                          "derived with another PyBullet or model")
 
 
 def derive_hulls(urdf: Path) -> DerivedHulls:
@@ -169,11 +149,8 @@ def derive_hulls(urdf: Path) -> DerivedHulls:
     import pybullet as p
 
     text = urdf.read_text()
-    folder = hulls_dir(urdf)
-    folder.mkdir(exist_ok=True)
     kept_count = mesh_count = 0
-    with tempfile.TemporaryDirectory(prefix=".staging-", dir=folder) as staging_dir:
-        staging = Path(staging_dir)
+    with writing_folder(hulls_dir(urdf), HULLS_MANIFEST_NAME, hulls_key()) as staging:
         client = p.connect(p.DIRECT)
         try:
             for relpath in collision_meshes(text):
@@ -193,14 +170,7 @@ def derive_hulls(urdf: Path) -> DerivedHulls:
         finally:
             p.disconnect(physicsClientId=client)
         (staging / urdf.name).write_text(collision_urdf_text(text))
-        names = sorted(path.name for path in staging.iterdir())
-        (staging / HULLS_MANIFEST_NAME).write_text(
-            "\n".join([f"# {hulls_key()}"] + [f"{_digest(staging / name)}  {name}" for name in names]) + "\n"
-        )
-        # The manifest last: a reader sees it only once every file it lists is in place.
-        for name in names + [HULLS_MANIFEST_NAME]:
-            os.replace(staging / name, folder / name)
-    return DerivedHulls(folder / urdf.name, kept_count, mesh_count)
+    return DerivedHulls(hulls_dir(urdf) / urdf.name, kept_count, mesh_count)
 
 
 def collision_hulls_urdf(urdf: Path, log: Callable[[str], None] = print) -> Path:

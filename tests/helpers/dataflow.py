@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import signal
 import subprocess
 import time
@@ -125,6 +126,17 @@ def error_lines(stderr: str) -> list[str]:
 
 # A mesh to break in tests of the model's one-line errors.
 BROKEN_MESH = "assets/upper_arm_so101_v1.stl"
+
+
+def copy_model(copy: Path) -> Path:
+    """A copy of the verified model's files (not what is derived from them) in the folder `copy`."""
+    from so101 import assets
+
+    model = assets.urdf_path().parent
+    for relpath in assets.manifest():
+        (copy / relpath).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(model / relpath, copy / relpath)
+    return copy
 
 
 def corrupt(path: Path) -> None:
