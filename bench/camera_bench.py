@@ -1,6 +1,6 @@
 """A task's cameras (issue "Something to pick up"): `so101 bench --cameras` runs these for a simulated body.
 
-  1. pictures alone: the camera node's simulator (the task's scene, MuJoCo's pictures light) draws
+  1. pictures alone: the camera node's simulator (the task's scene, its pictures light) draws
      the front and the wrist camera at 320x240 (or --image-size) in turn, nothing else running: ms a picture, and
      so the pictures a second each camera could give;
   2. the renderers' options, each in a process of its own (they are chosen at start-up): the front
@@ -70,15 +70,21 @@ def draw_timed(sim, image_size: tuple[int, int], camera_options: dict) -> tuple[
     return each_ms, first
 
 
+def camera_simulator(body: str):
+    """The body's simulator as the camera node makes it for the task: its scene, its pictures light."""
+    return BODIES[body].body_class()(mode="direct", time_step_s=TICK_PERIOD_S, log=lambda message: None,
+                                     task=CUBE_TO_BOX, light_pictures=True)
+
+
+def picture_figures(each_ms: list[float]) -> dict:
+    return {"ms": summary(each_ms), "pictures_per_s": 1e3 / float(np.median(each_ms))}
+
+
 def measure_pictures_alone(body: str, image_size: tuple[int, int]) -> dict:
     """Each camera's pictures of the task's scene, drawn as the camera node draws them, ms each."""
-    with BODIES[body].body_class()(mode="direct", time_step_s=TICK_PERIOD_S, log=lambda message: None,
-                                   task=CUBE_TO_BOX, light_pictures=True) as sim:
-        figures = {}
-        for key, camera in CAMERAS.items():
-            each_ms, _ = draw_timed(sim, image_size, {} if camera is None else {"camera": camera})
-            figures[key] = {"ms": summary(each_ms), "pictures_per_s": 1e3 / float(np.median(each_ms))}
-    return figures
+    with camera_simulator(body) as sim:
+        return {key: picture_figures(draw_timed(sim, image_size, {} if camera is None else {"camera": camera})[0])
+                for key, camera in CAMERAS.items()}
 
 
 def measure_renderer(body: str, name: str, image_size: tuple[int, int], picture_file: Path) -> dict:
@@ -104,11 +110,10 @@ def measure_renderer(body: str, name: str, image_size: tuple[int, int], picture_
         module.p.connect = connect_with_plugin
         module.p.getCameraImage = lambda *args, **kwargs: camera_image(
             *args, **{**kwargs, "renderer": p.ER_BULLET_HARDWARE_OPENGL})
-    with BODIES[body].body_class()(mode="direct", time_step_s=TICK_PERIOD_S, log=lambda message: None,
-                                   task=CUBE_TO_BOX, light_pictures=True) as sim:
+    with camera_simulator(body) as sim:
         each_ms, first = draw_timed(sim, image_size, {})
     np.save(picture_file, first)
-    return {"ms": summary(each_ms), "pictures_per_s": 1e3 / float(np.median(each_ms))}
+    return picture_figures(each_ms)
 
 
 def measure_renderers(body: str, image_size: tuple[int, int], work_dir: Path) -> dict:
@@ -220,7 +225,7 @@ def table_lines(figures: dict) -> list[str]:
             lines.append(f"{label:<52} not measured: {renderer['skipped']}")
         else:
             lines.append(f"{label:<52} {renderer['ms']['p50']:>10.1f} | {renderer['ms']['p99']:<9.1f}"
-                         f"{renderer.get('differs_from_camera', float('nan')):>6.1f}")
+                         f"{renderer['differs_from_camera']:>6.1f}")
     lines += [
         f"{'task recording: joint_state per s':<52} {beside['joint_state_per_s']:>10.2f}",
         f"{'  simulated / wall time':<52} {beside['sim_over_wall']:>10.4f}",

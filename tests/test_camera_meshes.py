@@ -4,6 +4,7 @@ task's cameras draw them and see what the full meshes show."""
 from __future__ import annotations
 
 import shutil
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -12,6 +13,7 @@ import pytest
 from so101 import assets
 from so101.bodies import camera_meshes
 from so101.bodies.camera import DEFAULT_CAMERA, WRIST_CAMERA
+from so101.bodies.registry import BODIES
 from so101.bodies.stl import stl_bytes, stl_points
 from so101.tasks import task_named
 from tests.helpers.dataflow import copy_model, corrupt
@@ -164,14 +166,8 @@ def test_where_they_cannot_be_written_the_cameras_draw_the_full_meshes(model_cop
 @pytest.mark.parametrize("body", ["pybullet", "mujoco"])
 def test_the_decimated_meshes_show_what_the_full_ones_show(body, monkeypatch):
     # A task's two cameras, with and without the decimated meshes, at a pose that shows the jaws up close.
-    if body == "mujoco":
-        from so101.bodies import mujoco_sim as module
-
-        simulator = module.SO101MuJoCo
-    else:
-        from so101.bodies import pybullet_sim as module  # type: ignore[no-redef]
-
-        simulator = module.SO101Sim  # type: ignore[assignment]
+    simulator = BODIES[body].body_class()
+    module = sys.modules[simulator.__module__]
     pictures = {}
     for decimated in (True, False):
         if not decimated:
