@@ -7,8 +7,10 @@ No deadline in either: the suite has no timed tests, and a loaded CI machine
 must not turn a slow example into a failure.
 """
 
-import fcntl
 import os
+import shutil
+import subprocess
+import tempfile
 import time
 from pathlib import Path
 
@@ -18,6 +20,8 @@ from hypothesis import HealthCheck, settings
 # tests/helpers/ holds code moved out of the test modules: its asserts report as theirs do.
 pytest.register_assert_rewrite("tests.helpers")
 
+from tests.helpers.network import network_of_its_own  # noqa: E402  (after the line above, to be rewritten)
+
 settings.register_profile("ci", max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 settings.register_profile("soak", max_examples=10_000, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
@@ -26,8 +30,10 @@ settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
 # -- in parallel (pytest-xdist: `-n auto --dist loadgroup`, pyproject's addopts) -------------------
 # dora 1.1's `dora run` (and a daemon started without --local-listen-port, as `dora up`'s) always
 # listens on port 53291 for dynamic nodes, the prompt among them: two at once and a prompt joins the
-# wrong one. So every test that starts dora runs
-# in one xdist group, one after another on one worker, while the other tests share the other workers.
+# wrong one. So each worker, where it may (root, with `ip`), runs in a network namespace of its own,
+# loopback only: its dataflows, prompts and browsers have every port to themselves. Its tmux server
+# is its own too (a shared one would start the other worker's terminals in its namespace). Where a
+# worker cannot, every test that starts dora runs in one xdist group, one after another on one worker.
 # These modules start dora in some of their tests (dora run, dora up, so101 teleop, replay, cluster).
 DORA_MODULES = {
     "test_course_differences", "test_dataflow", "test_environment", "test_faults", "test_gui",
@@ -35,27 +41,55 @@ DORA_MODULES = {
     "test_two_dataflows", "test_two_machines", "test_web_view",
 }
 # These start dora's daemons with ports of their own (--local-listen-port, which `dora daemon` honours
-# and `dora run` does not): beside the dora group, one test at a time among themselves.
-# (test_two_machines' dataflows run in network namespaces, each with its own ports, yet beside the
-# dora group its simulation did not start in time in a fresh clone's run: it stays in the group.)
+# and `dora run` does not): without namespaces, beside the dora group, one test at a time among themselves.
 OWN_PORT_MODULES = {"test_cluster"}
 MAX_WORKERS = 4
 
 
+def pytest_configure(config):
+    if hasattr(config, "workerinput") and network_of_its_own():
+        config.so101_own_network = True
+        tmux_dir = Path(tempfile.mkdtemp(prefix=f"so101-tmux-{config.workerinput['workerid']}-"))
+        os.environ["TMUX_TMPDIR"] = str(tmux_dir)
+
+
+def pytest_unconfigure(config):
+    tmux_dir = os.environ.get("TMUX_TMPDIR", "")
+    if getattr(config, "so101_own_network", False) and Path(tmux_dir).name.startswith("so101-tmux-"):
+        subprocess.run(["tmux", "kill-server"], capture_output=True)
+        shutil.rmtree(tmux_dir, ignore_errors=True)
+
+
+@pytest.hookimpl(optionalhook=True)  # an xdist hook
 def pytest_xdist_auto_num_workers(config):
-    """One worker per core, at most MAX_WORKERS: the dora group is one worker's whatever the count."""
+    """One worker per core, at most MAX_WORKERS."""
     return max(1, min(os.cpu_count() or 1, MAX_WORKERS))
 
 
+def runs_alone(item) -> bool:
+    """`alone` tests measure or load the whole machine; `realtime` ones (a driver and emulated servos
+    keeping a real-time pace: every emulated_hardware test and every real-body one) are starved by
+    what runs beside them on a machine of few cores, as a real arm's driver would be."""
+    return item.get_closest_marker("alone") is not None or item.get_closest_marker("realtime") is not None
+
+
 @pytest.hookimpl(tryfirst=True)  # before xdist's own, which reads the groups
-def pytest_collection_modifyitems(items):
-    """A real dataflow or a person's session is slow too: `-m "not slow"` is the fast subset. Tests
-    that start dora share one xdist group (DORA_MODULES)."""
+def pytest_collection_modifyitems(config, items):
+    """A real dataflow or a person's session is slow too: `-m "not slow"` is the fast subset. The
+    tests that run alone are one xdist group, run one after another. Without a network of its own per
+    worker, tests that start dora share one xdist group (DORA_MODULES)."""
     for item in items:
         if item.get_closest_marker("dataflow") or item.get_closest_marker("person"):
             item.add_marker(pytest.mark.slow)
+        params = getattr(item, "callspec", None) and item.callspec.params
+        if item.get_closest_marker("emulated_hardware") or (params and params.get("body") == "real"):
+            item.add_marker(pytest.mark.realtime)
         module = item.module.__name__.rsplit(".", 1)[-1]
-        if module in OWN_PORT_MODULES:
+        if runs_alone(item):
+            item.add_marker(pytest.mark.xdist_group("alone"))
+        elif getattr(config, "so101_own_network", False):
+            continue
+        elif module in OWN_PORT_MODULES:
             item.add_marker(pytest.mark.xdist_group(module))
         elif item.get_closest_marker("dataflow") or item.get_closest_marker("person") or module in DORA_MODULES:
             item.add_marker(pytest.mark.xdist_group("dora"))
@@ -76,21 +110,29 @@ def pytest_collection_finish(session):
                 "or run with -n 0")
 
 
-@pytest.fixture(autouse=True)
-def alone_when_marked(request, tmp_path_factory):
-    """A test marked `alone` runs with no other test beside it (a lock every test holds shared, an
-    `alone` one exclusive, in the session's shared temporary folder): it measures or loads the whole
-    machine, or would be disturbed by what runs beside it."""
-    if not hasattr(request.config, "workerinput"):  # not under xdist: nothing runs beside it anyway
-        yield
-        return
-    lock_file = tmp_path_factory.getbasetemp().parent / "so101-alone.lock"
-    with open(lock_file, "a") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX if request.node.get_closest_marker("alone") else fcntl.LOCK_SH)
-        try:
-            yield
-        finally:
-            fcntl.flock(lock, fcntl.LOCK_UN)
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_protocol(item, nextitem):
+    """Under xdist, a test that runs alone holds the machine's lock exclusively, every other test holds
+    it shared (tests/helpers/machine_lock.py); one alone test hands it to the next without letting go."""
+    lock = getattr(item.config, "so101_machine_lock", None)
+    if lock is None and hasattr(item.config, "workerinput"):
+        from tests.helpers.machine_lock import MachineLock
+
+        lock = item.config.so101_machine_lock = MachineLock(Path(item.config.workerinput["so101_lock_dir"]))
+    if lock is not None:
+        lock.take(exclusive=runs_alone(item))
+    yield
+    if lock is not None and not (nextitem is not None and runs_alone(item) and runs_alone(nextitem)):
+        lock.release()
+
+
+@pytest.hookimpl(optionalhook=True)  # an xdist hook
+def pytest_configure_node(node):
+    """xdist's controller: one folder for the machine's lock, shared by its workers."""
+    lock_dir = getattr(node.config, "so101_lock_dir", None)
+    if lock_dir is None:
+        lock_dir = node.config.so101_lock_dir = tempfile.mkdtemp(prefix="so101-machine-lock-")
+    node.workerinput["so101_lock_dir"] = lock_dir
 
 
 # -- the model files -------------------------------------------------------------------

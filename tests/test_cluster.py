@@ -19,6 +19,7 @@ from so101.runtime.dataflow import LOADED_MARKS, dataflow_copy, write_dataflow
 from tests.helpers.dataflow import (
     PROMPT_COMMAND, RECORDER, ROOT, check_the_record, error_lines, prompt_env, run_so101, type_the_script,
 )
+from tests.helpers.network import on_the_machines_network
 
 pytestmark = pytest.mark.dataflow
 
@@ -270,7 +271,7 @@ def other_dora(tmp_path_factory):
     venv = tmp_path_factory.mktemp("other-dora") / "venv"
     subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True, timeout=120)
     subprocess.run([str(venv / "bin" / "pip"), "install", "-q", f"dora-rs-cli=={OTHER_DORA_VERSION}"],
-                   check=True, capture_output=True, timeout=600)
+                   check=True, capture_output=True, timeout=600, preexec_fn=on_the_machines_network())
     return venv / "bin" / "dora"
 
 

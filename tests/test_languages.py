@@ -82,6 +82,7 @@ def stop(process: subprocess.Popen) -> str:
     return err.decode()
 
 
+@pytest.mark.realtime
 @pytest.mark.parametrize("lang", ["zh", "en"])
 def test_calibrating_the_emulated_arm_is_one_language_and_the_emulator_says_to_type_sweep(tmp_path, lang):
     about, hint, sweeping, middle, ends, use_it = SAID[lang]

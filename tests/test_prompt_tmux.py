@@ -198,6 +198,7 @@ def test_teleop_drives_the_mujoco_body_with_the_same_prompt(tmp_path):
     assert spawned and [pid for pid in spawned if _alive(pid)] == []
 
 
+@pytest.mark.realtime
 def test_a_person_without_an_arm_calibrates_the_emulated_one_and_drives_it(tmp_path):
     """The real arm's "done when": `so101 fake-arm`, `so101 calibrate` with its printed port, then
     `so101 teleop --body real` typed at as in the course; torque off after quit."""

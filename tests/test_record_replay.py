@@ -116,6 +116,7 @@ def recorded_episode(dataset_dir: Path, actions_deg: np.ndarray) -> None:
         episode.save()
 
 
+@pytest.mark.realtime
 def test_replay_onto_the_emulated_arm_is_ramped_and_stays_inside_its_limits(tmp_path):
     from so101.feetech.calibration import load_calibration
     from so101.robot import ACTUATED_JOINTS
@@ -165,6 +166,7 @@ def test_replay_onto_the_emulated_arm_is_ramped_and_stays_inside_its_limits(tmp_
     assert ACTUATED_JOINTS[0].upper_deg < 150
 
 
+@pytest.mark.realtime
 @pytest.mark.skipif(shutil.which("tmux") is None, reason="tmux is not installed (.ci/run installs it)")
 def test_a_person_drives_the_simulation_from_the_emulated_leader_records_and_replays(tmp_path):
     """The leader arm's "done when": `so101 fake-arm` as the leader, `so101 calibrate --leader`, then
