@@ -47,7 +47,12 @@ MAX_WORKERS = 4
 
 
 def pytest_configure(config):
-    if hasattr(config, "workerinput") and network_of_its_own():
+    if not hasattr(config, "workerinput"):
+        return
+    from tests.helpers.machine_lock import MachineLock
+
+    config.so101_machine_lock = MachineLock(Path(config.workerinput["so101_lock_dir"]))
+    if network_of_its_own():
         config.so101_own_network = True
         tmux_dir = Path(tempfile.mkdtemp(prefix=f"so101-tmux-{config.workerinput['workerid']}-"))
         os.environ["TMUX_TMPDIR"] = str(tmux_dir)
@@ -114,11 +119,7 @@ def pytest_collection_finish(session):
 def pytest_runtest_protocol(item, nextitem):
     """Under xdist, a test that runs alone holds the machine's lock exclusively, every other test holds
     it shared (tests/helpers/machine_lock.py); one alone test hands it to the next without letting go."""
-    lock = getattr(item.config, "so101_machine_lock", None)
-    if lock is None and hasattr(item.config, "workerinput"):
-        from tests.helpers.machine_lock import MachineLock
-
-        lock = item.config.so101_machine_lock = MachineLock(Path(item.config.workerinput["so101_lock_dir"]))
+    lock = getattr(item.config, "so101_machine_lock", None)  # a worker's (pytest_configure)
     if lock is not None:
         lock.take(exclusive=runs_alone(item))
     yield

@@ -28,8 +28,12 @@ def network_of_its_own() -> bool:
     if _libc().unshare(CLONE_NEWNET) != 0:
         os.close(host)
         return False
+    if subprocess.run(["ip", "link", "set", "lo", "up"], capture_output=True).returncode != 0:
+        _libc().setns(host, CLONE_NEWNET)  # a namespace without loopback would serve no dataflow: back
+        os.close(host)
+        return False
     _host_network_fd = host
-    return subprocess.run(["ip", "link", "set", "lo", "up"], capture_output=True).returncode == 0
+    return True
 
 
 def on_the_machines_network() -> Callable[[], None] | None:
