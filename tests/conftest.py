@@ -80,7 +80,7 @@ def runs_alone(item) -> bool:
 
 @pytest.hookimpl(tryfirst=True)  # before xdist's own, which reads the groups
 def pytest_collection_modifyitems(config, items):
-    """A real dataflow or a person's session is slow too: `-m "not slow"` is the fast subset. The
+    """A real dataflow, a person's session or a realtime test is slow too: `-m "not slow"` is the fast subset. The
     tests that run alone are one xdist group, run one after another. Without a network of its own per
     worker, tests that start dora share one xdist group (DORA_MODULES)."""
     for item in items:
@@ -89,6 +89,8 @@ def pytest_collection_modifyitems(config, items):
         params = getattr(item, "callspec", None) and item.callspec.params
         if item.get_closest_marker("emulated_hardware") or (params and params.get("body") == "real"):
             item.add_marker(pytest.mark.realtime)
+        if item.get_closest_marker("realtime"):  # it keeps the wall clock's pace: seconds, however fast the machine
+            item.add_marker(pytest.mark.slow)
         module = item.module.__name__.rsplit(".", 1)[-1]
         if runs_alone(item):
             item.add_marker(pytest.mark.xdist_group("alone"))
