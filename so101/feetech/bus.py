@@ -8,6 +8,7 @@ result codes and, for a vanished port, by pyserial exceptions; nothing else leak
 
 from __future__ import annotations
 
+import select
 import termios
 import time
 from typing import Any
@@ -41,14 +42,26 @@ class ServoSilent(BusError):
 
 
 class PortHandler(scs.PortHandler):  # the SDK is untyped
-    """Feetech's PortHandler, with two holes closed, both opened by a driver descheduled for tens of
-    milliseconds (a loaded machine):
+    """Feetech's PortHandler, with three holes closed, all opened by a loaded machine:
     - the SDK reads what has arrived, then asks whether the reply's time is up; descheduled between
       the two, it finds its time up with the reply waiting, and reports a servo that did answer as
       silent. Here the time is up only when nothing is waiting to be read;
     - a reply that comes after its request gave up stays in the port, and the SDK reads it as the
       next request's reply (a wrong value, or a cut-short packet it fails to index). Here what is
-      waiting is thrown away before each request."""
+      waiting is thrown away before each request;
+    - the SDK opens the port with timeout=0 and reads it in a loop until the reply is in: a driver
+      waiting for a reply spins a core, taking it from the kernel's worker thread that hands bytes
+      from the adapter (or a pseudo-terminal) to the reader, the very thing it waits for. With two
+      such drivers (arm and leader) and two busy processes on 2 cores, the emulated servos' requests
+      sat undelivered for up to 0.7 s (tools/under_load.py). Here a read waits in select() for the
+      first byte, at most until the reply's time is up."""
+
+    def readPort(self, length: int) -> bytes:
+        if not self.ser.in_waiting:
+            remaining_ms = self.packet_timeout - self.getTimeSinceStart()
+            if remaining_ms > 0:
+                select.select([self.ser.fd], [], [], remaining_ms / 1000)
+        return self.ser.read(length)
 
     def clearPort(self) -> None:
         self.ser.reset_input_buffer()

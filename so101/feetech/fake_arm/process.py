@@ -42,9 +42,9 @@ def scaled_clock(time_scale: float) -> Callable[[], float]:
 
 # Servos are hardware of their own: nothing the host runs delays their replies. The emulator stands in
 # for them at EMULATOR_NICE where it may (as root), so that a loaded machine starves the drivers under
-# test (as it would a real arm's) more than the servos. (SCHED_FIFO was tried: it passed
-# tools/under_load.py where nice -10 fails one test of 115, but in two of three fresh clones' parallel
-# suites the emulated arm then went silent for over 200 ms; the cause was not found.)
+# test (as it would a real arm's) more than the servos. (What had starved them under load was the
+# drivers spinning on the port, fixed in so101/feetech/bus.py; SCHED_FIFO, tried before that was found,
+# left the emulated arm silent for over 200 ms in parallel suites.)
 EMULATOR_NICE = -10
 
 
