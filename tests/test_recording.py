@@ -296,6 +296,9 @@ def test_the_link_matches_answers_and_shows_news():
     assert shown == ["  news first"]
     assert decode_record_cmd(sent[0][0]) == RecordCommand("episodes")
     assert link.ask("stop", timeout_s=0.05) is None
+    # The recorder answers after all (a loaded machine): the answer is shown, not dropped.
+    link.on_status("■ episode 0: 90 frames (3.0 s), saving...", sent[1][1])
+    assert shown == ["  news first", "  ■ episode 0: 90 frames (3.0 s), saving..."]
 
 
 def test_without_a_recorder_the_prompt_says_how_to_get_one(tmp_path):

@@ -25,10 +25,10 @@ class RecorderLink:
         return self._requests.ask(encode_record_cmd(command, task), timeout_s)
 
     def on_status(self, text: str, reply_to: str) -> None:
-        """A `record_status` message (from the pump thread): an answer, or news to show now."""
+        """A `record_status` message (from the pump thread): an answer, or news to show now. An answer
+        that comes after the prompt said the recorder did not answer is shown as news: it is the truth."""
         lines = text.split("\n")
-        if reply_to:
-            self._requests.answered(reply_to, lines)
-        else:
-            for line in lines:
-                self.show(f"  {line}")
+        if reply_to and self._requests.answered(reply_to, lines):
+            return
+        for line in lines:
+            self.show(f"  {line}")
