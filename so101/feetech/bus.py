@@ -50,11 +50,11 @@ class PortHandler(scs.PortHandler):  # the SDK is untyped
       next request's reply (a wrong value, or a cut-short packet it fails to index). Here what is
       waiting is thrown away before each request;
     - the SDK opens the port with timeout=0 and reads it in a loop until the reply is in: a driver
-      waiting for a reply spins a core, taking it from the kernel's worker thread that hands bytes
-      from the adapter (or a pseudo-terminal) to the reader, the very thing it waits for. With two
-      such drivers (arm and leader) and two busy processes on 2 cores, the emulated servos' requests
-      sat undelivered for up to 0.7 s (tools/under_load.py). Here a read waits in select() for the
-      first byte, at most until the reply's time is up."""
+      waiting for a reply spins a core, likely taking it from the kernel's worker thread that hands
+      bytes from the adapter (or a pseudo-terminal) to the reader, the very thing it waits for. With
+      two such drivers (arm and leader) and two busy processes on 2 cores, the emulated servos'
+      requests sat undelivered for up to 0.7 s (tools/under_load.py), and not once after this fix.
+      Here a read waits in select() for the first byte, at most until the reply's time is up."""
 
     def readPort(self, length: int) -> bytes:
         if not self.ser.in_waiting:
