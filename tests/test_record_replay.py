@@ -133,9 +133,11 @@ def test_replay_onto_the_emulated_arm_is_ramped_and_stays_inside_its_limits(tmp_
         goals: list[tuple[float, list[int]]] = []
         done = threading.Event()
 
-        def watch() -> None:  # the goal registers, as the bus carries them
+        def watch() -> None:  # the goal registers, as the bus carries them, each read between two instants
             while not done.is_set():
-                goals.append((time.monotonic(), [arm.read_register(servo, "Goal_Position") for servo in (1, 2)]))
+                asked = time.monotonic()
+                goal = [arm.read_register(servo, "Goal_Position") for servo in (1, 2)]
+                goals.append((asked, time.monotonic(), goal))
                 time.sleep(0.01)
 
         watcher = threading.Thread(target=watch)
@@ -151,18 +153,20 @@ def test_replay_onto_the_emulated_arm_is_ramped_and_stays_inside_its_limits(tmp_
     assert replay.returncode == 0, replay.stdout + replay.stderr
     assert re.match(TRACKING_LINE, replay.stdout.strip().splitlines()[-1]), replay.stdout
     pan = calibration["shoulder_pan"]
-    pan_goals = [goal[0] for _, goal in goals if goal[0]]
+    pan_goals = [goal[0] for _, _, goal in goals if goal[0]]
     assert pan_goals and min(pan_goals) >= pan.range_min and max(pan_goals) <= pan.range_max
     # Ramped: the goals of the first two joints never move faster than the ramp's 30°/s (with a
     # margin for sampling), where the arm's own limit in these tests (180°/s) would let a jump through.
-    # 4096 steps a turn; speeds over windows of at least 0.3 s, timed here: over 0.1 s, one sample
-    # read late by this process, or one waypoint sent late and the next on time, made 42°/s of 30.
+    # 4096 steps a turn; speeds over windows of at least 0.3 s: over 0.1 s, one waypoint sent late and
+    # the next on time made 42°/s of 30. A window runs from the first read's asking to the second's
+    # answer, the longest it can have been: a read answered late on a loaded machine stretches it
+    # instead of shortening it (timed at the asking, one such read made 84°/s of 30), and a jump still shows.
     steps_per_deg = 4096 / 360
     windows = [(before, next(after for after in goals[i:] if after[0] - before[0] >= 0.3))
                for i, before in enumerate(goals) if goals[-1][0] - before[0] >= 0.3]
-    speeds_deg_s = [abs(after[1][index] - before[1][index]) / steps_per_deg / (after[0] - before[0])
+    speeds_deg_s = [abs(after[2][index] - before[2][index]) / steps_per_deg / (after[1] - before[0])
                     for before, after in windows for index in (0, 1)
-                    if before[1][index] and after[1][index]]
+                    if before[2][index] and after[2][index]]
     assert speeds_deg_s and max(speeds_deg_s) < 40, max(speeds_deg_s)
     assert "moving to the first frame at no more than 30°/s" in replay.stdout
     assert "web view: http://127.0.0.1:8139/" in replay.stdout.splitlines()  # the replay shown in a browser too
