@@ -302,12 +302,13 @@ class Kinematics:
             error_mm=_distance(tip_m, target_m) * 1000.0,
         )
 
-    def solve_oriented(self, target_mm, rotation, seed_deg=None) -> tuple[tuple[float, ...], float, float]:
+    def solve_oriented(self, target_mm, rotation, seed_deg=None, max_starts: int | None = None) -> tuple[tuple[float, ...], float, float]:
         """Five arm angles that put the tip at `target_mm` with its frame turned as `rotation` (a
         3x3 matrix, its columns the tip's axes in the base frame), within the limits: (angles in
         degrees, position error in mm, angle error in degrees). A five-joint arm cannot take every
         orientation: the errors say how near it came. The starts are tried as `solve` tries them
-        (`seed_deg`, default home, first), until one comes within EXACT_MM and 0.1°."""
+        (`seed_deg`, default home, first), until one comes within EXACT_MM and 0.1°; `max_starts` tries
+        no more than that many (a seed near the answer finds it from the first: a planner's next waypoint)."""
         import numpy as np
         # MuJoCo's matrix-to-quaternion (PyBullet has none); mujoco_model first: it chooses MuJoCo's OpenGL back end.
         import so101.bodies.mujoco_model  # noqa: F401
@@ -340,7 +341,7 @@ class Kinematics:
         with self._lock:
             self._connected()
             best: tuple[list[float], float, float] | None = None
-            for start in self._starts(seed):
+            for start in self._starts(seed)[:max_starts]:
                 found = refined(start)
                 if best is None or found[1] + found[2] < best[1] + best[2]:
                     best = found

@@ -73,6 +73,9 @@ def at(dx, dy, z):
     pytest.param(at(0, 0, 0.03), 0.4, False, id="still falling into it"),
     pytest.param(at(0, 0, ON_THE_BOX_FLOOR_Z), REST_SPEED_M_S * 1.5, False, id="inside, still sliding"),
     pytest.param(at(0, 0, 0.15), 0.0, False, id="held above it"),
+    pytest.param(at(0, 0, ON_THE_BOX_FLOOR_Z + 0.015), 0.0, False, id="held still inside it, above its floor"),
+    pytest.param(at(BOX.inner_half_m - CUBE_HALF * math.sqrt(2), 0, ON_THE_BOX_FLOOR_Z + CUBE_HALF * (math.sqrt(2) - 1)),
+                 0.0, True, id="tilted on an edge against a wall"),
 ])
 def test_success_is_the_cube_at_rest_inside_the_box(cube_xyz, speed, expected):
     assert TASK.succeeded(cube_xyz, BOX_XYZ, speed) is expected

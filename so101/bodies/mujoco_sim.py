@@ -110,8 +110,9 @@ class SO101MuJoCo:
         visual meshes and the offscreen renderer only when the node publishes pictures, and the tick's step."""
         return cls(
             mode=node.display_mode, time_step_s=TICK_PERIOD_S, assets_dir=settings.assets_dir, log=log,
-            joint_damping_n_m_s=settings.joint_damping_n_m_s, renders=node.image_hz > 0,
+            joint_damping_n_m_s=settings.joint_damping_n_m_s, renders=node.image_hz > 0 or node.lockstep_pictures is not None,
             task=task_named(node.task) if node.task else None, seed=node.seed,
+            light_pictures=node.lockstep_pictures is not None,  # a task's cameras, as the camera node draws them
         )
 
     # -- control ---------------------------------------------------------------------

@@ -38,8 +38,10 @@ from so101.bodies.protocol import Body, BodyFailed, TaskScene
 from so101.bodies.settings import NodeSettings
 from so101.joint_cmd import decode_joint_cmd
 from so101.robot import GRIPPER_COMMAND_INDEX, NUM_ARM_JOINTS
+from so101.bodies.camera import DEFAULT_CAMERA, WRIST_CAMERA
 from so101.runtime.dataflow import TICK_PERIOD_S, TickClock, timer_period_s
-from so101.runtime.node_events import Event, inputs_until_stop
+from so101.runtime.lockstep import AGAIN_WORD, FrameTag, answers, frame_tag, steps_per_frame
+from so101.runtime.node_events import Event, inputs_until_stop, until_closed
 from so101.tasks import parse_reset
 
 if TYPE_CHECKING:
@@ -142,17 +144,20 @@ class TaskReport:
         self.reply_to = ""  # the task_cmd request the next task_status answers
         self.status_sent_at_step = 0
 
-    def tick(self, node: Node, steps: int) -> None:
+    def tick(self, node: Node, steps: int, tag: FrameTag | None = None) -> None:
+        """`tag`: a lockstep frame's, on both outputs; task_status then goes out every frame."""
         scene = self.scene
         object_state = scene.object_state()  # read once a tick: published, and judged
+        tags = tag.metadata() if tag is not None else {}
         if self.sends_objects:
-            node.send_output("object_state", pa.array(object_state), {"names": self.object_names})
+            node.send_output("object_state", pa.array(object_state), {"names": self.object_names, **tags})
         success = scene.task.state_succeeded(object_state, scene.cube_speed_m_s())
-        if success and success != self.last_success:
+        if success and success != self.last_success and tag is None:  # in lockstep the episodes' runner says it
             logger.info(self.text["succeeded"].format(task=scene.task.name, seed=scene.layout.seed))
-        if self.sends_status and (success != self.last_success or steps - self.status_sent_at_step >= self.refresh_steps):
+        if self.sends_status and (success != self.last_success or tag is not None
+                                  or steps - self.status_sent_at_step >= self.refresh_steps):
             node.send_output("task_status", pa.array([success]),
-                             {"task": scene.task.name, "seed": scene.layout.seed, "reply_to": self.reply_to})
+                             {"task": scene.task.name, "seed": scene.layout.seed, "reply_to": self.reply_to, **tags})
             self.status_sent_at_step = steps
         self.last_success, self.reply_to = success, ""
 
@@ -177,7 +182,12 @@ def run_body_node(body: Body, node: Node, settings: NodeSettings, identity: str,
     image_hz = settings.image_hz
     # The physics step equals the tick period, so simulated time keeps pace with the
     # wall clock (the course's default 1/240 s step on a 4 ms tick runs 4% fast).
-    tick_s = timer_period_s(node.node_config())
+    lockstep_fps = settings.lockstep_fps
+    if lockstep_fps and body.kind == "real":
+        body.close()
+        return cannot_start(ValueError("SO101_LOCKSTEP_FPS: the real arm keeps the wall clock's time; lockstep is "
+                                       "for the simulations"), node_id)
+    tick_s = TICK_PERIOD_S if lockstep_fps else timer_period_s(node.node_config())
     if tick_s is None:
         tick_s = TICK_PERIOD_S
         logger.warning(text["no_timer"].format(step_ms=tick_s * 1000))
@@ -191,8 +201,10 @@ def run_body_node(body: Body, node: Node, settings: NodeSettings, identity: str,
     # pyarrow's first array from numpy takes about 12 ms: paid here, before the ticks come, the first
     # tick is as quick as the rest, and no tick is dropped meanwhile (dora warns once for each).
     pa.array(np.zeros(NUM_ARM_JOINTS), type=pa.float64())
-    # dora's type stubs (1.1.0) lack try_recv, which its Node has.
-    events: Iterable[Event] = fast_events(cast(Polled, node)) if fast_steps else node
+    # dora's type stubs (1.1.0) lack try_recv, which its Node has. In lockstep the episodes' runner
+    # ends the node by going away: its task_cmd closes.
+    events: Iterable[Event] = (fast_events(cast(Polled, node)) if fast_steps
+                               else until_closed(node, "task_cmd") if lockstep_fps else node)
     # (start ns, end ns, physics steps so far) of each tick, in time.monotonic_ns, when asked for;
     # None costs nothing per tick.
     tick_log: array[int] | None = array("q") if settings.tick_log_path else None
@@ -206,6 +218,28 @@ def run_body_node(body: Body, node: Node, settings: NodeSettings, identity: str,
     target_refresh_steps = max(1, round(TARGET_REFRESH_S / tick_s))
     scene = body.scene
     report = TaskReport(scene, outputs, target_refresh_steps, text) if scene is not None else None
+    # Lockstep: the frame now (episode: resets so far), the steps a frame takes, the pictures it carries.
+    frame_steps = steps_per_frame(lockstep_fps, tick_s) if lockstep_fps else 0
+    now = FrameTag(0, 0, scene.layout.seed if scene is not None else 0)
+    pictures = [(output, camera) for output, camera in (("image", DEFAULT_CAMERA), ("wrist_image", WRIST_CAMERA))
+                if settings.lockstep_pictures and output in outputs]
+
+    def publish(tag: FrameTag | None = None) -> None:
+        """joint_state and gripper_state, the task's outputs, and in lockstep the frame's pictures."""
+        tags = tag.metadata() if tag is not None else {}
+        angles_deg = body.joint_angles_deg()
+        # None: the real arm's read failed this tick; publishing nothing beats stale angles.
+        if angles_deg is not None:
+            node.send_output("joint_state", pa.array(angles_deg[:NUM_ARM_JOINTS], type=pa.float64()), tags)
+            node.send_output("gripper_state", pa.array(angles_deg[NUM_ARM_JOINTS:], type=pa.float64()), tags)
+        if report is not None:
+            report.tick(node, body.steps, tag)
+        if tag is not None and settings.lockstep_pictures:
+            width, height = settings.lockstep_pictures
+            for output, camera in pictures:
+                rgb = body.render_rgb(width, height, camera)
+                node.send_output(output, pa.array(rgb.ravel()),
+                                 {"width": width, "height": height, "encoding": "rgb8", **tags})
 
     def finish() -> None:  # however the loop ends: the window, the bus let go; the tick log kept
         body.close()
@@ -215,7 +249,11 @@ def run_body_node(body: Body, node: Node, settings: NodeSettings, identity: str,
 
     with inputs_until_stop(events, close=finish) as inputs:
         try:
+            if lockstep_fps:
+                publish(now)  # the first frame: the driver's first action answers it
             for event in inputs:
+                if event["id"] == "tick" and lockstep_fps:
+                    continue
                 if event["id"] == "tick":
                     if tick_log is not None:
                         tick_log.append(time.monotonic_ns())
@@ -223,17 +261,11 @@ def run_body_node(body: Body, node: Node, settings: NodeSettings, identity: str,
                         body.step(fast_steps)
                     else:
                         body.step(tick_clock.steps_due(event["metadata"].get("timestamp")))
-                    angles_deg = body.joint_angles_deg()
-                    # None: the real arm's read failed this tick; publishing nothing beats stale angles.
-                    if angles_deg is not None:
-                        node.send_output("joint_state", pa.array(angles_deg[:NUM_ARM_JOINTS], type=pa.float64()))
-                        node.send_output("gripper_state", pa.array(angles_deg[NUM_ARM_JOINTS:], type=pa.float64()))
                     if sends_targets and (targets_sent_at_step is None
                                           or body.steps - targets_sent_at_step >= target_refresh_steps):
                         node.send_output("joint_target", pa.array(joint_targets_deg, type=pa.float64()))
                         targets_sent_at_step = body.steps
-                    if report is not None:
-                        report.tick(node, body.steps)
+                    publish()
                     if tick_log is not None:
                         tick_log.extend((time.monotonic_ns(), body.steps))
                     if steps_per_image and body.steps >= next_image_step:
@@ -244,6 +276,8 @@ def run_body_node(body: Body, node: Node, settings: NodeSettings, identity: str,
                             "image", pa.array(rgb.ravel()),
                             {"width": width, "height": height, "encoding": "rgb8"},
                         )
+                elif event["id"] == "task_cmd" and lockstep_fps and event["value"].to_pylist() == [AGAIN_WORD]:
+                    publish(now)  # a receiver lost part of this frame
                 elif event["id"] == "task_cmd":
                     try:
                         if report is None:
@@ -256,7 +290,12 @@ def run_body_node(body: Body, node: Node, settings: NodeSettings, identity: str,
                     joint_targets_deg = body.start_targets_deg()
                     targets_sent_at_step = None
                     report.laid_out(seed, str((event.get("metadata") or {}).get("request", "")))
+                    if lockstep_fps:
+                        now = FrameTag(now.episode + 1, 0, seed)
+                        publish(now)
                 elif event["id"] == "joint_cmd":
+                    if lockstep_fps and not answers(frame_tag(event.get("metadata")), now):
+                        continue  # sent for a frame before a reset: the episode it was for is over
                     decoded = decode_joint_cmd(event["value"], joint_targets_deg)
                     if decoded.targets_deg is None:  # what arrived is not a command: decoded.error says why
                         logger.warning(text["rejected"].format(error=decoded.error))
@@ -265,6 +304,13 @@ def run_body_node(body: Body, node: Node, settings: NodeSettings, identity: str,
                     joint_targets_deg = decoded.targets_deg
                     body.set_targets_deg(joint_targets_deg)
                     targets_sent_at_step = None
+                    if lockstep_fps:  # the action of this frame, then the next frame
+                        if sends_targets:
+                            node.send_output("joint_target", pa.array(joint_targets_deg, type=pa.float64()), now.metadata())
+                        body.step(frame_steps)
+                        now = FrameTag(now.episode, now.frame + 1, now.seed)
+                        publish(now)
+                        continue
                     if STREAM_KEY in (event.get("metadata") or {}):
                         continue  # one command a tick (the leader's): a log line each would bury the log
                     for note in decoded.notes:

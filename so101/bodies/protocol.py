@@ -14,6 +14,7 @@ from typing import Literal, Protocol, Sequence, Union
 import numpy as np
 import numpy.typing as npt
 
+from so101.bodies.camera import DEFAULT_CAMERA, Camera, WristCamera
 from so101.tasks.cube_to_box import CubeToBox, Layout
 
 BodyName = Literal["pybullet", "mujoco", "real"]
@@ -84,8 +85,9 @@ class Body(Protocol):
     def joint_angles_deg(self) -> AnglesDeg | None:
         """The six angles now; None when this tick's read failed (the real arm's bus)."""
 
-    def render_rgb(self, width: int, height: int) -> RgbImage:
-        """A picture of the arm, uint8 of shape (height, width, 3); a body without a camera raises ValueError."""
+    def render_rgb(self, width: int, height: int, camera: Camera | WristCamera = DEFAULT_CAMERA) -> RgbImage:
+        """A picture of the arm from `camera`, uint8 of shape (height, width, 3); a body without a camera
+        raises ValueError."""
 
     def close(self) -> None:
         """Let go of everything the body holds (a physics client, a window, servo torque); safe twice."""

@@ -233,7 +233,7 @@ class SO101Real:
     def reset_task(self, seed: int) -> NoReturn:
         raise ValueError("the real arm has no task scene to lay out")
 
-    def render_rgb(self, width: int, height: int) -> NoReturn:
+    def render_rgb(self, width: int, height: int, camera: object = None) -> NoReturn:
         raise ValueError("the real arm has no camera: set SO101_IMAGE_HZ to 0")
 
     def round_trip_summary(self) -> str:

@@ -23,6 +23,7 @@ from so101.runtime.settings import (
     EnvironSettings, Setting, parse_number, read_number, read_optional_number, read_optional_path, read_file_path,
     read_stripped_text, read_text, read_whole_number, setting,
 )
+from so101.runtime.lockstep import steps_per_frame
 from so101.runtime.versions import spawning_daemon_version_problem
 from so101.tasks import task_named
 
@@ -61,6 +62,22 @@ def read_task(environ: Mapping[str, str], declared_setting: Setting) -> str:
     return name
 
 
+def read_lockstep_fps(environ: Mapping[str, str], declared_setting: Setting) -> int:
+    fps = read_whole_number(environ, declared_setting)
+    if fps:
+        try:
+            steps_per_frame(fps)
+        except ValueError as error:
+            raise ValueError(f"{declared_setting.env_var}: {error}") from None
+    return fps
+
+
+def read_picture_size(environ: Mapping[str, str], declared_setting: Setting) -> tuple[int, int] | None:
+    from so101.dataset.settings import parse_image_size
+
+    return parse_image_size(declared_setting.raw(environ), declared_setting.env_var)
+
+
 def read_joint_signs(environ: Mapping[str, str], declared_setting: Setting) -> tuple[int, ...]:
     return parse_joint_signs(declared_setting.raw(environ))
 
@@ -94,6 +111,14 @@ class NodeSettings(EnvironSettings):
         "SO101_TASK", "", "a task's scene on the floor (`cube_to_box`; simulations only); empty = the arm alone",
         read_task)
     seed: int = setting("SO101_SEED", "0", "the task's first layout (a whole number)", read_whole_number)
+    lockstep_fps: int = setting(
+        "SO101_LOCKSTEP_FPS", "0",
+        "N > 0: lockstep (no timer): each `joint_cmd` steps 1/N s of simulated time, then the next frame goes out "
+        "(`so101 demos`, `so101 eval`; N a divisor of 250)", read_lockstep_fps)
+    lockstep_pictures: tuple[int, int] | None = setting(
+        "SO101_LOCKSTEP_PICTURES", "",
+        "WIDTHxHEIGHT: in lockstep, each frame carries the task's front and wrist pictures on `image` and "
+        "`wrist_image`, drawn for that frame; empty = none", read_picture_size)
 
     @classmethod
     def from_environ(cls, environ: Mapping[str, str]) -> Self:

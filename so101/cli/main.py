@@ -29,6 +29,8 @@ SUBCOMMANDS = {
     "teleop": ("so101.cli.teleop", "steps D + exercise 1: the dataflow and the keyboard prompt in one terminal"),
     "dataset": ("so101.cli.dataset", "summarize a LeRobot dataset (episodes, frames, tasks, features); --plot N draws an episode"),
     "replay": ("so101.cli.replay", "play an episode of a LeRobot dataset onto any body, then print the tracking error"),
+    "demos": ("so101.cli.demos", "demonstrations of a task by the scripted expert, in lockstep, into a LeRobot dataset"),
+    "eval": ("so101.cli.evaluate", "score the expert (or an idle arm) on a task's seeded layouts, in lockstep: success rate with its 95%% interval"),
     "fake-arm": ("so101.cli.fake_arm", "an emulated SO-101 servo bus on a pseudo-terminal, for trying the real-arm driver without hardware"),
 }
 

@@ -38,3 +38,11 @@ def inputs_until_stop(events: Iterable[Event], close: Callable[[], None]) -> Ite
         pass  # Ctrl-C on a node run by hand: stop as at STOP
     finally:
         close()
+
+
+def until_closed(events: Iterable[Event], input_id: str) -> Iterator[Event]:
+    """`events` until the input `input_id` closes (its sender ended), as if STOP had come then."""
+    for event in events:
+        if event["type"] == "INPUT_CLOSED" and event.get("id") == input_id:
+            return
+        yield event

@@ -13,7 +13,8 @@ every corner of the sector), so no seed puts the cube in the box. Python's `rand
 draws the numbers: its sequence for a seed is the same on every platform and Python 3 release.
 
 Success (`succeeded`) is the cube at rest inside the box: its centre within the box's inner
-walls and below their top, and moving slower than `REST_SPEED_M_S`.
+walls, low enough to lie on the box's floor (flat, or tilted against a wall: not held above it),
+and moving slower than `REST_SPEED_M_S`.
 """
 
 from __future__ import annotations
@@ -33,6 +34,10 @@ OBJECT_STATE_NAMES: tuple[str, ...] = (
 
 # Slower than this, the cube is at rest (a cube that lands bounces for a few tenths of a second faster).
 REST_SPEED_M_S = 0.01
+# A cube in the box lies on its floor: its centre at most this much higher than lying flat there. Tilted
+# against a wall it is up to 5.2 mm higher (a 25 mm cube on an edge); held still 15 mm above the floor,
+# where the jaws could let it go, it is not in the box yet.
+ON_FLOOR_SLACK_M = 0.008
 
 
 @dataclass(frozen=True)
@@ -128,11 +133,13 @@ class CubeToBox:
         return Layout(seed, cube_xyz, yaw, (*self.box.xy_m, 0.0))
 
     def succeeded(self, cube_xyz_m: Sequence[float], box_xyz_m: Sequence[float], cube_speed_m_s: float) -> bool:
-        """The cube at rest inside the box: its centre within the inner walls, below their top,
-        and slower than REST_SPEED_M_S. On the rim, outside or still falling, it is not."""
+        """The cube at rest inside the box: its centre within the inner walls, lying on the box's floor
+        (ON_FLOOR_SLACK_M), and slower than REST_SPEED_M_S. On the rim, outside, still falling or held
+        above the floor, it is not."""
         dx, dy, dz = (cube - box for cube, box in zip(cube_xyz_m, box_xyz_m))
         inner = self.box.inner_half_m
-        return (abs(dx) < inner and abs(dy) < inner and dz < self.box.wall_height_m
+        lying_z = self.box.floor_thickness_m + self.cube.half_size_m
+        return (abs(dx) < inner and abs(dy) < inner and dz < lying_z + ON_FLOOR_SLACK_M
                 and cube_speed_m_s < REST_SPEED_M_S)
 
     def state_succeeded(self, object_state: Iterable[float], cube_speed_m_s: float) -> bool:

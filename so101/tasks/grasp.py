@@ -65,18 +65,23 @@ class TopDownGrasp:
 
     def pose(self, point_m: Sequence[float], yaw_rad: float, seed_deg: Sequence[float] | None = None) -> GraspPose:
         """The arm angles that put the grasp point at `point_m` (base frame), pointing down, jaws
-        across `yaw_rad` or a quarter turn from it: the best of the four."""
+        across `yaw_rad` or a quarter turn from it: the best of the four (see _rank)."""
         best: GraspPose | None = None
         for quarter in range(4):
-            yaw = yaw_rad + quarter * math.pi / 2
-            rotation = top_down_rotation(yaw)
-            tip_m = np.asarray(point_m, dtype=np.float64) - rotation @ self.point_in_tip_m
-            arm_deg, position_mm, angle_deg = self.kinematics.solve_oriented(tip_m * 1000.0, rotation, seed_deg)
-            candidate = GraspPose(arm_deg, yaw, position_mm, angle_deg)
+            candidate = self.pose_at_yaw(point_m, yaw_rad + quarter * math.pi / 2, seed_deg)
             if best is None or _rank(candidate) < _rank(best):
                 best = candidate
         assert best is not None
         return best
+
+    def pose_at_yaw(self, point_m: Sequence[float], yaw_rad: float, seed_deg: Sequence[float] | None = None,
+                    max_starts: int | None = None) -> GraspPose:
+        """The arm angles that put the grasp point at `point_m`, pointing down, jaws across exactly
+        `yaw_rad` (a grasp's next waypoint: the yaw taken, `seed_deg` the one before, near it)."""
+        rotation = top_down_rotation(yaw_rad)
+        tip_m = np.asarray(point_m, dtype=np.float64) - rotation @ self.point_in_tip_m
+        arm_deg, position_mm, angle_deg = self.kinematics.solve_oriented(tip_m * 1000.0, rotation, seed_deg, max_starts)
+        return GraspPose(arm_deg, yaw_rad, position_mm, angle_deg)
 
 
 def _rank(pose: GraspPose) -> tuple[bool, float]:

@@ -1,0 +1,198 @@
+"""episodes: runs a task's episodes on a body in lockstep, one seed after another, and judges each.
+
+It stands between the driver (the expert, a policy) and the body, as an environment does:
+it lays each episode out (`task_cmd`: `reset SEED`), and at each frame takes the body's frame
+(`joint_state`, `gripper_state`, `object_state`, `task_status`, and the pictures where there
+are) and the driver's `action` for it, writes the frame into the dataset (SO101_RECORD_DIR),
+and either passes the action on to the body (`joint_cmd`) or ends the episode: at the first
+frame whose task_status says success, or at the time limit. `SO101_IDLE=1` has no driver: it
+answers every frame with home, the floor every score must beat. Episodes end in order;
+each one's outcome is a JSON line in SO101_EPISODES_OUT, and `"done"` after the last, which
+ends the node, and with it the body (its task_cmd closes). Episode i uses seed SO101_SEED + i.
+What it judges and scores is so101/tasks/episodes.py.
+Settings: so101.tasks.settings.EpisodeSettings.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import sys
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:  # run as a script from anywhere: the so101 package sits beside nodes/
+    sys.path.insert(0, str(ROOT))
+
+import numpy as np  # noqa: E402
+import pyarrow as pa  # noqa: E402
+from dora import Node  # noqa: E402
+
+from so101.bodies.node_loop import STREAM_KEY, cannot_start  # noqa: E402
+from so101.dataset.episode import EpisodeRecorder  # noqa: E402
+from so101.dataset.features import (  # noqa: E402
+    ACTION_KEY, ENVIRONMENT_KEY, IMAGE_KEY, REWARD_KEY, STATE_KEY, SUCCESS_KEY, WRIST_IMAGE_KEY, to_lerobot,
+    video_keys_and_sizes,
+)
+from so101.dataset.layout import DatasetError  # noqa: E402
+from so101.dataset.video import StreamingEncoder  # noqa: E402
+from so101.dataset.writer import DatasetWriter  # noqa: E402
+from so101.robot import HOME_POSE_DEG  # noqa: E402
+from so101.runtime.lockstep import AGAIN_WORD, FrameParts, FrameTag, frame_tag  # noqa: E402
+from so101.runtime.logs import send_diagnostics_to  # noqa: E402
+from so101.tasks import task_named  # noqa: E402
+from so101.tasks.episodes import EpisodeClock, Outcome, seeds_for  # noqa: E402
+from so101.tasks.settings import EpisodeSettings  # noqa: E402
+
+NODE_ID = "episodes"
+# The text of every episode in a dataset of the task (LeRobot's task, what a policy is told to do).
+TASK_TEXT = {"cube_to_box": "put the cube in the box"}
+logger = logging.getLogger("so101.episodes")
+# After this long without a message, one was lost (a frame takes milliseconds; the expert's first
+# plan, with its kinematics starting, about a second): the runner asks for it again.
+SILENCE_S = 3.0
+
+
+def picture(value: Any, size: tuple[int, int]) -> np.ndarray:
+    width, height = size
+    return value.to_numpy(zero_copy_only=False).astype(np.uint8, copy=False).reshape(height, width, 3)
+
+
+def main() -> int:
+    send_diagnostics_to("stdout")
+    try:
+        settings = EpisodeSettings.from_environ(os.environ)
+        task = task_named(settings.task)
+        video_sizes = video_keys_and_sizes(settings.image_size, True) if settings.record_dir else {}
+        writer = (DatasetWriter.open(settings.record_dir, settings.lockstep_fps, video_sizes,
+                                     environment_names=task.object_state_names) if settings.record_dir else None)
+        if settings.video_dir is not None:
+            settings.video_dir.mkdir(parents=True, exist_ok=True)
+        results = open(settings.results_path, "a", encoding="utf-8")
+    except (ValueError, DatasetError, OSError) as error:
+        return cannot_start(error, NODE_ID)
+    idle = os.environ.get("SO101_IDLE", "") == "1"
+    pictures = ("image", "wrist_image") if writer is not None and settings.image_size else (
+        ("image",) if settings.video_dir is not None and settings.image_size else ())
+    observation = ("joint_state", "gripper_state", "object_state", "task_status", *pictures)
+    frames = FrameParts(observation if idle else (*observation, "action"))
+    clock = EpisodeClock(settings.lockstep_fps, settings.time_limit_s)
+    seeds = seeds_for(settings.first_seed, settings.episodes)
+    node = Node()
+    index = 0  # the episode running: seeds[index]
+    adopted = 0  # the body's number of the episode running; its start's (0) is never one of ours
+    adopted_index = -1  # the index of the episode `adopted` is
+    recorder: EpisodeRecorder | None = None
+    video: StreamingEncoder | None = None
+    answered: tuple[FrameTag, list[float]] | None = None  # the last frame passed on, and its action
+
+    def lay_out() -> None:
+        node.send_output("task_cmd", pa.array([f"reset {seeds[index]}"]))
+
+    def begin(episode: int) -> None:
+        """The body's episode `episode` is seeds[index] laid out: its frames are this run's."""
+        nonlocal adopted, adopted_index, recorder, video, answered
+        drop()
+        adopted, adopted_index, answered = episode, index, None
+        recorder = writer.start_episode(TASK_TEXT.get(task.name, task.name)) if writer is not None else None
+        if settings.video_dir is not None and settings.image_size:
+            width, height = settings.image_size
+            video = StreamingEncoder(settings.video_dir / f"episode_{index:04d}_seed_{seeds[index]}.mp4",
+                                     settings.lockstep_fps, width, height)
+
+    def drop() -> None:
+        nonlocal recorder, video
+        if recorder is not None:
+            recorder.discard()
+        if video is not None:
+            video.cancel()
+        recorder = video = None
+
+    def finish(tag: FrameTag, success: bool) -> None:
+        """The episode ends at `tag`'s frame."""
+        nonlocal index, recorder, video
+        kept = False
+        if recorder is not None:
+            if success or settings.keep == "all":
+                recorder.save()
+                kept = True
+            else:
+                recorder.discard()
+            recorder = None
+        if video is not None:
+            video.finish()
+            video = None
+        outcome = Outcome(index, seeds[index], success, tag.frame + 1, clock.seconds(tag.frame), kept=kept)
+        results.write(outcome.to_json() + "\n")
+        results.flush()
+        logger.info("[episodes] %s", outcome.line())
+        index += 1
+
+    def close() -> None:
+        drop()  # an episode cut short by STOP is not a demonstration
+        if writer is not None:
+            writer.close()
+        results.close()
+
+    try:
+        if seeds:
+            lay_out()
+        while index < len(seeds):
+            event = node.next(timeout=SILENCE_S)
+            if event is None or event["type"] == "STOP":
+                return 0
+            if event["type"] == "ERROR":  # nothing for SILENCE_S: a message was lost; ask again
+                logger.info("[episodes] nothing came for %g s (episode %d, seed %d): asking again", SILENCE_S, index,
+                            seeds[index])
+                if adopted_index != index:
+                    lay_out()  # the reset, or its first frame, went missing
+                else:
+                    node.send_output("task_cmd", pa.array([AGAIN_WORD]))
+                continue
+            if event["type"] != "INPUT":
+                continue
+            tag = frame_tag(event.get("metadata"))
+            if tag is None:
+                continue
+            if tag.frame == 0 and tag.seed == seeds[index] and tag.episode > adopted:
+                begin(tag.episode)  # the body laid it out as asked (the newest such, if asked twice)
+            frame = frames.add(event["id"], tag, event["value"])
+            if frame is None or tag.episode != adopted:
+                continue  # not whole yet; or a frame of the body's start, or of an episode before
+            if answered is not None and tag.frame <= answered[0].frame:  # sent again, after a loss
+                if tag.frame == answered[0].frame:
+                    node.send_output("joint_cmd", pa.array(answered[1], type=pa.float64()),
+                                     {**tag.metadata(), STREAM_KEY: NODE_ID})
+                continue
+            state_deg = frame["joint_state"].to_pylist() + frame["gripper_state"].to_pylist()
+            action_deg = list(HOME_POSE_DEG) if idle else frame["action"].to_pylist()
+            success = bool(frame["task_status"].to_pylist()[0])
+            if recorder is not None:
+                values = {STATE_KEY: to_lerobot(state_deg), ACTION_KEY: to_lerobot(action_deg),
+                          ENVIRONMENT_KEY: np.asarray(frame["object_state"].to_numpy(zero_copy_only=False), np.float32),
+                          SUCCESS_KEY: np.array([success]), REWARD_KEY: np.array([task.reward(success)], dtype=np.float32)}
+                if settings.image_size:
+                    values[IMAGE_KEY] = picture(frame["image"], settings.image_size)
+                    values[WRIST_IMAGE_KEY] = picture(frame["wrist_image"], settings.image_size)
+                recorder.add_frame(values)
+            if video is not None and settings.image_size:
+                video.add(picture(frame["image"], settings.image_size))
+            if clock.ended(tag.frame, success):
+                finish(tag, success)
+                if index < len(seeds):
+                    lay_out()
+                continue
+            answered = (tag, action_deg)
+            node.send_output("joint_cmd", pa.array(action_deg, type=pa.float64()), {**tag.metadata(), STREAM_KEY: NODE_ID})
+        results.write('"done"\n')
+        results.flush()
+    except KeyboardInterrupt:
+        pass
+    finally:
+        close()
+    return 0  # the body's task_cmd closes: it ends too
+
+
+if __name__ == "__main__":
+    sys.exit(main())

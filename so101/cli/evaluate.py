@@ -1,0 +1,53 @@
+"""`so101 eval`: score a driver on a task's seeded layouts, in lockstep, as a success rate with its interval.
+
+One line per episode (seed, success, time to success), then
+`success: K/N (P%, 95% CI lo–hi, Wilson), mean time to success T s`. A score is a measurement:
+the exit code is 0 whatever it is; bad options and a dataflow that fails exit non-zero with
+one line. `--expert` scores the scripted expert (nodes/expert.py), `--idle` an arm held at
+home: the floor every score must beat. `--video DIR` keeps each episode's front camera as an
+mp4, to see why an episode failed.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from so101.cli.argtypes import image_size
+from so101.cli.lockstep_run import Flow, add_common_arguments, body_of, fail, refuse_real, run_flow, work_folder
+from so101.dataset.settings import DEFAULT_IMAGE_SIZE
+from so101.tasks.episodes import score_line
+
+
+def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
+    driver = parser.add_mutually_exclusive_group(required=True)
+    driver.add_argument("--expert", action="store_true", help="the scripted expert drives (nodes/expert.py)")
+    driver.add_argument("--idle", action="store_true", help="nothing drives: the arm holds home (the floor of any score)")
+    add_common_arguments(parser)
+    parser.add_argument("--video", type=Path, default=None, metavar="DIR",
+                        help="keep each episode's front camera as an mp4 in DIR (drawn every frame: slower)")
+    parser.add_argument("--image-size", type=image_size, default=DEFAULT_IMAGE_SIZE, metavar="WxH",
+                        help=f"--video's picture size (default {DEFAULT_IMAGE_SIZE})")
+
+
+def run(args: argparse.Namespace) -> int:
+    refusal = refuse_real("eval", args.body)
+    if refusal:
+        return fail(refusal)
+    work = work_folder("eval")
+    size = f"{args.image_size[0]}x{args.image_size[1]}" if args.video is not None else ""
+    runner_env = {"SO101_TASK": args.task, "SO101_SEED": str(args.seed), "SO101_EPISODES": str(args.episodes),
+                  "SO101_TIME_LIMIT_S": repr(args.time_limit), "SO101_EPISODES_OUT": str(work / "episodes.jsonl"),
+                  "SO101_LOCKSTEP_PICTURES": size,
+                  "SO101_VIDEO_DIR": str(args.video.expanduser().resolve()) if args.video is not None else ""}
+    flow = Flow(body_of(args.body), expert=args.expert, runner_env=runner_env,
+                expert_env={"SO101_TASK": args.task, "SO101_EXPERT_NOISE": repr(args.noise)}, lang=args.lang,
+                pictures=("image",) if size else (), picture_size=size)
+    driver = "the expert" if args.expert else "idle (the arm held at home)"
+    print(f"eval: {args.task} on {args.body}, {driver}, seeds {args.seed}..{args.seed + args.episodes - 1}, "
+          f"time limit {args.time_limit:g} s (log: {args.log or work / 'run.log'})", flush=True)
+    outcomes, problem = run_flow("eval", flow, work, args.log, lambda outcome: print(outcome.line(), flush=True))
+    if problem:
+        return fail(f"so101 eval: {problem}")
+    print(score_line(outcomes), flush=True)
+    return 0

@@ -1,0 +1,76 @@
+"""The task nodes' settings (nodes/expert.py, nodes/episodes.py): environment variables, each declared
+once (so101/runtime/settings.py says how) and read once when the node starts. Light: no simulator."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Mapping
+
+from so101.bodies.settings import read_language, read_lockstep_fps, read_picture_size, read_task
+from so101.lang import DEFAULT_LANGUAGE, ENV_VAR as LANG_ENV_VAR
+from so101.runtime.settings import (
+    EnvironSettings, Setting, parse_number, read_number, read_optional_path, read_text, read_whole_number, setting,
+)
+
+KEEP_CHOICES = ("success", "all")
+
+
+def read_required_task(environ: Mapping[str, str], declared_setting: Setting) -> str:
+    name = read_task(environ, declared_setting)
+    if not name:
+        raise ValueError(f"{declared_setting.env_var} is empty: name the task (cube_to_box)")
+    return name
+
+
+def read_positive_number(environ: Mapping[str, str], declared_setting: Setting) -> float:
+    value = parse_number(declared_setting.env_var, declared_setting.raw(environ), 0.0)
+    if value <= 0:
+        raise ValueError(f"{declared_setting.env_var}={value:g} is not a number of seconds above 0")
+    return value
+
+
+def read_keep(environ: Mapping[str, str], declared_setting: Setting) -> str:
+    keep = declared_setting.raw(environ).strip()
+    if keep not in KEEP_CHOICES:
+        raise ValueError(f"{declared_setting.env_var}={keep!r} is not one of: {', '.join(KEEP_CHOICES)}")
+    return keep
+
+
+@dataclass(frozen=True)
+class ExpertSettings(EnvironSettings):
+    """The scripted expert's (nodes/expert.py)."""
+
+    task: str = setting("SO101_TASK", "cube_to_box", "the task the expert performs", read_required_task)
+    noise: float = setting(
+        "SO101_EXPERT_NOISE", "0", "perturbations of the expert's path, as a multiple of its standard ones (0 = none)",
+        read_number(0.0))
+    lockstep_fps: int = setting(
+        "SO101_LOCKSTEP_FPS", "25", "the body's lockstep frame rate: the expert's clock is frames / fps",
+        read_lockstep_fps)
+    lang: str = setting(LANG_ENV_VAR, DEFAULT_LANGUAGE, "log language, `zh` or `en`", read_language)
+
+
+@dataclass(frozen=True)
+class EpisodeSettings(EnvironSettings):
+    """The episodes' runner's (nodes/episodes.py): which layouts, how long, what is written."""
+
+    task: str = setting("SO101_TASK", "cube_to_box", "the task whose episodes run", read_required_task)
+    first_seed: int = setting("SO101_SEED", "0", "episode i is laid out from seed SO101_SEED + i", read_whole_number)
+    episodes: int = setting("SO101_EPISODES", "1", "how many episodes", read_whole_number)
+    lockstep_fps: int = setting("SO101_LOCKSTEP_FPS", "25", "the body's lockstep frame rate", read_lockstep_fps)
+    time_limit_s: float = setting(
+        "SO101_TIME_LIMIT_S", "30", "simulated seconds an episode may take before it counts as failed",
+        read_positive_number)
+    results_path: Path = setting(
+        "SO101_EPISODES_OUT", "episodes.jsonl", "a file the runner appends one JSON line to per episode, then `done`",
+        lambda environ, declared_setting: Path(read_text(environ, declared_setting) or declared_setting.default))
+    record_dir: Path | None = setting(
+        "SO101_RECORD_DIR", "", "a LeRobot dataset to write the episodes into; empty = none", read_optional_path)
+    keep: str = setting("SO101_KEEP", "success", "which episodes are written: `success` or `all`", read_keep)
+    image_size: tuple[int, int] | None = setting(
+        "SO101_LOCKSTEP_PICTURES", "", "WIDTHxHEIGHT of the front and wrist pictures written; empty = no video",
+        read_picture_size)
+    video_dir: Path | None = setting(
+        "SO101_VIDEO_DIR", "", "a folder for each episode's front picture as an mp4; empty = none", read_optional_path)
+    lang: str = setting(LANG_ENV_VAR, DEFAULT_LANGUAGE, "log language, `zh` or `en`", read_language)

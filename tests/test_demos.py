@@ -1,0 +1,113 @@
+"""`so101 demos` and `so101 eval` as a user runs them: lockstep dataflows of a body, the expert and the
+episodes' runner. The same seeds give the same episodes, bit for bit, on both simulators; an idle arm
+scores 0; what is written is a dataset that reads, and appends; bad input is one line."""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from so101.bodies.registry import SIMULATED_BODIES
+from so101.dataset.features import ACTION_KEY, ENVIRONMENT_KEY, STATE_KEY, SUCCESS_KEY
+from so101.dataset.reader import Dataset
+from so101.dataset.writer import DatasetWriter
+
+pytestmark = pytest.mark.dataflow
+
+SO101 = Path(sys.executable).parent / "so101"
+EPISODE_LINE = re.compile(r"^episode (\d+) \(seed (\d+)\): (success in [\d.]+ s|failed \(time limit, [\d.]+ s\)), "
+                          r"(\d+) frames(, kept)?$")
+
+
+def so101(*args, timeout=300):
+    return subprocess.run([str(SO101), *args, "--lang", "en"], capture_output=True, text=True, timeout=timeout)
+
+
+def episode_lines(stdout: str) -> list[str]:
+    return [line for line in stdout.splitlines() if EPISODE_LINE.match(line)]
+
+
+def frames_of(root: Path) -> dict[str, np.ndarray]:
+    dataset = Dataset.open(root)
+    keys = (STATE_KEY, ACTION_KEY, ENVIRONMENT_KEY, SUCCESS_KEY)
+    episodes = [dataset.episode_frames(index) for index in range(len(dataset.episodes))]
+    return {key: np.concatenate([np.asarray(frames[key]) for frames in episodes]) for key in keys}
+
+
+@pytest.mark.parametrize("body", SIMULATED_BODIES)
+def test_the_same_seeds_make_the_same_demonstrations_bit_for_bit(tmp_path, body):
+    runs = []
+    for name in ("first", "second"):
+        result = so101("demos", str(tmp_path / name), "--task", "cube_to_box", "--episodes", "2", "--seed", "5",
+                       "--body", body, "--no-video", "--noise", "1")
+        assert result.returncode == 0, result.stdout + result.stderr
+        runs.append(result.stdout)
+    lines = episode_lines(runs[0])
+    assert [EPISODE_LINE.match(line).group(2) for line in lines] == ["5", "6"]
+    assert all(line.endswith(", kept") and "success in" in line for line in lines), runs[0]
+    assert episode_lines(runs[1]) == lines
+    last = runs[0].splitlines()[-1]
+    assert re.fullmatch(r"demos: 2 episodes kept, 2 of 2 succeeded \(100%\), [\d.]+ s, [\d.]+× real time", last), last
+    first, second = frames_of(tmp_path / "first"), frames_of(tmp_path / "second")
+    for key in first:
+        assert np.array_equal(first[key], second[key]), key
+    # The cube moved (the expert did the task) and the last frame of each episode is a success.
+    assert np.ptp(first[ENVIRONMENT_KEY][:, 2]) > 0.05
+    dataset = Dataset.open(tmp_path / "first")
+    assert dataset.fps == 25 and [episode.tasks for episode in dataset.episodes] == [("put the cube in the box",)] * 2
+    assert all(bool(dataset.episode_frames(index)[SUCCESS_KEY][-1]) for index in range(2))
+
+
+def test_eval_scores_the_expert_and_an_idle_arm_scores_nothing(tmp_path):
+    expert = so101("eval", "--expert", "--task", "cube_to_box", "--episodes", "3", "--seed", "20")
+    assert expert.returncode == 0, expert.stdout + expert.stderr
+    assert len(episode_lines(expert.stdout)) == 3
+    assert re.fullmatch(r"success: 3/3 \(100%, 95% CI 44–100%, Wilson\), mean time to success [\d.]+ s",
+                        expert.stdout.splitlines()[-1]), expert.stdout
+    idle = so101("eval", "--idle", "--task", "cube_to_box", "--episodes", "2", "--time-limit", "2", "--body", "mujoco")
+    assert idle.returncode == 0, idle.stdout + idle.stderr
+    assert episode_lines(idle.stdout) == ["episode 0 (seed 0): failed (time limit, 2.0 s), 51 frames",
+                                          "episode 1 (seed 1): failed (time limit, 2.0 s), 51 frames"]
+    assert idle.stdout.splitlines()[-1] == "success: 0/2 (0%, 95% CI 0–66%, Wilson), mean time to success none (no success)"
+
+
+def test_demos_with_video_append_to_the_folder_and_every_episode_reads(tmp_path):
+    root = tmp_path / "demos"
+    for seed in ("0", "1"):
+        result = so101("demos", str(root), "--task", "cube_to_box", "--episodes", "1", "--seed", seed,
+                       "--image-size", "160x120")
+        assert result.returncode == 0, result.stdout + result.stderr
+    dataset = Dataset.open(root)
+    assert len(dataset.episodes) == 2
+    for index in range(2):
+        frames = dataset.episode_frames(index)
+        front = list(dataset.episode_images(index, "observation.images.front"))
+        wrist = list(dataset.episode_images(index, "observation.images.wrist"))
+        assert len(front) == len(wrist) == len(frames[STATE_KEY])
+        assert front[0].shape == (120, 160, 3)
+        assert np.abs(front[-1].astype(int) - front[0].astype(int)).mean() > 1.0  # the arm and the cube moved
+
+
+@pytest.mark.parametrize("args, message", [
+    (["eval", "--expert", "--task", "cube_to_box", "--body", "real"], "the real arm has no object state"),
+    (["demos", "DIR", "--task", "cube_to_box", "--body", "real"], "the real arm has no object state"),
+    (["eval", "--expert", "--task", "stack_cubes"], "invalid choice: 'stack_cubes'"),
+    (["eval", "--expert", "--task", "cube_to_box", "--episodes", "0"], "'0' is not a whole number from 1"),
+    (["eval", "--task", "cube_to_box"], "one of the arguments --expert --idle is required"),
+    (["demos", "OTHER", "--task", "cube_to_box", "--no-video"], "fps"),
+])
+def test_bad_input_is_one_line_and_starts_nothing(tmp_path, args, message):
+    other = tmp_path / "other"
+    with DatasetWriter.open(other, 30, {}):  # a recording at 30 fps, of no task
+        pass
+    args = [str(tmp_path / "new") if arg == "DIR" else str(other) if arg == "OTHER" else arg for arg in args]
+    result = so101(*args, timeout=60)
+    assert result.returncode != 0
+    last = result.stderr.strip().splitlines()[-1]  # argparse's usage may come before it
+    assert last.startswith(f"so101 {args[0]}") and message in last, result.stderr
+    assert "Traceback" not in result.stderr
