@@ -13,6 +13,9 @@ dataflow declares them, `object_state` each tick (float32, the task's object nam
 metadata) and `task_status` (the success function's answer, a bool, with the task and seed in its
 metadata) at the first tick, whenever it changes, after each reset and once a second; a
 `task_cmd` (`reset` or `reset SEED`) lays the scene out again and homes the arm (TaskReport).
+In lockstep (SO101_LOCKSTEP_FPS, so101/runtime/lockstep.py) there is no tick: each `joint_cmd`
+tagged for the frame now steps one frame and the next frame goes out, with the task's pictures
+where asked; a reset starts the next episode; the node ends when its `task_cmd` closes.
 STOP or Ctrl-C closes the body and ends with 0, as every node's loop does
 (so101/runtime/node_events.py). The real arm differs only where hardware must: it
 starts from where it stands (`start_targets_deg`), a tick whose read failed publishes
@@ -34,11 +37,11 @@ from typing import TYPE_CHECKING, Iterable, Iterator, Mapping, Protocol, cast
 import numpy as np
 import pyarrow as pa
 
+from so101.bodies.camera import DEFAULT_CAMERA, WRIST_CAMERA
 from so101.bodies.protocol import Body, BodyFailed, TaskScene
 from so101.bodies.settings import NodeSettings
 from so101.joint_cmd import decode_joint_cmd
 from so101.robot import GRIPPER_COMMAND_INDEX, NUM_ARM_JOINTS
-from so101.bodies.camera import DEFAULT_CAMERA, WRIST_CAMERA
 from so101.runtime.dataflow import TICK_PERIOD_S, TickClock, timer_period_s
 from so101.runtime.lockstep import AGAIN_WORD, FrameTag, answers, frame_tag, steps_per_frame
 from so101.runtime.node_events import Event, inputs_until_stop, until_closed

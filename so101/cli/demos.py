@@ -15,7 +15,8 @@ import time
 from pathlib import Path
 
 from so101.cli.argtypes import image_size
-from so101.cli.lockstep_run import Flow, add_common_arguments, body_of, fail, refuse_real, run_flow, work_folder
+from so101.bodies.registry import BODIES
+from so101.cli.lockstep_run import Flow, add_common_arguments, fail, refuse_real, run_flow, work_folder
 from so101.dataset.settings import DEFAULT_IMAGE_SIZE
 from so101.runtime.lockstep import DEFAULT_LOCKSTEP_FPS
 
@@ -50,7 +51,7 @@ def run(args: argparse.Namespace) -> int:
     runner_env = {"SO101_TASK": args.task, "SO101_SEED": str(args.seed), "SO101_EPISODES": str(args.episodes),
                   "SO101_TIME_LIMIT_S": repr(args.time_limit), "SO101_EPISODES_OUT": str(work / "episodes.jsonl"),
                   "SO101_RECORD_DIR": str(root), "SO101_KEEP": args.keep, "SO101_LOCKSTEP_PICTURES": size}
-    flow = Flow(body_of(args.body), expert=True, runner_env=runner_env,
+    flow = Flow(BODIES[args.body], expert=True, runner_env=runner_env,
                 expert_env={"SO101_TASK": args.task, "SO101_EXPERT_NOISE": repr(args.noise)}, lang=args.lang,
                 pictures=("image", "wrist_image") if size else (), picture_size=size)
     print(f"demos: {args.task} on {args.body} by the expert (noise {args.noise:g}), seeds {args.seed}.."

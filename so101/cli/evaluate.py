@@ -14,7 +14,8 @@ import argparse
 from pathlib import Path
 
 from so101.cli.argtypes import image_size
-from so101.cli.lockstep_run import Flow, add_common_arguments, body_of, fail, refuse_real, run_flow, work_folder
+from so101.bodies.registry import BODIES
+from so101.cli.lockstep_run import Flow, add_common_arguments, fail, refuse_real, run_flow, work_folder
 from so101.dataset.settings import DEFAULT_IMAGE_SIZE
 from so101.tasks.episodes import score_line
 
@@ -40,7 +41,7 @@ def run(args: argparse.Namespace) -> int:
                   "SO101_TIME_LIMIT_S": repr(args.time_limit), "SO101_EPISODES_OUT": str(work / "episodes.jsonl"),
                   "SO101_LOCKSTEP_PICTURES": size,
                   "SO101_VIDEO_DIR": str(args.video.expanduser().resolve()) if args.video is not None else ""}
-    flow = Flow(body_of(args.body), expert=args.expert, runner_env=runner_env,
+    flow = Flow(BODIES[args.body], expert=args.expert, runner_env=runner_env,
                 expert_env={"SO101_TASK": args.task, "SO101_EXPERT_NOISE": repr(args.noise)}, lang=args.lang,
                 pictures=("image",) if size else (), picture_size=size)
     driver = "the expert" if args.expert else "idle (the arm held at home)"

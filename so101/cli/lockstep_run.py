@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-from so101.bodies.registry import BODIES, SIMULATED_BODIES, BodyKind
+from so101.bodies.registry import SIMULATED_BODIES, BodyKind
 from so101.cli.argtypes import add_language_option, number, whole_number
 from so101.runtime.dataflow import ROOT, write_dataflow
 from so101.runtime.lockstep import DEFAULT_LOCKSTEP_FPS
@@ -159,10 +159,6 @@ def run_flow(command: str, flow: Flow, work: Path, log: Path | None, show: Calla
         refusal = _refusal(log_file)
         return outcomes, refusal or f"the dataflow ended (exit code {code}) before its episodes did: see {log_file}"
     return outcomes, None
-
-
-def body_of(name: str) -> BodyKind:
-    return BODIES[name]
 
 
 def fail(line: str) -> int:

@@ -8,9 +8,9 @@ open; go up and back to home. Every pose comes from the project's kinematics
 arm as any other sender does: six joint targets, in degrees.
 
 `Expert` plays a plan out against time and looks at `object_state` at two moments: after
-the lift (is the cube up with the jaws?) and at the end (is it in the box?). A cube that did
-not come up, or fell on the way, gets a new plan from where the arm is, from the cube's
-new pose, up to `MAX_ATTEMPTS` in all. It reads nothing but the arm's angles, the
+the lift and over the box (is the cube up with the jaws?). A cube that did not come up, or
+fell on the way, gets a new plan from where the arm is to where the cube lies, up to
+`MAX_ATTEMPTS` in all. It reads nothing but the arm's angles, the
 gripper's and object_state, as a policy would.
 
 `noise` perturbs a plan (where the approach, the carry and the release are, how fast it
@@ -22,8 +22,8 @@ from __future__ import annotations
 
 import math
 import random
-from pathlib import Path
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Sequence
 
 import numpy as np
@@ -105,6 +105,11 @@ def smoothstep(fraction: float) -> float:
     return t * t * (3.0 - 2.0 * t)
 
 
+def pan_rad(point: Sequence[float] | np.ndarray) -> float:
+    """The bearing of a point from the base's axis: where shoulder_pan turns the arm to reach it."""
+    return math.atan2(point[1], point[0])
+
+
 class Planner:
     """Plans of `task` with `grasp` (its kinematics among it). Close it when done (it holds the kinematics')."""
 
@@ -130,11 +135,8 @@ class Planner:
         def pace() -> float:  # a move's duration, stretched by the noise (never hurried: a hurried carry flings)
             return 1.0 + abs(draw.gauss(0.0, NOISE_TIME * noise)) if noise > 0 else 1.0
 
-        cube = np.array(seen.cube_xyz_m)
         half = self.task.cube.half_size_m
-        floor_z = cube[2] - half if cube[2] - half < 0.02 else 0.0  # the floor the cube stands on
-        grasp_point = cube + jitter(NOISE_GRASP_M) * [1, 1, 0]
-        grasp_point[2] = floor_z + half
+        grasp_point = np.array(seen.cube_xyz_m) + jitter(NOISE_GRASP_M) * [1, 1, 0]  # the cube's centre
         approach = grasp_point + [0, 0, APPROACH_ABOVE_M] + jitter(NOISE_APPROACH_M)
         approach[2] = max(approach[2], grasp_point[2] + 0.03)
         box = self.task.box
@@ -181,11 +183,9 @@ class Planner:
             add(lifted, CLOSED_DEG, NEAR_DEG_S, SETTLE_S if index == 2 else 0.0, "lift", "held" if index == 2 else "")
         # Over the box: through a point halfway, high, so the cube clears the box's near wall.
         via = (grasp_point + box_centre) / 2 + jitter(NOISE_CARRY_M)
-        via[2] = max(carry_z, grasp_point[2] + LIFT_ABOVE_M) + abs(via[2] - box_centre[2] / 2 - grasp_point[2] / 2)
+        # The noise raises it, never lowers it.
+        via[2] = max(carry_z, grasp_point[2] + LIFT_ABOVE_M) + abs(via[2] - (grasp_point[2] + box_centre[2]) / 2)
         # Carried, the jaws turn with the arm's pan, so the wrist need not roll (a held cube may face any way).
-        def pan_rad(point: np.ndarray) -> float:
-            return math.atan2(point[1], point[0])
-
         carried = pose(via, lifted, held=True, turned_rad=pan_rad(via) - pan_rad(grasp_point))
         add(carried, CLOSED_DEG, FREE_DEG_S * 0.6, 0.0, "carry")
         at_box_rad = pan_rad(release) - pan_rad(grasp_point)
