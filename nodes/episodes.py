@@ -9,6 +9,8 @@ frame whose task_status says success, or at the time limit. `SO101_IDLE=1` has n
 answers every frame with home, the floor every score must beat. Episodes end in order;
 each one's outcome is a JSON line in SO101_EPISODES_OUT, and `"done"` after the last, which
 ends the node, and with it the body (its task_cmd closes). Episode i uses seed SO101_SEED + i.
+After SILENCE_S with nothing come, a message was lost: it asks the body for the frame again
+(`task_cmd` `again`), or for the reset again.
 What it judges and scores is so101/tasks/episodes.py.
 Settings: so101.tasks.settings.EpisodeSettings.
 """
@@ -46,8 +48,6 @@ from so101.tasks.episodes import EpisodeClock, Outcome, seeds_for  # noqa: E402
 from so101.tasks.settings import EpisodeSettings  # noqa: E402
 
 NODE_ID = "episodes"
-# The text of every episode in a dataset of the task (LeRobot's task, what a policy is told to do).
-TASK_TEXT = {"cube_to_box": "put the cube in the box"}
 logger = logging.getLogger("so101.episodes")
 # After this long without a message, one was lost (a frame takes milliseconds; the expert's first
 # plan, with its kinematics starting, about a second): the runner asks for it again.
@@ -95,7 +95,7 @@ def main() -> int:
         nonlocal adopted, adopted_index, recorder, video, answered
         drop()
         adopted, adopted_index, answered = episode, index, None
-        recorder = writer.start_episode(TASK_TEXT.get(task.name, task.name)) if writer is not None else None
+        recorder = writer.start_episode(task.instruction) if writer is not None else None
         if settings.video_dir is not None and settings.image_size:
             width, height = settings.image_size
             video = StreamingEncoder(settings.video_dir / f"episode_{index:04d}_seed_{seeds[index]}.mp4",

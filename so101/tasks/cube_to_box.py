@@ -119,6 +119,7 @@ class CubeToBox:
     box: Box = Box()
     sector: SpawnSector = SpawnSector()
     name: str = NAME
+    instruction: str = "put the cube in the box"  # an episode's task text in a dataset: what a policy is told
     object_state_names: tuple[str, ...] = OBJECT_STATE_NAMES
 
     def layout(self, seed: int) -> Layout:
