@@ -20,6 +20,7 @@ from so101.dataset.features import ACTION_KEY, STATE_KEY, from_lerobot, to_lerob
 from so101.dataset.reader import Dataset
 from so101.dataset.writer import DatasetWriter
 from tests.helpers.dataflow import SO101, body_environment
+from so101.runtime.cluster import free_port
 from so101.runtime.processes import processes_with_env
 from tests.helpers.terminal import Terminal, calibrate_in_tmux, send_keys, start_teleop
 
@@ -128,6 +129,7 @@ def test_replay_onto_the_emulated_arm_is_ramped_and_stays_inside_its_limits(tmp_
     actions[:, 1] = 50.0
     actions[:, 0] = np.linspace(60, 150, frames)
     recorded_episode(tmp_path / "set", actions)
+    web_port = free_port()
     with body_environment("real", tmp_path) as (env, arm):
         calibration = load_calibration(Path(env["SO101_CALIBRATION"]))
         goals: list[tuple[float, list[int]]] = []
@@ -146,7 +148,7 @@ def test_replay_onto_the_emulated_arm_is_ramped_and_stays_inside_its_limits(tmp_
             replay = subprocess.run(
                 [str(SO101), "replay", str(tmp_path / "set"), "--body", "real", "--port", env["SO101_PORT"],
                  "--calibration", env["SO101_CALIBRATION"], "--lang", "en", "--log", str(tmp_path / "replay.log"),
-                 "--web", "--web-port", "8139"], capture_output=True, text=True, timeout=180)
+                 "--web", "--web-port", str(web_port)], capture_output=True, text=True, timeout=180)
         finally:
             done.set()
             watcher.join()
@@ -169,7 +171,7 @@ def test_replay_onto_the_emulated_arm_is_ramped_and_stays_inside_its_limits(tmp_
                     if before[2][index] and after[2][index]]
     assert speeds_deg_s and max(speeds_deg_s) < 40, max(speeds_deg_s)
     assert "moving to the first frame at no more than 30°/s" in replay.stdout
-    assert "web view: http://127.0.0.1:8139/" in replay.stdout.splitlines()  # the replay shown in a browser too
+    assert f"web view: http://127.0.0.1:{web_port}/" in replay.stdout.splitlines()  # the replay shown in a browser too
     assert ACTUATED_JOINTS[0].upper_deg < 150
 
 

@@ -12,6 +12,7 @@ import pytest
 
 from so101.assets import urdf_path
 from so101.robot import ACTUATED_JOINTS
+from so101.runtime.cluster import free_port
 from so101.web.urdf_scene import axis_angle, load_urdf_scene, multiply, rotate, rpy
 from so101.web.settings import page_address
 from so101.web.view import WebView, angles_markdown, recording_html
@@ -85,10 +86,11 @@ def test_a_connection_closed_before_its_request_is_no_error(caplog):
     # A browser's speculative connection, or a port scan: websockets would log each with a traceback.
     import socket
 
-    view = WebView(load_urdf_scene(urdf_path(None)), "127.0.0.1", 8134)
+    port = free_port()
+    view = WebView(load_urdf_scene(urdf_path(None)), "127.0.0.1", port)
     try:
         for _ in range(3):
-            socket.create_connection(("127.0.0.1", 8134)).close()
+            socket.create_connection(("127.0.0.1", port)).close()
         time.sleep(1)
         view.show([10.0, 0.0, 0.0, 0.0, 0.0, 0.0])
     finally:
