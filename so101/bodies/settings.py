@@ -20,8 +20,8 @@ from so101.feetech.calibration import parse_joint_signs
 from so101.gui.display import MODE_ENV_VAR
 from so101.lang import DEFAULT_LANGUAGE, ENV_VAR as LANG_ENV_VAR, language_from_environ
 from so101.runtime.settings import (
-    EnvironSettings, Setting, parse_number, read_number, read_optional_number, read_optional_path, read_file_path,
-    read_stripped_text, read_text, read_whole_number, setting,
+    EnvironSettings, Setting, parse_number, read_image_size, read_number, read_optional_number, read_optional_path,
+    read_file_path, read_stripped_text, read_text, read_whole_number, setting,
 )
 from so101.runtime.lockstep import steps_per_frame
 from so101.runtime.versions import spawning_daemon_version_problem
@@ -72,12 +72,6 @@ def read_lockstep_fps(environ: Mapping[str, str], declared_setting: Setting) -> 
     return fps
 
 
-def read_picture_size(environ: Mapping[str, str], declared_setting: Setting) -> tuple[int, int] | None:
-    from so101.dataset.settings import parse_image_size
-
-    return parse_image_size(declared_setting.raw(environ), declared_setting.env_var)
-
-
 def read_joint_signs(environ: Mapping[str, str], declared_setting: Setting) -> tuple[int, ...]:
     return parse_joint_signs(declared_setting.raw(environ))
 
@@ -118,7 +112,7 @@ class NodeSettings(EnvironSettings):
     lockstep_pictures: tuple[int, int] | None = setting(
         "SO101_LOCKSTEP_PICTURES", "",
         "WIDTHxHEIGHT: in lockstep, each frame carries the task's front and wrist pictures on `image` and "
-        "`wrist_image`, drawn for that frame; empty = none", read_picture_size)
+        "`wrist_image`, drawn for that frame; empty = none", read_image_size)
 
     @classmethod
     def from_environ(cls, environ: Mapping[str, str]) -> Self:

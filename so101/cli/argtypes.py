@@ -56,8 +56,8 @@ def whole_number(lowest: int, highest: int) -> Callable[[str], int]:
 
 
 def image_size(text: str) -> tuple[int, int]:
-    """An argparse `type` for a picture size, "WIDTHxHEIGHT" (so101.dataset.settings.parse_image_size's rule)."""
-    from so101.dataset.settings import parse_image_size
+    """An argparse `type` for a picture size, "WIDTHxHEIGHT" (so101.runtime.settings.parse_image_size's rule)."""
+    from so101.runtime.settings import parse_image_size
 
     try:
         size = parse_image_size(text)

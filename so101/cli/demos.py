@@ -15,8 +15,7 @@ import time
 from pathlib import Path
 
 from so101.cli.argtypes import image_size
-from so101.bodies.registry import BODIES
-from so101.cli.lockstep_run import Flow, add_common_arguments, fail, refuse_real, run_flow, work_folder
+from so101.cli.lockstep_run import add_common_arguments, fail, flow_for, refuse_real, run_flow, work_folder
 from so101.dataset.settings import DEFAULT_IMAGE_SIZE
 from so101.runtime.lockstep import DEFAULT_LOCKSTEP_FPS
 
@@ -41,29 +40,24 @@ def run(args: argparse.Namespace) -> int:
     if refusal:
         return fail(refusal)
     root = args.dataset.expanduser().resolve()
-    size = "" if args.no_video else f"{args.image_size[0]}x{args.image_size[1]}"
+    picture_size = None if args.no_video else args.image_size
     try:  # another dataset's folder (other features, another rate) is refused here, before anything starts
-        DatasetWriter.open(root, DEFAULT_LOCKSTEP_FPS, video_keys_and_sizes(None if args.no_video else args.image_size, True),
+        DatasetWriter.open(root, DEFAULT_LOCKSTEP_FPS, video_keys_and_sizes(picture_size, True),
                            environment_names=task_named(args.task).object_state_names).close()
     except DatasetError as error:
         return fail(f"so101 demos: {error}")
     work = work_folder("demos")
-    runner_env = {"SO101_TASK": args.task, "SO101_SEED": str(args.seed), "SO101_EPISODES": str(args.episodes),
-                  "SO101_TIME_LIMIT_S": repr(args.time_limit), "SO101_EPISODES_OUT": str(work / "episodes.jsonl"),
-                  "SO101_RECORD_DIR": str(root), "SO101_KEEP": args.keep, "SO101_LOCKSTEP_PICTURES": size}
-    flow = Flow(BODIES[args.body], expert=True, runner_env=runner_env,
-                expert_env={"SO101_TASK": args.task, "SO101_EXPERT_NOISE": repr(args.noise)}, lang=args.lang,
-                pictures=("image", "wrist_image") if size else (), picture_size=size)
+    flow = flow_for(args, work, True, ("image", "wrist_image"), picture_size, SO101_RECORD_DIR=str(root),
+                    SO101_KEEP=args.keep)
+    cameras = f"front and wrist {flow.picture_size}" if flow.picture_size else "no video"
     print(f"demos: {args.task} on {args.body} by the expert (noise {args.noise:g}), seeds {args.seed}.."
-          f"{args.seed + args.episodes - 1}, {'no video' if not size else 'front and wrist ' + size}, into {root} "
-          f"(log: {args.log or work / 'run.log'})", flush=True)
+          f"{args.seed + args.episodes - 1}, {cameras}, into {root} (log: {args.log or work / 'run.log'})", flush=True)
     started = time.monotonic()
     outcomes, problem = run_flow("demos", flow, work, args.log, lambda outcome: print(outcome.line(), flush=True))
     wall_s = time.monotonic() - started
-    if problem:
-        kept = sum(outcome.kept for outcome in outcomes)
-        return fail(f"so101 demos: {problem} ({kept} episodes were kept before it)")
     kept = sum(outcome.kept for outcome in outcomes)
+    if problem:
+        return fail(f"so101 demos: {problem} ({kept} episodes were kept before it)")
     successes = sum(outcome.success for outcome in outcomes)
     simulated_s = sum(outcome.frames for outcome in outcomes) / DEFAULT_LOCKSTEP_FPS
     print(f"demos: {kept} episodes kept, {successes} of {len(outcomes)} succeeded "

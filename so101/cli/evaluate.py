@@ -14,8 +14,7 @@ import argparse
 from pathlib import Path
 
 from so101.cli.argtypes import image_size
-from so101.bodies.registry import BODIES
-from so101.cli.lockstep_run import Flow, add_common_arguments, fail, refuse_real, run_flow, work_folder
+from so101.cli.lockstep_run import add_common_arguments, fail, flow_for, refuse_real, run_flow, work_folder
 from so101.dataset.settings import DEFAULT_IMAGE_SIZE
 from so101.tasks.episodes import score_line
 
@@ -36,14 +35,8 @@ def run(args: argparse.Namespace) -> int:
     if refusal:
         return fail(refusal)
     work = work_folder("eval")
-    size = f"{args.image_size[0]}x{args.image_size[1]}" if args.video is not None else ""
-    runner_env = {"SO101_TASK": args.task, "SO101_SEED": str(args.seed), "SO101_EPISODES": str(args.episodes),
-                  "SO101_TIME_LIMIT_S": repr(args.time_limit), "SO101_EPISODES_OUT": str(work / "episodes.jsonl"),
-                  "SO101_LOCKSTEP_PICTURES": size,
-                  "SO101_VIDEO_DIR": str(args.video.expanduser().resolve()) if args.video is not None else ""}
-    flow = Flow(BODIES[args.body], expert=args.expert, runner_env=runner_env,
-                expert_env={"SO101_TASK": args.task, "SO101_EXPERT_NOISE": repr(args.noise)}, lang=args.lang,
-                pictures=("image",) if size else (), picture_size=size)
+    video = str(args.video.expanduser().resolve()) if args.video is not None else ""
+    flow = flow_for(args, work, args.expert, ("image",), args.image_size if video else None, SO101_VIDEO_DIR=video)
     driver = "the expert" if args.expert else "idle (the arm held at home)"
     print(f"eval: {args.task} on {args.body}, {driver}, seeds {args.seed}..{args.seed + args.episodes - 1}, "
           f"time limit {args.time_limit:g} s (log: {args.log or work / 'run.log'})", flush=True)

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-from so101.bodies.registry import SIMULATED_BODIES, BodyKind
+from so101.bodies.registry import BODIES, SIMULATED_BODIES, BodyKind
 from so101.cli.argtypes import add_language_option, number, whole_number
 from so101.runtime.dataflow import ROOT, write_dataflow
 from so101.runtime.lockstep import DEFAULT_LOCKSTEP_FPS
@@ -65,6 +65,19 @@ class Flow:
 
 def queued(source: str) -> dict:
     return {"source": source, "queue_size": 100, "queue_policy": "backpressure"}
+
+
+def flow_for(args: argparse.Namespace, work: Path, expert: bool, pictures: tuple[str, ...],
+             picture_size: tuple[int, int] | None, **runner_env: str) -> Flow:
+    """The run add_common_arguments' options ask for: `pictures` (the body's picture outputs) at
+    `picture_size` (None: none), the runner's results in `work`, and its own settings `runner_env`."""
+    size = f"{picture_size[0]}x{picture_size[1]}" if picture_size else ""
+    runner_env = {"SO101_TASK": args.task, "SO101_SEED": str(args.seed), "SO101_EPISODES": str(args.episodes),
+                  "SO101_TIME_LIMIT_S": repr(args.time_limit), "SO101_EPISODES_OUT": str(work / "episodes.jsonl"),
+                  "SO101_LOCKSTEP_PICTURES": size, **runner_env}
+    return Flow(BODIES[args.body], expert=expert, runner_env=runner_env,
+                expert_env={"SO101_TASK": args.task, "SO101_EXPERT_NOISE": repr(args.noise)}, lang=args.lang,
+                pictures=pictures if size else (), picture_size=size)
 
 
 def lockstep_dataflow(flow: Flow) -> dict:

@@ -11,7 +11,9 @@ from so101.assets import ASSETS_ENV_VAR
 from so101.bodies.settings import read_language, read_task
 from so101.dataset.features import DEFAULT_FPS
 from so101.lang import DEFAULT_LANGUAGE, ENV_VAR as LANG_ENV_VAR
-from so101.runtime.settings import EnvironSettings, Setting, read_file_path, read_optional_path, read_whole_number, setting
+from so101.runtime.settings import (
+    EnvironSettings, Setting, read_choice, read_file_path, read_image_size, read_optional_path, read_whole_number, setting,
+)
 
 SIMULATORS = ("pybullet", "mujoco")
 DEFAULT_IMAGE_SIZE = "320x240"
@@ -22,30 +24,6 @@ def read_fps(environ: Mapping[str, str], declared_setting: Setting) -> int:
     if not 1 <= fps <= 1000:
         raise ValueError(f"{declared_setting.env_var}={fps} is not a frame rate from 1 to 1000 per second")
     return fps
-
-
-def parse_image_size(text: str, env_var: str = "image size") -> tuple[int, int] | None:
-    """"WIDTHxHEIGHT" -> (width, height); "" -> None (no pictures)."""
-    raw = text.strip().lower()
-    if not raw:
-        return None
-    width, _, height = raw.partition("x")
-    if not (width.isdigit() and height.isdigit() and 16 <= int(width) <= 4096 and 16 <= int(height) <= 4096
-            and int(width) % 2 == 0 and int(height) % 2 == 0):
-        raise ValueError(f"{env_var}={text!r} is not WIDTHxHEIGHT in even pixels from 16 to 4096 (e.g. 320x240), "
-                         "or empty for no video")
-    return int(width), int(height)
-
-
-def read_image_size(environ: Mapping[str, str], declared_setting: Setting) -> tuple[int, int] | None:
-    return parse_image_size(declared_setting.raw(environ), declared_setting.env_var)
-
-
-def read_simulator(environ: Mapping[str, str], declared_setting: Setting) -> str:
-    raw = declared_setting.raw(environ).strip()
-    if raw not in SIMULATORS:
-        raise ValueError(f"{declared_setting.env_var}={raw!r} is not one of: {', '.join(SIMULATORS)}")
-    return raw
 
 
 @dataclass(frozen=True)
@@ -71,7 +49,7 @@ class CameraSettings(EnvironSettings):
     """nodes/camera.py."""
 
     simulator: str = setting("SO101_CAMERA_BODY", "pybullet", "whose renderer draws the arm: `pybullet` or `mujoco`",
-                             read_simulator)
+                             read_choice(SIMULATORS))
     image_size: tuple[int, int] | None = setting(
         "SO101_RECORD_IMAGE_SIZE", DEFAULT_IMAGE_SIZE, "WIDTHxHEIGHT of the pictures", read_image_size,
         required="to WIDTHxHEIGHT (e.g. 320x240)")

@@ -112,3 +112,30 @@ def read_whole_number(environ: Mapping[str, str], declared_setting: Setting) -> 
     if not raw.strip().isdigit():
         raise ValueError(f"{declared_setting.env_var}={raw!r} is not a whole number >= 0")
     return int(raw)
+
+
+def parse_image_size(text: str, env_var: str = "image size") -> tuple[int, int] | None:
+    """"WIDTHxHEIGHT" -> (width, height); "" -> None (no pictures)."""
+    raw = text.strip().lower()
+    if not raw:
+        return None
+    width, _, height = raw.partition("x")
+    if not (width.isdigit() and height.isdigit() and 16 <= int(width) <= 4096 and 16 <= int(height) <= 4096
+            and int(width) % 2 == 0 and int(height) % 2 == 0):
+        raise ValueError(f"{env_var}={text!r} is not WIDTHxHEIGHT in even pixels from 16 to 4096 (e.g. 320x240), "
+                         "or empty for no video")
+    return int(width), int(height)
+
+
+def read_image_size(environ: Mapping[str, str], declared_setting: Setting) -> tuple[int, int] | None:
+    return parse_image_size(declared_setting.raw(environ), declared_setting.env_var)
+
+
+def read_choice(choices: tuple[str, ...]) -> Callable[[Mapping[str, str], Setting], str]:
+    """One of `choices`, as written (spaces around it ignored)."""
+    def read(environ: Mapping[str, str], declared_setting: Setting) -> str:
+        raw = declared_setting.raw(environ).strip()
+        if raw not in choices:
+            raise ValueError(f"{declared_setting.env_var}={raw!r} is not one of: {', '.join(choices)}")
+        return raw
+    return read

@@ -7,10 +7,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Mapping
 
-from so101.bodies.settings import read_language, read_lockstep_fps, read_picture_size, read_task
+from so101.bodies.settings import read_language, read_lockstep_fps, read_task
 from so101.lang import DEFAULT_LANGUAGE, ENV_VAR as LANG_ENV_VAR
 from so101.runtime.settings import (
-    EnvironSettings, Setting, parse_number, read_number, read_optional_path, read_text, read_whole_number, setting,
+    EnvironSettings, Setting, parse_number, read_choice, read_image_size, read_number, read_optional_path, read_text,
+    read_whole_number, setting,
 )
 
 KEEP_CHOICES = ("success", "all")
@@ -28,13 +29,6 @@ def read_positive_number(environ: Mapping[str, str], declared_setting: Setting) 
     if value <= 0:
         raise ValueError(f"{declared_setting.env_var}={value:g} is not a number of seconds above 0")
     return value
-
-
-def read_keep(environ: Mapping[str, str], declared_setting: Setting) -> str:
-    keep = declared_setting.raw(environ).strip()
-    if keep not in KEEP_CHOICES:
-        raise ValueError(f"{declared_setting.env_var}={keep!r} is not one of: {', '.join(KEEP_CHOICES)}")
-    return keep
 
 
 @dataclass(frozen=True)
@@ -67,10 +61,10 @@ class EpisodeSettings(EnvironSettings):
         lambda environ, declared_setting: Path(read_text(environ, declared_setting) or declared_setting.default))
     record_dir: Path | None = setting(
         "SO101_RECORD_DIR", "", "a LeRobot dataset to write the episodes into; empty = none", read_optional_path)
-    keep: str = setting("SO101_KEEP", "success", "which episodes are written: `success` or `all`", read_keep)
+    keep: str = setting("SO101_KEEP", "success", "which episodes are written: `success` or `all`", read_choice(KEEP_CHOICES))
     image_size: tuple[int, int] | None = setting(
         "SO101_LOCKSTEP_PICTURES", "", "WIDTHxHEIGHT of the front and wrist pictures written; empty = no video",
-        read_picture_size)
+        read_image_size)
     video_dir: Path | None = setting(
         "SO101_VIDEO_DIR", "", "a folder for each episode's front picture as an mp4; empty = none", read_optional_path)
     lang: str = setting(LANG_ENV_VAR, DEFAULT_LANGUAGE, "log language, `zh` or `en`", read_language)
