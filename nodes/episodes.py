@@ -3,7 +3,8 @@
 It stands between the driver (the expert, a policy) and the body, as an environment does:
 it lays each episode out (`task_cmd`: `reset SEED`), and at each frame takes the body's frame
 (`joint_state`, `gripper_state`, `object_state`, `task_status`, and the pictures where there
-are) and the driver's `action` for it, writes the frame into the dataset (SO101_RECORD_DIR),
+are) and the driver's `action` for it, writes the frame into the dataset (SO101_RECORD_DIR, or
+a spool for `so101 demos --workers` to merge: SO101_SPOOL_DIR),
 and either passes the action on to the body (`joint_cmd`) or ends the episode: at the first
 frame whose task_status says success, or at the time limit. `SO101_IDLE=1` has no driver: it
 answers every frame with home, the floor every score must beat. Episodes end in order;
@@ -38,6 +39,7 @@ from so101.dataset.features import (  # noqa: E402
     video_keys_and_sizes,
 )
 from so101.dataset.layout import DatasetError  # noqa: E402
+from so101.dataset.spool import EpisodeSpool  # noqa: E402
 from so101.dataset.video import StreamingEncoder  # noqa: E402
 from so101.dataset.writer import DatasetWriter  # noqa: E402
 from so101.robot import HOME_POSE_DEG  # noqa: E402
@@ -64,9 +66,13 @@ def main() -> int:
     try:
         settings = EpisodeSettings.from_environ(os.environ)
         task = task_named(settings.task)
-        video_sizes = video_keys_and_sizes(settings.image_size, True) if settings.record_dir else {}
-        writer = (DatasetWriter.open(settings.record_dir, settings.lockstep_fps, video_sizes,
-                                     environment_names=task.object_state_names) if settings.record_dir else None)
+        video_sizes = video_keys_and_sizes(settings.image_size, True)
+        writer: DatasetWriter | EpisodeSpool | None = None
+        if settings.record_dir:
+            writer = DatasetWriter.open(settings.record_dir, settings.lockstep_fps, video_sizes,
+                                        environment_names=task.object_state_names)
+        elif settings.spool_dir:
+            writer = EpisodeSpool(settings.spool_dir, settings.lockstep_fps, video_sizes, task.object_state_names)
         if settings.video_dir is not None:
             settings.video_dir.mkdir(parents=True, exist_ok=True)
         results = open(settings.results_path, "a", encoding="utf-8")
@@ -98,7 +104,7 @@ def main() -> int:
         recorder = writer.start_episode(task.instruction) if writer is not None else None
         if settings.video_dir is not None and settings.image_size:
             width, height = settings.image_size
-            video = StreamingEncoder(settings.video_dir / f"episode_{index:04d}_seed_{seeds[index]}.mp4",
+            video = StreamingEncoder(settings.video_dir / f"seed_{seeds[index]}.mp4",
                                      settings.lockstep_fps, width, height)
 
     def drop() -> None:

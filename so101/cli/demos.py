@@ -6,6 +6,9 @@ Episode i is laid out from seed S + i. By default only the episodes that succeed
 features (the arm's state and action, the objects' poses, success and reward) and, unless
 `--no-video`, the front and wrist cameras, drawn for each frame's own state. A run that stops
 part-way leaves every episode it saved; run it again on the same folder and it appends.
+`--workers K` runs K dataflows at once, each on its share of the seeds, each keeping its episodes
+in a spool (so101/dataset/spool.py); this command adds them to the dataset in seed order, so the
+dataset is the one a single worker writes.
 """
 
 from __future__ import annotations
@@ -15,9 +18,10 @@ import time
 from pathlib import Path
 
 from so101.cli.argtypes import image_size
-from so101.cli.lockstep_run import add_common_arguments, fail, flow_for, refuse_real, run_flow, work_folder
+from so101.cli.lockstep_run import add_common_arguments, fail, flows_for, log_place, refuse_real, run_flows, work_folder
 from so101.dataset.settings import DEFAULT_IMAGE_SIZE
 from so101.runtime.lockstep import DEFAULT_LOCKSTEP_FPS
+from so101.tasks.episodes import Outcome
 
 
 def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
@@ -33,6 +37,7 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
 def run(args: argparse.Namespace) -> int:
     from so101.dataset.features import video_keys_and_sizes
     from so101.dataset.layout import DatasetError
+    from so101.dataset.spool import pop, spooled
     from so101.dataset.writer import DatasetWriter
     from so101.tasks import task_named
 
@@ -41,21 +46,47 @@ def run(args: argparse.Namespace) -> int:
         return fail(refusal)
     root = args.dataset.expanduser().resolve()
     picture_size = None if args.no_video else args.image_size
+    merged = args.workers > 1
     try:  # another dataset's folder (other features, another rate) is refused here, before anything starts
-        DatasetWriter.open(root, DEFAULT_LOCKSTEP_FPS, video_keys_and_sizes(picture_size, True),
-                           environment_names=task_named(args.task).object_state_names).close()
+        writer: DatasetWriter | None = DatasetWriter.open(
+            root, DEFAULT_LOCKSTEP_FPS, video_keys_and_sizes(picture_size, True),
+            environment_names=task_named(args.task).object_state_names)
     except DatasetError as error:
         return fail(f"so101 demos: {error}")
+    if not merged:  # the runner writes it
+        writer.close()
+        writer = None
     work = work_folder("demos")
-    flow = flow_for(args, work, True, ("image", "wrist_image"), picture_size, SO101_RECORD_DIR=str(root),
-                    SO101_KEEP=args.keep)
-    cameras = f"front and wrist {flow.picture_size}" if flow.picture_size else "no video"
+    flows = flows_for(args, work, True, ("image", "wrist_image"), picture_size,
+                      lambda folder: {"SO101_SPOOL_DIR" if merged else "SO101_RECORD_DIR": str(folder / "spool" if merged else root),
+                                      "SO101_KEEP": args.keep})
+    cameras = f"front and wrist {flows[0].picture_size}" if flows[0].picture_size else "no video"
+    workers = f", {args.workers} workers merged in seed order" if merged else ""
     print(f"demos: {args.task} on {args.body} by the expert (noise {args.noise:g}), seeds {args.seed}.."
-          f"{args.seed + args.episodes - 1}, {cameras}, into {root} (log: {args.log or work / 'run.log'})", flush=True)
+          f"{args.seed + args.episodes - 1}, {cameras}, into {root}{workers} (logs: {log_place(args, work)})", flush=True)
     started = time.monotonic()
-    outcomes, problem = run_flow("demos", flow, work, args.log, lambda outcome: print(outcome.line(), flush=True))
+    kept = 0
+    problem = None
+
+    def show(outcome: Outcome, worker: int) -> None:
+        """With workers, this command writes the dataset from their spools, an episode as soon as every
+        one before it is in: a stop part-way leaves whole episodes, in seed order."""
+        nonlocal kept, problem
+        if outcome.kept and writer is not None and problem is None:
+            try:
+                pop(spooled(Path(flows[worker].runner_env["SO101_SPOOL_DIR"]))[0], writer)
+            except (DatasetError, IndexError, OSError) as error:
+                problem = f"episode {outcome.index} (seed {outcome.seed}) could not be merged: {error}"
+        kept += outcome.kept and problem is None
+        print(outcome.line(), flush=True)
+
+    try:
+        outcomes, run_problem = run_flows("demos", flows, work, args.log, show)
+    finally:
+        if writer is not None:
+            writer.close()
     wall_s = time.monotonic() - started
-    kept = sum(outcome.kept for outcome in outcomes)
+    problem = problem or run_problem
     if problem:
         return fail(f"so101 demos: {problem} ({kept} episodes were kept before it)")
     successes = sum(outcome.success for outcome in outcomes)

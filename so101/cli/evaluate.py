@@ -5,7 +5,8 @@ One line per episode (seed, success, time to success), then
 the exit code is 0 whatever it is; bad options and a dataflow that fails exit non-zero with
 one line. `--expert` scores the scripted expert (nodes/expert.py), `--idle` an arm held at
 home: the floor every score must beat. `--video DIR` keeps each episode's front camera as an
-mp4, to see why an episode failed.
+mp4 (seed_S.mp4), to see why an episode failed. `--workers K` runs K dataflows at once, each on
+its share of the seeds; the lines still come in seed order.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ import argparse
 from pathlib import Path
 
 from so101.cli.argtypes import image_size
-from so101.cli.lockstep_run import add_common_arguments, fail, flow_for, refuse_real, run_flow, work_folder
+from so101.cli.lockstep_run import add_common_arguments, fail, flows_for, log_place, refuse_real, run_flows, work_folder
 from so101.dataset.settings import DEFAULT_IMAGE_SIZE
 from so101.tasks.episodes import score_line
 
@@ -36,11 +37,13 @@ def run(args: argparse.Namespace) -> int:
         return fail(refusal)
     work = work_folder("eval")
     video = str(args.video.expanduser().resolve()) if args.video is not None else ""
-    flow = flow_for(args, work, args.expert, ("image",), args.image_size if video else None, SO101_VIDEO_DIR=video)
+    flows = flows_for(args, work, args.expert, ("image",), args.image_size if video else None,
+                      lambda folder: {"SO101_VIDEO_DIR": video})
     driver = "the expert" if args.expert else "idle (the arm held at home)"
     print(f"eval: {args.task} on {args.body}, {driver}, seeds {args.seed}..{args.seed + args.episodes - 1}, "
-          f"time limit {args.time_limit:g} s (log: {args.log or work / 'run.log'})", flush=True)
-    outcomes, problem = run_flow("eval", flow, work, args.log, lambda outcome: print(outcome.line(), flush=True))
+          f"time limit {args.time_limit:g} s, {args.workers} worker{'s' if args.workers > 1 else ''} "
+          f"(logs: {log_place(args, work)})", flush=True)
+    outcomes, problem = run_flows("eval", flows, work, args.log, lambda outcome, worker: print(outcome.line(), flush=True))
     if problem:
         return fail(f"so101 eval: {problem}")
     print(score_line(outcomes), flush=True)

@@ -10,10 +10,12 @@ the action on as the body's `joint_cmd`, or ends the episode and lays out the ne
 from __future__ import annotations
 
 import argparse
+import json
 import os
+import subprocess
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable
 
@@ -22,12 +24,14 @@ from so101.cli.argtypes import add_language_option, number, whole_number
 from so101.runtime.dataflow import ROOT, write_dataflow
 from so101.runtime.lockstep import DEFAULT_LOCKSTEP_FPS
 from so101.tasks import TASKS
-from so101.tasks.episodes import Outcome, read_outcomes
+from so101.tasks.episodes import Outcome, read_outcomes, seeds_for, split_seeds
 
 EXPERT_NODE_FILE = ROOT / "nodes" / "expert.py"
 EPISODES_NODE_FILE = ROOT / "nodes" / "episodes.py"
 BODY_FRAME_OUTPUTS = ["joint_state", "gripper_state", "object_state", "task_status"]
 DEFAULT_TIME_LIMIT_S = 30.0
+MAX_WORKERS = 16
+WORKERS_MACHINE = "local"  # the daemon's machine id when --workers runs several dataflows here
 # A run whose dataflow said nothing for this long (no episode ended, dora did not exit) is stuck.
 STALL_S = 300.0
 
@@ -45,9 +49,13 @@ def add_common_arguments(parser: argparse.ArgumentParser) -> None:
                         help=f"simulated seconds an episode may take before it fails (default {DEFAULT_TIME_LIMIT_S:g})")
     parser.add_argument("--noise", type=number(lambda value: 0 <= value <= 10, "a scale from 0 to 10"), default=0.0,
                         metavar="SCALE", help="the expert's perturbations, as a multiple of its standard ones (default 0)")
+    parser.add_argument("--workers", type=whole_number(1, MAX_WORKERS), default=1, metavar="K",
+                        help="dataflows run at once, each on its share of the seeds; the results are merged in seed "
+                             "order (default 1)")
     add_language_option(parser, "the nodes' logs")
     parser.add_argument("--log", type=Path, default=None, metavar="FILE",
-                        help="dora's log (default: run.log in the run's work folder under out/)")
+                        help="dora's log (default: run.log in the run's work folder under out/; with --workers, the "
+                             "nodes' logs are in that folder's dora/)")
 
 
 @dataclass(frozen=True)
@@ -67,21 +75,30 @@ def queued(source: str) -> dict:
     return {"source": source, "queue_size": 100, "queue_policy": "backpressure"}
 
 
-def flow_for(args: argparse.Namespace, work: Path, expert: bool, pictures: tuple[str, ...],
-             picture_size: tuple[int, int] | None, **runner_env: str) -> Flow:
-    """The run add_common_arguments' options ask for: `pictures` (the body's picture outputs) at
-    `picture_size` (None: none), the runner's results in `work`, and its own settings `runner_env`."""
+def flows_for(args: argparse.Namespace, work: Path, expert: bool, pictures: tuple[str, ...],
+              picture_size: tuple[int, int] | None, runner_env: Callable[[Path], dict[str, str]]) -> list[Flow]:
+    """The runs add_common_arguments' options ask for, one per worker, each on its run of the seeds
+    (in order): `pictures` (the body's picture outputs) at `picture_size` (None: none), each
+    runner's results in its folder (`work`, or work/worker-K with several), and its own settings
+    `runner_env(folder)`."""
     size = f"{picture_size[0]}x{picture_size[1]}" if picture_size else ""
-    runner_env = {"SO101_TASK": args.task, "SO101_SEED": str(args.seed), "SO101_EPISODES": str(args.episodes),
-                  "SO101_TIME_LIMIT_S": repr(args.time_limit), "SO101_EPISODES_OUT": str(work / "episodes.jsonl"),
-                  "SO101_LOCKSTEP_PICTURES": size, **runner_env}
-    return Flow(BODIES[args.body], expert=expert, runner_env=runner_env,
-                expert_env={"SO101_TASK": args.task, "SO101_EXPERT_NOISE": repr(args.noise)}, lang=args.lang,
-                pictures=pictures if size else (), picture_size=size)
+    seed_runs = split_seeds(seeds_for(args.seed, args.episodes), args.workers)
+    flows = []
+    for worker, seeds in enumerate(seed_runs):
+        folder = work if len(seed_runs) == 1 else work / f"worker-{worker}"
+        folder.mkdir(parents=True, exist_ok=True)
+        env = {"SO101_TASK": args.task, "SO101_SEED": str(seeds[0]), "SO101_EPISODES": str(len(seeds)),
+               "SO101_TIME_LIMIT_S": repr(args.time_limit), "SO101_EPISODES_OUT": str(folder / "episodes.jsonl"),
+               "SO101_LOCKSTEP_PICTURES": size, **runner_env(folder)}
+        flows.append(Flow(BODIES[args.body], expert=expert, runner_env=env,
+                          expert_env={"SO101_TASK": args.task, "SO101_EXPERT_NOISE": repr(args.noise)}, lang=args.lang,
+                          pictures=pictures if size else (), picture_size=size))
+    return flows
 
 
-def lockstep_dataflow(flow: Flow) -> dict:
-    """The dataflow's descriptor: the body, the driver and the runner, every node's path absolute."""
+def lockstep_dataflow(flow: Flow, machine: str | None = None) -> dict:
+    """The dataflow's descriptor: the body, the driver and the runner, every node's path absolute;
+    each node placed on the daemon `machine` where one is named."""
     body_id = flow.body.node_id
     frame_outputs = [*BODY_FRAME_OUTPUTS, *flow.pictures]
     runner_inputs = {output: queued(f"{body_id}/{output}") for output in frame_outputs}
@@ -107,7 +124,17 @@ def lockstep_dataflow(flow: Flow) -> dict:
         "env": {"SO101_LANG": flow.lang, "SO101_LOCKSTEP_FPS": str(DEFAULT_LOCKSTEP_FPS),
                 **({} if flow.expert else {"SO101_IDLE": "1"}), **flow.runner_env},
     })
+    if machine is not None:
+        nodes = [{"deploy": {"machine": machine}, **node} for node in nodes]
     return {"nodes": nodes}
+
+
+def log_place(args: argparse.Namespace, work: Path) -> Path:
+    """Where dora's logs go: --log's file, or run.log in the work folder; with workers, the nodes' logs
+    under the work folder's dora/."""
+    if args.workers > 1:
+        return work / "dora"
+    return args.log or work / "run.log"
 
 
 def refuse_real(command: str, body: str) -> str | None:
@@ -123,55 +150,163 @@ def work_folder(command: str) -> Path:
     return folder
 
 
-def run_flow(command: str, flow: Flow, work: Path, log: Path | None, show: Callable[[Outcome], None]) -> tuple[list[Outcome], str | None]:
-    """Run `flow` to its end, showing each outcome as it comes: (outcomes, None), or what went wrong in one line."""
-    from so101.cli.teleop import TEXT as TELEOP_TEXT, Dataflow, _refusal, port_held_problem
+class _OneRun:
+    """One dataflow under `dora run` (its own coordinator and daemon, dynamic-node port included)."""
+
+    def __init__(self, dataflow_file: Path, log_file: Path, env: dict[str, str]):
+        from so101.cli.teleop import Dataflow
+
+        self.log_file = log_file
+        self.dataflow = Dataflow(dataflow_file, log_file, env, ())
+
+    def problem(self) -> str | None:
+        """None while it runs; once dora exited, why."""
+        from so101.cli.teleop import _refusal
+
+        code = self.dataflow.process.poll()
+        if code is None:
+            return None
+        return _refusal(self.log_file) or f"the dataflow ended (exit code {code}) before its episodes did: see {self.log_file}"
+
+    def wait(self, timeout_s: float) -> None:
+        deadline = time.monotonic() + timeout_s
+        while self.dataflow.process.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.1)
+
+    def stop(self) -> None:
+        self.dataflow.stop()
+
+
+class _Workers:
+    """Several dataflows on one coordinator (`dora up`'s coordinator and daemon, then `dora start`
+    for each), on this machine: ports of their own, so they need no port of the prompt's."""
+
+    def __init__(self, command: str, dataflow_files: list[Path], work: Path):
+        from so101.runtime.cluster import Cluster
+
+        self.names = [f"{command}-{index}" for index in range(len(dataflow_files))]
+        self.cluster = Cluster(work / "dora", auth=False)
+        self.cluster.start_coordinator()
+        self.cluster.start_daemon(WORKERS_MACHINE)
+        for name, dataflow_file in zip(self.names, dataflow_files):
+            self.cluster.start_dataflow(dataflow_file, name)
+        self.logs = work / "dora" / f"daemon-{WORKERS_MACHINE}"
+
+    def problem(self) -> str | None:
+        """None while every dataflow runs or finished; else the first refusal or failure."""
+        from so101.cli.teleop import _refusal
+
+        listed = self.cluster.cli("list", "--format", "json", timeout_s=20)
+        states = {}
+        for line in listed.stdout.splitlines():
+            try:
+                entry = json.loads(line)
+            except ValueError:
+                continue
+            states[entry.get("name")] = str(entry.get("status", "")).lower()
+        failed = [name for name in self.names if states.get(name, "").startswith("fail")]
+        if not failed:
+            return None
+        for node_log in sorted(self.logs.glob("_work/*/out/*/log_*.jsonl")):
+            refusal = _refusal(node_log)
+            if refusal:
+                return refusal
+        return f"dataflow {failed[0]} failed: see the node logs under {self.logs}"
+
+    def wait(self, timeout_s: float) -> None:
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            listed = self.cluster.cli("list", "--status", "running", "--quiet", timeout_s=20)
+            if not listed.stdout.strip():
+                return
+            time.sleep(0.2)
+
+    def stop(self) -> None:
+        for name in self.names:
+            try:
+                self.cluster.cli("stop", "--name", name, timeout_s=15)
+            except subprocess.TimeoutExpired:
+                pass
+        self.cluster.stop()
+
+
+def run_flows(command: str, flows: list[Flow], work: Path, log: Path | None,
+              show: Callable[[Outcome, int], None]) -> tuple[list[Outcome], str | None]:
+    """Run `flows` (one or more workers, each on its run of the seeds) to their end; show each
+    outcome, with its worker's number, in seed order as soon as the ones before it are in.
+    (outcomes, None), or what went wrong in one line."""
+    from so101.cli.teleop import TEXT as TELEOP_TEXT, port_held_problem
+    from so101.runtime.cluster import ClusterError
     from so101.runtime.venv import dora_executable, env_with_bin_first
     from so101.runtime.versions import dora_version_problem
 
     version_problem = dora_version_problem(dora_executable())
     if version_problem:
         return [], version_problem
-    port_problem = port_held_problem(TELEOP_TEXT[flow.lang]["port_held"])
-    if port_problem:
-        return [], port_problem
-    results = Path(flow.runner_env["SO101_EPISODES_OUT"])
-    results.unlink(missing_ok=True)
-    dataflow_file = write_dataflow(lockstep_dataflow(flow), work / "dataflow.yml")
-    log_file = (log or work / "run.log").expanduser().resolve()
-    env = env_with_bin_first(dict(os.environ, SO101_LANG=flow.lang))
-    dataflow = Dataflow(dataflow_file, log_file, env, ())
-    shown = 0
+    results = [Path(flow.runner_env["SO101_EPISODES_OUT"]) for flow in flows]
+    for path in results:
+        path.unlink(missing_ok=True)
+    machine = WORKERS_MACHINE if len(flows) > 1 else None
+    dataflow_files = [write_dataflow(lockstep_dataflow(flow, machine), path.parent / "dataflow.yml")
+                      for flow, path in zip(flows, results)]
+    runs: _OneRun | _Workers
+    if len(flows) == 1:
+        port_problem = port_held_problem(TELEOP_TEXT[flows[0].lang]["port_held"])
+        if port_problem:
+            return [], port_problem
+        log_file = (log or work / "run.log").expanduser().resolve()
+        runs = _OneRun(dataflow_files[0], log_file, env_with_bin_first(dict(os.environ, SO101_LANG=flows[0].lang)))
+    else:
+        try:
+            runs = _Workers(command, dataflow_files, work)
+        except ClusterError as error:
+            return [], str(error)
+    first_seed = next_seed = min(int(flow.runner_env["SO101_SEED"]) for flow in flows)
+    waiting: dict[int, tuple[Outcome, int]] = {}
     outcomes: list[Outcome] = []
-    done = False
-    last_news = time.monotonic()
-    try:
-        while True:
-            exited = dataflow.process.poll() is not None
+    seen = [0] * len(flows)
+    finished = [False] * len(flows)
+
+    def collect() -> bool:
+        """Read the workers' results; show what is next in seed order. True once every worker is done."""
+        nonlocal next_seed
+        for worker, path in enumerate(results):
             try:
-                outcomes, done = read_outcomes(results.read_text(encoding="utf-8").splitlines())
+                worker_outcomes, finished[worker] = read_outcomes(path.read_text(encoding="utf-8").splitlines())
             except (OSError, ValueError, TypeError):
-                outcomes, done = outcomes, False
-            for outcome in outcomes[shown:]:
-                show(outcome)
-                last_news = time.monotonic()
-            shown = len(outcomes)
-            if exited or done:
-                break
+                continue  # not there yet, or a line half written
+            for outcome in worker_outcomes[seen[worker]:]:
+                waiting[outcome.seed] = (replace(outcome, index=outcome.seed - first_seed), worker)
+            seen[worker] = len(worker_outcomes)
+        while next_seed in waiting:
+            outcome, worker = waiting.pop(next_seed)
+            show(outcome, worker)
+            outcomes.append(outcome)
+            next_seed += 1
+        return all(finished)
+
+    problem = None
+    shown = 0
+    last_news = last_check = time.monotonic()
+    try:
+        while not collect():
+            if len(outcomes) != shown:
+                shown, last_news = len(outcomes), time.monotonic()
+            if time.monotonic() - last_check >= 1.0:
+                last_check = time.monotonic()
+                problem = runs.problem()
+                if problem:
+                    problem = None if collect() else problem  # it may have finished as it was asked
+                    break
             if time.monotonic() - last_news > STALL_S:
-                return outcomes, f"no episode ended for {STALL_S:g} s: see {log_file}"
+                problem = f"no episode ended for {STALL_S:g} s: see {log or work}"
+                break
             time.sleep(0.1)
-        if done:
-            deadline = time.monotonic() + 20
-            while dataflow.process.poll() is None and time.monotonic() < deadline:
-                time.sleep(0.1)
+        if problem is None:
+            runs.wait(20)
     finally:
-        code = dataflow.process.poll()
-        dataflow.stop()
-    if not done:
-        refusal = _refusal(log_file)
-        return outcomes, refusal or f"the dataflow ended (exit code {code}) before its episodes did: see {log_file}"
-    return outcomes, None
+        runs.stop()
+    return outcomes, problem
 
 
 def fail(line: str) -> int:

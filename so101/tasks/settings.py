@@ -61,6 +61,9 @@ class EpisodeSettings(EnvironSettings):
         lambda environ, declared_setting: Path(read_text(environ, declared_setting) or declared_setting.default))
     record_dir: Path | None = setting(
         "SO101_RECORD_DIR", "", "a LeRobot dataset to write the episodes into; empty = none", read_optional_path)
+    spool_dir: Path | None = setting(
+        "SO101_SPOOL_DIR", "", "a folder to keep each written episode whole in, for `so101 demos --workers` to merge "
+        "in seed order (instead of SO101_RECORD_DIR); empty = none", read_optional_path)
     keep: str = setting("SO101_KEEP", "success", "which episodes are written: `success` or `all`", read_choice(KEEP_CHOICES))
     image_size: tuple[int, int] | None = setting(
         "SO101_LOCKSTEP_PICTURES", "", "WIDTHxHEIGHT of the front and wrist pictures written; empty = no video",
