@@ -5,6 +5,7 @@ scores 0; what is written is a dataset that reads, and appends; bad input is one
 from __future__ import annotations
 
 import re
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -69,6 +70,11 @@ def test_eval_scores_the_expert_and_an_idle_arm_scores_nothing(tmp_path):
     assert len(episode_lines(expert.stdout)) == 3
     assert re.fullmatch(r"success: 3/3 \(100%, 95% CI 44–100%, Wilson\), mean time to success [\d.]+ s",
                         expert.stdout.splitlines()[-1]), expert.stdout
+    # Two workers (seeds 20 and 21, then 22): the same lines, in seed order, and the same score.
+    workers = so101("eval", "--expert", "--task", "cube_to_box", "--episodes", "3", "--seed", "20", "--workers", "2")
+    assert workers.returncode == 0, workers.stdout + workers.stderr
+    assert episode_lines(workers.stdout) == episode_lines(expert.stdout)
+    assert workers.stdout.splitlines()[-1] == expert.stdout.splitlines()[-1]
     idle = so101("eval", "--idle", "--task", "cube_to_box", "--episodes", "2", "--time-limit", "2", "--body", "mujoco")
     assert idle.returncode == 0, idle.stdout + idle.stderr
     assert episode_lines(idle.stdout) == ["episode 0 (seed 0): failed (time limit, 2.0 s), 51 frames",
@@ -93,12 +99,62 @@ def test_demos_with_video_append_to_the_folder_and_every_episode_reads(tmp_path)
         assert np.abs(front[-1].astype(int) - front[0].astype(int)).mean() > 1.0  # the arm and the cube moved
 
 
+def test_two_workers_write_the_dataset_one_worker_writes_byte_for_byte(tmp_path):
+    outputs = {}
+    for workers in ("1", "2"):  # two workers: seeds 30 and 31, then 32
+        result = so101("demos", str(tmp_path / workers), "--task", "cube_to_box", "--episodes", "3", "--seed", "30",
+                       "--body", "mujoco", "--noise", "1", "--image-size", "64x48", "--workers", workers,
+                       "--keep", "all", "--time-limit", "12")
+        assert result.returncode == 0, result.stdout + result.stderr
+        outputs[workers] = result.stdout
+    assert episode_lines(outputs["2"]) == episode_lines(outputs["1"])
+    assert [EPISODE_LINE.match(line).group(2) for line in episode_lines(outputs["2"])] == ["30", "31", "32"]
+    files = {workers: sorted(path.relative_to(tmp_path / workers) for path in (tmp_path / workers).rglob("*")
+                             if path.is_file()) for workers in outputs}
+    assert files["2"] == files["1"] and Path("videos/observation.images.wrist/chunk-000/file-000.mp4") in files["1"]
+    for name in files["1"]:
+        assert (tmp_path / "2" / name).read_bytes() == (tmp_path / "1" / name).read_bytes(), name
+    assert len(Dataset.open(tmp_path / "2").episodes) == 3
+
+
+@pytest.mark.parametrize("workers", ["1", "2"])
+def test_demos_stopped_part_way_keep_whole_episodes_and_a_rerun_appends(tmp_path, workers):
+    root = tmp_path / "demos"
+    process = subprocess.Popen([str(SO101), "demos", str(root), "--task", "cube_to_box", "--episodes", "8", "--seed", "0",
+                                "--no-video", "--workers", workers, "--lang", "en"],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        for line in process.stdout:
+            if line.startswith("episode 0 "):
+                break
+        process.send_signal(signal.SIGTERM)  # `kill`, mid-way through the second episode or later
+        out, err = process.communicate(timeout=60)
+    finally:
+        process.kill()
+    assert process.returncode == 1, out + err
+    stopped = re.fullmatch(r"so101 demos: stopped \(Ctrl-C, or a signal\): the episode running was dropped "
+                           r"\((\d+) episodes were kept before it\)", err.strip().splitlines()[-1])
+    assert stopped, err
+    kept = int(stopped.group(1))
+    assert 1 <= kept < 8 and len(Dataset.open(root).episodes) == kept
+    # The dataflow stopped with it (a second one could not start while it ran), and a rerun appends.
+    again = so101("demos", str(root), "--task", "cube_to_box", "--episodes", "2", "--seed", "8", "--no-video",
+                  "--workers", workers)
+    assert again.returncode == 0, again.stdout + again.stderr
+    dataset = Dataset.open(root)
+    assert len(dataset.episodes) == kept + 2
+    for index in range(kept + 2):
+        frames = dataset.episode_frames(index)
+        assert len(frames[STATE_KEY]) == dataset.episodes[index].length and bool(frames[SUCCESS_KEY][-1])
+
+
 @pytest.mark.parametrize("args, message", [
     (["eval", "--expert", "--task", "cube_to_box", "--body", "real"], "the real arm has no object state"),
     (["demos", "DIR", "--task", "cube_to_box", "--body", "real"], "the real arm has no object state"),
     (["eval", "--expert", "--task", "stack_cubes"], "invalid choice: 'stack_cubes'"),
     (["eval", "--expert", "--task", "cube_to_box", "--episodes", "0"], "'0' is not a whole number from 1"),
     (["eval", "--task", "cube_to_box"], "one of the arguments --expert --idle is required"),
+    (["demos", "DIR", "--task", "cube_to_box", "--workers", "0"], "'0' is not a whole number from 1 to 16"),
     (["demos", "OTHER", "--task", "cube_to_box", "--no-video"], "fps"),
 ])
 def test_bad_input_is_one_line_and_starts_nothing(tmp_path, args, message):

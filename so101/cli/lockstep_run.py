@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -34,6 +35,7 @@ MAX_WORKERS = 16
 WORKERS_MACHINE = "local"  # the daemon's machine id when --workers runs several dataflows here
 # A run whose dataflow said nothing for this long (no episode ended, dora did not exit) is stuck.
 STALL_S = 300.0
+INTERRUPTED = "stopped (Ctrl-C, or a signal): the episode running was dropped"
 
 
 def add_common_arguments(parser: argparse.ArgumentParser) -> None:
@@ -148,6 +150,10 @@ def work_folder(command: str) -> Path:
     folder = ROOT / "out" / f"{command}-{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}"
     folder.mkdir(parents=True, exist_ok=True)
     return folder
+
+
+def _interrupt(signum, frame) -> None:
+    raise KeyboardInterrupt
 
 
 class _OneRun:
@@ -288,6 +294,9 @@ def run_flows(command: str, flows: list[Flow], work: Path, log: Path | None,
     problem = None
     shown = 0
     last_news = last_check = time.monotonic()
+    # dora runs in sessions of its own: a closed terminal or a `kill` must stop it here, as Ctrl-C does.
+    signal.signal(signal.SIGHUP, _interrupt)
+    signal.signal(signal.SIGTERM, _interrupt)
     try:
         while not collect():
             if len(outcomes) != shown:
@@ -304,8 +313,16 @@ def run_flows(command: str, flows: list[Flow], work: Path, log: Path | None,
             time.sleep(0.1)
         if problem is None:
             runs.wait(20)
+    except KeyboardInterrupt:
+        problem = INTERRUPTED
     finally:
-        runs.stop()
+        # A second Ctrl-C must not cut the clean-up short and leave dora running.
+        handlers = {signum: signal.signal(signum, signal.SIG_IGN) for signum in (signal.SIGINT, signal.SIGHUP, signal.SIGTERM)}
+        try:
+            runs.stop()
+        finally:
+            for signum, handler in handlers.items():
+                signal.signal(signum, handler)
     return outcomes, problem
 
 
