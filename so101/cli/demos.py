@@ -48,14 +48,13 @@ def run(args: argparse.Namespace) -> int:
     picture_size = None if args.no_video else args.image_size
     merged = args.workers > 1
     try:  # another dataset's folder (other features, another rate) is refused here, before anything starts
-        writer: DatasetWriter | None = DatasetWriter.open(
-            root, DEFAULT_LOCKSTEP_FPS, video_keys_and_sizes(picture_size, True),
-            environment_names=task_named(args.task).object_state_names)
+        opened = DatasetWriter.open(root, DEFAULT_LOCKSTEP_FPS, video_keys_and_sizes(picture_size, True),
+                                    environment_names=task_named(args.task).object_state_names)
     except DatasetError as error:
         return fail(f"so101 demos: {error}")
+    writer = opened if merged else None
     if not merged:  # the runner writes it
-        writer.close()
-        writer = None
+        opened.close()
     work = work_folder("demos")
     flows = flows_for(args, work, True, ("image", "wrist_image"), picture_size,
                       lambda folder: {"SO101_SPOOL_DIR" if merged else "SO101_RECORD_DIR": str(folder / "spool" if merged else root),
