@@ -60,7 +60,9 @@ DEFAULT_OUT = {"pybullet": ROOT / "bench" / "results" / "latest.json", "mujoco":
                "cluster": ROOT / "bench" / "results" / "latest-cluster.json",
                "web": ROOT / "bench" / "results" / "latest-web.json",
                "cameras": ROOT / "bench" / "results" / "latest-cameras.json",
-               "cameras-mujoco": ROOT / "bench" / "results" / "latest-cameras-mujoco.json"}
+               "cameras-mujoco": ROOT / "bench" / "results" / "latest-cameras-mujoco.json",
+               "demos": ROOT / "bench" / "results" / "latest-demos.json",
+               "demos-mujoco": ROOT / "bench" / "results" / "latest-demos-mujoco.json"}
 # The engine's own call for one 4 ms tick, as the table names it.
 RAW_STEP_LABEL = {"pybullet": "raw stepSimulation, DIRECT", "mujoco": "raw mj_step x 2 (one 4 ms tick)"}
 
@@ -405,13 +407,27 @@ def run_cameras_only(duration_s: float, body: str, image_size: tuple[int, int]) 
                      camera_bench.targets)
 
 
+def run_demos_only(body: str, image_size: tuple[int, int], quick: bool) -> dict:
+    """`--demos`: `so101 demos`' speed with one and two workers, and where a frame's time goes."""
+    from bench import demos_bench
+
+    settings = {"episodes": 4 if quick else 20, "video_episodes": 2 if quick else 4, "image_size": list(image_size),
+                "stage_frames": 50 if quick else 250}
+    return run_alone("demos", "a simulation's episodes", body, settings,
+                     lambda work_dir: demos_bench.run_demos_benchmark(
+                         work_dir, body, settings["episodes"], settings["video_episodes"], image_size,
+                         settings["stage_frames"]),
+                     demos_bench.targets)
+
+
 def alone_table(result: dict) -> str:
     """The table of a part run by itself (`run_alone`'s result)."""
-    from bench import camera_bench, web_bench
+    from bench import camera_bench, demos_bench, web_bench
 
     only = result["only"]
-    title = {"web": "web view", "cameras": "task cameras"}[only]
-    lines = {"web": web_bench.table_lines, "cameras": camera_bench.table_lines}[only](result[only])
+    title = {"web": "web view", "cameras": "task cameras", "demos": "demonstrations"}[only]
+    lines = {"web": web_bench.table_lines, "cameras": camera_bench.table_lines,
+             "demos": demos_bench.table_lines}[only](result[only])
     machine = result["machine"]
     return "\n".join([f"SO-101 {title} benchmark ({result['body']}), {machine['date']}", machine_line(result), "",
                       *lines, "", *target_lines(result["targets"])])
@@ -505,8 +521,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--cameras", action="store_true",
                         help="measure only a task's two cameras (cube_to_box, 320x240): pictures a second each, drawn "
                         "alone and while `so101 teleop --task cube_to_box --record`'s dataflow runs, --duration seconds")
+    parser.add_argument("--demos", action="store_true",
+                        help="measure only `so101 demos` (cube_to_box, the expert): episodes a minute and × real time "
+                        "without video and with both cameras, one worker and two, and where a frame's time goes")
     parser.add_argument("--image-size", type=image_size, default=DEFAULT_IMAGE_SIZE, metavar="WxH",
-                        help=f"--cameras: the pictures' size (default {DEFAULT_IMAGE_SIZE})")
+                        help=f"--cameras, --demos: the pictures' size (default {DEFAULT_IMAGE_SIZE})")
     parser.add_argument("--out", type=Path, default=None,
                         help="JSON file to write (default " + ", ".join(f"{path.relative_to(ROOT)} for {body}" for body, path in DEFAULT_OUT.items()) + ")")
     parser.add_argument("--quick", action="store_true",
@@ -528,7 +547,8 @@ def run(args: argparse.Namespace) -> int:
     # serial bus, the fake arm and the cluster (about 0.1 s of imports) that only a run needs.
     from bench import cluster_bench, real_bench
 
-    tables = {"real": real_bench.table, "cluster": cluster_bench.table, "web": alone_table, "cameras": alone_table}
+    tables = {"real": real_bench.table, "cluster": cluster_bench.table, "web": alone_table, "cameras": alone_table,
+              "demos": alone_table}
     if args.show is not None:
         try:
             shown = json.loads(args.show.read_text(encoding="utf-8"))
@@ -545,7 +565,8 @@ def run(args: argparse.Namespace) -> int:
                         saved_episode_s=5.0, web_browsers=False)
     else:
         settings = dict(duration_s=args.duration, fast_s=5.0, fast_steps=[1, 10, 100], raw_steps=40000, node_ticks=10000, after_sleep_steps=1000)
-    kind = "cluster" if args.cluster else "web" if args.web else "cameras" if args.cameras else args.body
+    kind = ("cluster" if args.cluster else "web" if args.web else "cameras" if args.cameras else "demos" if args.demos
+            else args.body)
     try:
         if args.cluster:
             result = cluster_bench.run_cluster_benchmark(settings["duration_s"])
@@ -553,6 +574,8 @@ def run(args: argparse.Namespace) -> int:
             result = run_web_only(settings["duration_s"], args.body, browsers=not args.quick)
         elif args.cameras:
             result = run_cameras_only(settings["duration_s"], args.body, args.image_size)
+        elif args.demos:
+            result = run_demos_only(args.body, args.image_size, args.quick)
         elif args.body == "real":
             result = real_bench.run_real_benchmark(settings["duration_s"], exchanges=500 if args.quick else 3000)
         else:
@@ -563,7 +586,7 @@ def run(args: argparse.Namespace) -> int:
     result["settings"]["quick"] = args.quick
     print()
     print(tables.get(kind, table)(result))
-    out = args.out or DEFAULT_OUT["cameras-mujoco" if kind == "cameras" and args.body == "mujoco" else kind]
+    out = args.out or DEFAULT_OUT[f"{kind}-mujoco" if kind in ("cameras", "demos") and args.body == "mujoco" else kind]
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(result, indent=2) + "\n")
     print(f"\nwrote {out}")

@@ -102,6 +102,8 @@ def main() -> int:
         drop()
         adopted, adopted_index, answered = episode, index, None
         recorder = writer.start_episode(task.instruction) if writer is not None else None
+        if recorder is not None:
+            recorder.seed = seeds[index]
         if settings.video_dir is not None and settings.image_size:
             width, height = settings.image_size
             video = StreamingEncoder(settings.video_dir / f"seed_{seeds[index]}.mp4",

@@ -1,11 +1,15 @@
 """expert: the scripted expert of a task, a sender of `joint_cmd` like the prompt or the leader.
 
-It reads only `joint_state`, `gripper_state` and `object_state`, from a body in lockstep
-(so101/runtime/lockstep.py): once the three parts of a frame are in, it answers that frame
-with six joint targets, tagged with it. A frame 0 is a new episode (a reset): a fresh plan
-for the layout it shows, its noise drawn from the layout's seed. Its clock is the frame's
-index over the frame rate, so the same layout gives the same episode however fast the
-machine. What it plans is so101/tasks/expert.py.
+It reads only `joint_state`, `gripper_state` and `object_state`. In lockstep (`so101 eval`,
+`so101 demos`; so101/runtime/lockstep.py), once the three parts of a frame are in, it answers
+that frame with six joint targets, tagged with it. A frame 0 is a new episode (a reset): a fresh
+plan for the layout it shows, its noise drawn from the layout's seed. Its clock is the frame's
+index over the frame rate, so the same layout gives the same episode however fast the machine.
+At the prompt (`so101 teleop --task`), it stands between the prompt and the body, as the leader
+does: what the prompt sends (`typed_cmd`) goes on to the body as it is; `expert_cmd` `run` has it
+do the task once from where things are, a target every `tick` (40 ms) by the wall clock, until
+its plan ends, a typed command takes over, or `stop` (a reset) comes. Its news goes out on
+`expert_status`. What it plans is so101/tasks/expert.py.
 Settings: so101.tasks.settings.ExpertSettings (SO101_TASK, SO101_EXPERT_NOISE, SO101_LOCKSTEP_FPS, SO101_LANG).
 """
 
@@ -14,6 +18,7 @@ from __future__ import annotations
 import logging
 import os
 import sys
+import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -34,6 +39,20 @@ from so101.tasks.settings import ExpertSettings  # noqa: E402
 
 NODE_ID = "expert"
 logger = logging.getLogger("so101.expert")
+OBSERVED = ("joint_state", "gripper_state", "object_state")
+
+TEXT = {
+    "zh": {
+        "took_over": "[专家] 键入的命令接管了控制,专家停下",
+        "finished": "[专家] 做完了:{seconds:.1f} 秒,{attempts} 次抓取",
+        "no_state": "[专家] 还没有收到 joint_state、gripper_state 和 object_state:没有开始",
+    },
+    "en": {
+        "took_over": "[expert] a typed command took over: the expert stopped",
+        "finished": "[expert] done: {seconds:.1f} s, {attempts} grasp(s)",
+        "no_state": "[expert] no joint_state, gripper_state and object_state yet: not started",
+    },
+}
 
 
 def main() -> int:
@@ -43,22 +62,53 @@ def main() -> int:
         planner: Planner = planner_for(task_named(settings.task))
     except (ValueError, ModelFilesError) as error:
         return cannot_start(error, NODE_ID)
-    frames = FrameParts(("joint_state", "gripper_state", "object_state"))
+    text = TEXT[settings.lang]
+    frames = FrameParts(OBSERVED)
     expert: Expert | None = None
+    latest: dict[str, list[float]] = {}  # at the prompt: the newest of each observed input
+    started_s: float | None = None  # at the prompt: when `run` came; None: not driving
     node = Node()
+
+    def say(line: str) -> None:
+        logger.warning(line)
+        node.send_output("expert_status", pa.array([line]))
+
     with inputs_until_stop(node, close=planner.close) as inputs:
         for event in inputs:
+            input_id = event["id"]
             tag = frame_tag(event.get("metadata"))
-            if tag is None:
-                continue  # not a lockstep frame's
-            frame = frames.add(event["id"], tag, event["value"].to_pylist())
-            if frame is None:
-                continue
-            joints_deg = frame["joint_state"] + frame["gripper_state"]
-            if expert is None or tag.frame == 0:
-                expert = Expert(planner, noise=settings.noise, seed=tag.seed)
-            targets_deg = expert.targets(tag.frame / settings.lockstep_fps, joints_deg, frame["object_state"])
-            node.send_output("joint_cmd", pa.array(targets_deg, type=pa.float64()), {**tag.metadata(), STREAM_KEY: 1})
+            if tag is not None:  # lockstep: answer the frame once it is whole
+                frame = frames.add(input_id, tag, event["value"].to_pylist())
+                if frame is None:
+                    continue
+                if expert is None or tag.frame == 0:
+                    expert = Expert(planner, noise=settings.noise, seed=tag.seed)
+                targets_deg = expert.targets(tag.frame / settings.lockstep_fps,
+                                             frame["joint_state"] + frame["gripper_state"], frame["object_state"])
+                node.send_output("joint_cmd", pa.array(targets_deg, type=pa.float64()), {**tag.metadata(), STREAM_KEY: 1})
+            elif input_id in OBSERVED:
+                latest[input_id] = event["value"].to_pylist()
+            elif input_id == "typed_cmd":
+                node.send_output("joint_cmd", event["value"])
+                if started_s is not None:
+                    started_s = None
+                    say(text["took_over"])
+            elif input_id == "expert_cmd":
+                words = event["value"].to_pylist()
+                if words[:1] == ["stop"]:
+                    started_s = None
+                elif words[:1] == ["run"] and all(name in latest for name in OBSERVED):
+                    expert, started_s = Expert(planner, noise=settings.noise), time.monotonic()
+                elif words[:1] == ["run"]:
+                    say(text["no_state"])
+            elif input_id == "tick" and started_s is not None and expert is not None:
+                elapsed_s = time.monotonic() - started_s
+                targets_deg = expert.targets(elapsed_s, latest["joint_state"] + latest["gripper_state"],
+                                             latest["object_state"])
+                node.send_output("joint_cmd", pa.array(targets_deg, type=pa.float64()), {STREAM_KEY: NODE_ID})
+                if expert.done:
+                    started_s = None
+                    say(text["finished"].format(seconds=elapsed_s, attempts=expert.attempts))
     return 0
 
 

@@ -4,10 +4,13 @@ scores 0; what is written is a dataset that reads, and appends; bad input is one
 
 from __future__ import annotations
 
+import os
 import re
+import shutil
 import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -15,6 +18,7 @@ import pytest
 
 from so101.bodies.registry import SIMULATED_BODIES
 from so101.dataset.features import ACTION_KEY, ENVIRONMENT_KEY, STATE_KEY, SUCCESS_KEY
+from so101.dataset.layout import SEEDS_KEY
 from so101.dataset.reader import Dataset
 from so101.dataset.writer import DatasetWriter
 
@@ -62,6 +66,7 @@ def test_the_same_seeds_make_the_same_demonstrations_bit_for_bit(tmp_path, body)
     dataset = Dataset.open(tmp_path / "first")
     assert dataset.fps == 25 and [episode.tasks for episode in dataset.episodes] == [("put the cube in the box",)] * 2
     assert all(bool(dataset.episode_frames(index)[SUCCESS_KEY][-1]) for index in range(2))
+    assert dataset.info[SEEDS_KEY] == {"0": 5, "1": 6}
 
 
 def test_eval_scores_the_expert_and_an_idle_arm_scores_nothing(tmp_path):
@@ -117,6 +122,39 @@ def test_two_workers_write_the_dataset_one_worker_writes_byte_for_byte(tmp_path)
     assert len(Dataset.open(tmp_path / "2").episodes) == 3
 
 
+def test_on_a_cluster_the_workers_spread_over_its_machines_and_the_dataset_is_the_same(tmp_path):
+    from so101.runtime.cluster import Cluster
+
+    with Cluster(tmp_path / "cluster") as cluster:  # a coordinator with a token, daemons `arm` and `desk`
+        cluster.start_coordinator()
+        cluster.start_daemon("arm")
+        cluster.start_daemon("desk")
+        spread = subprocess.run(
+            [str(SO101), "demos", str(tmp_path / "spread"), "--task", "cube_to_box", "--episodes", "3", "--seed", "40",
+             "--no-video", "--workers", "2", "--coordinator", f"127.0.0.1:{cluster.coordinator_port}",
+             "--machine", "desk", "--lang", "en"],
+            capture_output=True, text=True, timeout=300, env=dict(os.environ, DORA_AUTH_TOKEN=cluster.token))
+        assert spread.returncode == 0, spread.stdout + spread.stderr
+        assert "demos: worker 0 (seeds 40..41) on machine 'arm'" in spread.stdout
+        assert "demos: worker 1 (seeds 42..42) on machine 'desk'" in spread.stdout
+        # Each daemon ran a body; the runners ran on `desk`, this machine's daemon, where the dataset is written.
+        assert cluster.node_log("arm", "simulation") and cluster.node_log("desk", "simulation")
+        assert not cluster.node_log("arm", "episodes") and cluster.node_log("desk", "episodes")
+        refused = subprocess.run(
+            [str(SO101), "eval", "--expert", "--task", "cube_to_box", "--coordinator",
+             f"127.0.0.1:{cluster.coordinator_port}", "--machine", "laptop", "--lang", "en"],
+            capture_output=True, text=True, timeout=60, env=dict(os.environ, DORA_AUTH_TOKEN=cluster.token))
+        assert refused.returncode == 1 and refused.stderr.strip().startswith(
+            "so101 eval: no daemon with machine id 'laptop' on the coordinator at 127.0.0.1:"), refused.stderr
+        assert "(its daemons: arm, desk;" in refused.stderr
+    here = so101("demos", str(tmp_path / "here"), "--task", "cube_to_box", "--episodes", "3", "--seed", "40", "--no-video")
+    assert here.returncode == 0, here.stdout + here.stderr
+    assert episode_lines(spread.stdout) == episode_lines(here.stdout)
+    for name in ("data/chunk-000/file-000.parquet", "meta/episodes/chunk-000/file-000.parquet", "meta/info.json",
+                 "meta/stats.json"):
+        assert (tmp_path / "spread" / name).read_bytes() == (tmp_path / "here" / name).read_bytes(), name
+
+
 @pytest.mark.parametrize("workers", ["1", "2"])
 def test_demos_stopped_part_way_keep_whole_episodes_and_a_rerun_appends(tmp_path, workers):
     root = tmp_path / "demos"
@@ -146,6 +184,37 @@ def test_demos_stopped_part_way_keep_whole_episodes_and_a_rerun_appends(tmp_path
     for index in range(kept + 2):
         frames = dataset.episode_frames(index)
         assert len(frames[STATE_KEY]) == dataset.episodes[index].length and bool(frames[SUCCESS_KEY][-1])
+    assert dataset.info[SEEDS_KEY] == {str(index): index for index in range(kept)} | {str(kept): 8, str(kept + 1): 9}
+
+
+@pytest.mark.skipif(shutil.which("tmux") is None, reason="tmux is not installed (.ci/run installs it)")
+def test_at_the_prompt_the_expert_does_the_task_and_a_typed_command_takes_over(tmp_path):
+    from tests.helpers.terminal import start_teleop
+
+    terminal, _, _ = start_teleop(tmp_path, "en", extra="--task cube_to_box --seed 3")
+    try:
+        terminal.seen = terminal.wait_for(r"^=+\n>$", timeout_s=120).start()
+        terminal.command("expert", re.escape("  → the expert is doing the task; any move you type takes over"))
+        # Paced by the wall clock: about 9 s for the task, then home.
+        terminal.wait_for(re.escape("  ★ the cube is in the box (task cube_to_box, seed 3)"), timeout_s=60,
+                          after=terminal.seen)
+        done = terminal.wait_for(r"^  \[expert\] done: ([\d.]+) s, 1 grasp\(s\)$", timeout_s=30, after=terminal.seen)
+        assert 8.0 < float(done.group(1)) < 20.0
+        terminal.seen = done.end()
+        terminal.command("task", r"  task cube_to_box, seed 3: .*\n  the cube is now at .*: in the box")
+        terminal.command("reset", r"  → laid out from seed 4, the arm at home: .*")
+        terminal.command("expert", re.escape("  → the expert is doing the task; any move you type takes over"))
+        time.sleep(2.0)
+        terminal.command("0 40", re.escape("  → joint 0 (shoulder_pan) → 40°"))
+        terminal.wait_for(re.escape("  [expert] a typed command took over: the expert stopped"), timeout_s=10,
+                          after=terminal.seen)
+        time.sleep(3.0)  # the expert sends nothing more: the arm stays where it was typed to
+        pan_deg = float(terminal.command("state", r"  joint angles now: \[(-?[\d.]+),.*").group(1))
+        assert abs(pan_deg - 40.0) < 2.0
+        terminal.type_line("quit")
+        terminal.wait_for(r"^TELEOP_EXIT=0$", timeout_s=60, after=terminal.seen)
+    finally:
+        terminal.close()
 
 
 @pytest.mark.parametrize("args, message", [
@@ -155,6 +224,10 @@ def test_demos_stopped_part_way_keep_whole_episodes_and_a_rerun_appends(tmp_path
     (["eval", "--expert", "--task", "cube_to_box", "--episodes", "0"], "'0' is not a whole number from 1"),
     (["eval", "--task", "cube_to_box"], "one of the arguments --expert --idle is required"),
     (["demos", "DIR", "--task", "cube_to_box", "--workers", "0"], "'0' is not a whole number from 1 to 16"),
+    (["demos", "DIR", "--task", "cube_to_box", "--machine", "desk"], "--machine and --root go with --coordinator"),
+    (["eval", "--expert", "--task", "cube_to_box", "--coordinator", "10.0.0.1"], "--coordinator needs --machine ID"),
+    (["eval", "--idle", "--task", "cube_to_box", "--coordinator", "10.0.0.1:port", "--machine", "desk"],
+     "--coordinator '10.0.0.1:port' is not ADDR[:PORT]"),
     (["demos", "OTHER", "--task", "cube_to_box", "--no-video"], "fps"),
 ])
 def test_bad_input_is_one_line_and_starts_nothing(tmp_path, args, message):

@@ -161,7 +161,7 @@ def test_a_piped_script_runs_in_order_echoes_and_stops_at_quit(tmp_path, monkeyp
         "  → joint 0 (shoulder_pan) → 90°",
         "> bogus",
         "  cannot read 'bogus': use 'JOINT ANGLE' (e.g. '0 45'), batch, grip, open, close, home, list, state, save, "
-        "go, poses, snapshot, xyz, where, jog, record, stop, discard, episodes, reset, task, help, quit (type help)",
+        "go, poses, snapshot, xyz, where, jog, record, stop, discard, episodes, reset, task, expert, help, quit (type help)",
         "> save a",
         "  → pose 'a' saved: [-30.0, 44.98, -59.69, 30.0, 0.0]°, gripper 12.35°",
         "> quit",
@@ -506,9 +506,22 @@ def test_task_shows_the_layout_where_the_cube_is_and_whether_it_is_in_the_box(tm
     assert control.handle_line("task")[0][1] == "  the cube is now at (160, 190, 18) mm: in the box"
 
 
+def test_expert_asks_the_expert_node_to_run_and_a_reset_stops_it(tmp_path):
+    control, sent_cmds, news = task_control(tmp_path)
+    told = []
+    control.tell_expert = told.append
+    assert control.handle_line("expert") == (["  → the expert is doing the task; any move you type takes over"], False)
+    assert control.handle_line("reset 5")[0][0].startswith("  → laid out from seed 5")
+    assert told == ["run", "stop"] and sent_cmds == ["reset 5"]
+    # Its news comes on expert_status and is shown as it comes.
+    control.on_event({"type": "INPUT", "id": "expert_status", "value": pa.array(["[expert] done: 9.1 s, 1 grasp(s)"])})
+    assert news == ["  [expert] done: 9.1 s, 1 grasp(s)"]
+    assert control.handle_line("expert now") == (["  'expert' takes no arguments, got 'expert now'"], False)
+
+
 def test_without_a_task_reset_and_task_say_how_to_start_one(tmp_path):
     node, control = make_control(tmp_path, "zh", events=state_events())
-    for line in ("reset", "reset 3", "task"):
+    for line in ("reset", "reset 3", "task", "expert"):
         assert control.handle_line(line) == (["  没有任务:用 so101 teleop --task cube_to_box 启动"], False)
     assert sent(node) == []
 

@@ -4,11 +4,12 @@ whole in its spool; a half-kept one is never listed."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import pytest
 
-from so101.dataset.layout import DatasetError
+from so101.dataset.layout import SEEDS_KEY, DatasetError
 from so101.dataset.spool import EpisodeSpool, pop, spooled
 from so101.dataset.writer import DatasetWriter
 from tests.test_dataset_format import FPS, VIDEO, frame
@@ -19,6 +20,7 @@ LENGTHS = {0: 7, 1: 5, 2: 6}  # seed -> frames
 def record(writer, seeds: list[int]) -> None:
     for seed in seeds:
         episode = writer.start_episode("pick")
+        episode.seed = seed
         for i in range(LENGTHS[seed]):
             episode.add_frame(frame(seed, i))
         episode.save()
@@ -43,6 +45,7 @@ def test_two_spools_merged_in_order_make_the_dataset_one_writer_makes(tmp_path):
     assert spooled(tmp_path / "a") == spooled(tmp_path / "b") == []
     single, merged = files(tmp_path / "single"), files(tmp_path / "merged")
     assert "videos/observation.images.front/chunk-000/file-000.mp4" in single
+    assert json.loads(single["meta/info.json"])[SEEDS_KEY] == {"0": 0, "1": 1, "2": 2}
     assert merged.keys() == single.keys()
     for name in single:
         assert merged[name] == single[name], name

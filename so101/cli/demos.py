@@ -18,7 +18,7 @@ import time
 from pathlib import Path
 
 from so101.cli.argtypes import image_size
-from so101.cli.lockstep_run import add_common_arguments, fail, flows_for, log_place, refuse_real, run_flows, work_folder
+from so101.cli.lockstep_run import add_common_arguments, cluster_place, fail, flows_for, log_place, refuse_real, run_flows, work_folder
 from so101.dataset.settings import DEFAULT_IMAGE_SIZE
 from so101.runtime.lockstep import DEFAULT_LOCKSTEP_FPS
 from so101.tasks.episodes import Outcome
@@ -44,6 +44,9 @@ def run(args: argparse.Namespace) -> int:
     refusal = refuse_real("demos", args.body)
     if refusal:
         return fail(refusal)
+    place = cluster_place(args)
+    if isinstance(place, str):
+        return fail(f"so101 demos: {place}")
     root = args.dataset.expanduser().resolve()
     picture_size = None if args.no_video else args.image_size
     merged = args.workers > 1
@@ -80,7 +83,7 @@ def run(args: argparse.Namespace) -> int:
         print(outcome.line(), flush=True)
 
     try:
-        outcomes, run_problem = run_flows("demos", flows, work, args.log, show)
+        outcomes, run_problem = run_flows("demos", flows, work, args.log, show, place)
     finally:
         if writer is not None:
             writer.close()

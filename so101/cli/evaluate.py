@@ -15,7 +15,7 @@ import argparse
 from pathlib import Path
 
 from so101.cli.argtypes import image_size
-from so101.cli.lockstep_run import add_common_arguments, fail, flows_for, log_place, refuse_real, run_flows, work_folder
+from so101.cli.lockstep_run import add_common_arguments, cluster_place, fail, flows_for, log_place, refuse_real, run_flows, work_folder
 from so101.dataset.settings import DEFAULT_IMAGE_SIZE
 from so101.tasks.episodes import score_line
 
@@ -35,6 +35,9 @@ def run(args: argparse.Namespace) -> int:
     refusal = refuse_real("eval", args.body)
     if refusal:
         return fail(refusal)
+    place = cluster_place(args)
+    if isinstance(place, str):
+        return fail(f"so101 eval: {place}")
     work = work_folder("eval")
     video = str(args.video.expanduser().resolve()) if args.video is not None else ""
     flows = flows_for(args, work, args.expert, ("image",), args.image_size if video else None,
@@ -43,7 +46,8 @@ def run(args: argparse.Namespace) -> int:
     print(f"eval: {args.task} on {args.body}, {driver}, seeds {args.seed}..{args.seed + args.episodes - 1}, "
           f"time limit {args.time_limit:g} s, {args.workers} worker{'s' if args.workers > 1 else ''} "
           f"(logs: {log_place(args, work)})", flush=True)
-    outcomes, problem = run_flows("eval", flows, work, args.log, lambda outcome, worker: print(outcome.line(), flush=True))
+    outcomes, problem = run_flows("eval", flows, work, args.log, lambda outcome, worker: print(outcome.line(), flush=True),
+                                  place)
     if problem:
         return fail(f"so101 eval: {problem}")
     print(score_line(outcomes), flush=True)

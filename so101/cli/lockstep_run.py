@@ -17,7 +17,7 @@ import subprocess
 import sys
 import time
 from dataclasses import dataclass, replace
-from pathlib import Path
+from pathlib import Path, PurePath
 from typing import Callable
 
 from so101.bodies.registry import BODIES, SIMULATED_BODIES, BodyKind
@@ -54,6 +54,15 @@ def add_common_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--workers", type=whole_number(1, MAX_WORKERS), default=1, metavar="K",
                         help="dataflows run at once, each on its share of the seeds; the results are merged in seed "
                              "order (default 1)")
+    parser.add_argument("--coordinator", default=None, metavar="ADDR[:PORT]",
+                        help="run on the dora cluster of this coordinator (its token in DORA_AUTH_TOKEN, as for "
+                             "`dora start`): each worker's body and expert on its machines in turn")
+    parser.add_argument("--machine", default=None, metavar="ID",
+                        help="with --coordinator: the machine id of this machine's daemon, where the episodes' runners "
+                             "run and keep what they write")
+    parser.add_argument("--root", type=PurePath, default=None, metavar="FOLDER",
+                        help="with --coordinator: the project's folder on the cluster's machines (default: this "
+                             "checkout's, the same path everywhere)")
     add_language_option(parser, "the nodes' logs")
     parser.add_argument("--log", type=Path, default=None, metavar="FILE",
                         help="dora's log (default: run.log in the run's work folder under out/; with --workers, the "
@@ -98,14 +107,19 @@ def flows_for(args: argparse.Namespace, work: Path, expert: bool, pictures: tupl
     return flows
 
 
-def lockstep_dataflow(flow: Flow, machine: str | None = None) -> dict:
-    """The dataflow's descriptor: the body, the driver and the runner, every node's path absolute;
-    each node placed on the daemon `machine` where one is named."""
+def lockstep_dataflow(flow: Flow, placement: tuple[str, str] | None = None, root: PurePath = ROOT) -> dict:
+    """The dataflow's descriptor: the body, the driver and the runner, every node's path absolute
+    under `root` (the project's folder on the machines that run them); with a `placement`
+    (body machine, runner machine), the body and the expert on the first daemon, the runner, who
+    writes the results, on the second."""
+    def path(node_file: Path) -> str:
+        return str(root / node_file.relative_to(ROOT))
+
     body_id = flow.body.node_id
     frame_outputs = [*BODY_FRAME_OUTPUTS, *flow.pictures]
     runner_inputs = {output: queued(f"{body_id}/{output}") for output in frame_outputs}
     nodes = [{
-        "id": body_id, "path": str(flow.body.node_file), "restart_policy": "never",
+        "id": body_id, "path": path(flow.body.node_file), "restart_policy": "never",
         "inputs": {"joint_cmd": queued("episodes/joint_cmd"), "task_cmd": queued("episodes/task_cmd")},
         "outputs": frame_outputs,
         "env": {"SO101_MODE": "direct", "SO101_LANG": flow.lang, "SO101_TASK": flow.runner_env["SO101_TASK"],
@@ -115,20 +129,33 @@ def lockstep_dataflow(flow: Flow, machine: str | None = None) -> dict:
     if flow.expert:
         runner_inputs["action"] = queued("expert/joint_cmd")
         nodes.append({
-            "id": "expert", "path": str(EXPERT_NODE_FILE), "restart_policy": "never",
+            "id": "expert", "path": path(EXPERT_NODE_FILE), "restart_policy": "never",
             "inputs": {name: queued(f"{body_id}/{name}") for name in ("joint_state", "gripper_state", "object_state")},
             "outputs": ["joint_cmd"],
             "env": {"SO101_LANG": flow.lang, "SO101_LOCKSTEP_FPS": str(DEFAULT_LOCKSTEP_FPS), **flow.expert_env},
         })
     nodes.append({
-        "id": "episodes", "path": str(EPISODES_NODE_FILE), "restart_policy": "never",
+        "id": "episodes", "path": path(EPISODES_NODE_FILE), "restart_policy": "never",
         "inputs": runner_inputs, "outputs": ["joint_cmd", "task_cmd"],
         "env": {"SO101_LANG": flow.lang, "SO101_LOCKSTEP_FPS": str(DEFAULT_LOCKSTEP_FPS),
                 **({} if flow.expert else {"SO101_IDLE": "1"}), **flow.runner_env},
     })
-    if machine is not None:
-        nodes = [{"deploy": {"machine": machine}, **node} for node in nodes]
+    if placement is not None:
+        nodes = [{"deploy": {"machine": placement[node["id"] == "episodes"]}, **node} for node in nodes]
     return {"nodes": nodes}
+
+
+def cluster_place(args: argparse.Namespace) -> ClusterPlace | str | None:
+    """The cluster that --coordinator, --machine and --root name; None for none; what is wrong, in one line."""
+    if args.coordinator is None:
+        return "--machine and --root go with --coordinator ADDR[:PORT]" if args.machine or args.root else None
+    if not args.machine:
+        return ("--coordinator needs --machine ID: the machine id of this machine's daemon, where the runners keep "
+                "the episodes")
+    addr, _, port = args.coordinator.rpartition(":") if ":" in args.coordinator else (args.coordinator, "", "6013")
+    if not addr or not port.isdigit() or not 0 < int(port) < 65536:
+        return f"--coordinator {args.coordinator!r} is not ADDR[:PORT] (e.g. 192.168.1.10 or 192.168.1.10:6013)"
+    return ClusterPlace(addr, int(port), args.machine, args.root or ROOT)
 
 
 def log_place(args: argparse.Namespace, work: Path) -> Path:
@@ -183,25 +210,59 @@ class _OneRun:
         self.dataflow.stop()
 
 
+@dataclass(frozen=True)
+class ClusterPlace:
+    """A dora cluster someone runs (`--coordinator`): where its coordinator is, the machine id of
+    this machine's daemon (`--machine`: the runners run there and keep the results here), and the
+    project's folder on every machine (`--root`)."""
+
+    coordinator_addr: str
+    coordinator_port: int
+    here: str
+    root: PurePath = ROOT
+
+
 class _Workers:
-    """Several dataflows on one coordinator (`dora up`'s coordinator and daemon, then `dora start`
-    for each), on this machine: ports of their own, so they need no port of the prompt's."""
+    """Dataflows started with `dora start` on one coordinator: on this machine, a coordinator and a
+    daemon of the run's own, on free ports (so they need no port of the prompt's); on a cluster
+    (`place`), its daemons, each worker's body and expert on the next machine in turn."""
 
-    def __init__(self, command: str, dataflow_files: list[Path], work: Path):
-        from so101.runtime.cluster import Cluster
+    def __init__(self, command: str, flows: list[Flow], work: Path, place: ClusterPlace | None):
+        from so101.runtime.cluster import Cluster, ClusterError
 
-        self.names = [f"{command}-{index}" for index in range(len(dataflow_files))]
-        self.cluster = Cluster(work / "dora", auth=False)
-        self.cluster.start_coordinator()
-        self.cluster.start_daemon(WORKERS_MACHINE)
-        for name, dataflow_file in zip(self.names, dataflow_files):
-            self.cluster.start_dataflow(dataflow_file, name)
+        self.names = [f"{command}-{os.getpid()}-{index}" for index in range(len(flows))]
         self.logs = work / "dora" / f"daemon-{WORKERS_MACHINE}"
+        root: PurePath = ROOT
+        if place is None:
+            self.cluster = Cluster(work / "dora", auth=False)
+            machines, here = [WORKERS_MACHINE], WORKERS_MACHINE
+        else:
+            self.cluster = Cluster.joined(work / "dora", place.coordinator_addr, place.coordinator_port)
+            try:
+                machines = sorted(set(self.cluster.connected_daemons()))
+            except (OSError, subprocess.TimeoutExpired) as error:
+                raise ClusterError(f"the coordinator at {place.coordinator_addr}:{place.coordinator_port} did not "
+                                   f"answer: {error}") from None
+            if place.here not in machines:
+                raise ClusterError(f"no daemon with machine id {place.here!r} on the coordinator at "
+                                   f"{place.coordinator_addr}:{place.coordinator_port} (its daemons: "
+                                   f"{', '.join(machines) or 'none'}; is DORA_AUTH_TOKEN its token?)")
+            here, root = place.here, place.root
+        self.placements = [(machines[index % len(machines)], here) for index in range(len(flows))]
+        try:
+            if place is None:
+                self.cluster.start_coordinator()
+                self.cluster.start_daemon(WORKERS_MACHINE)
+            for name, flow, placement in zip(self.names, flows, self.placements):
+                folder = Path(flow.runner_env["SO101_EPISODES_OUT"]).parent
+                self.cluster.start_dataflow(
+                    write_dataflow(lockstep_dataflow(flow, placement, root), folder / "dataflow.yml"), name)
+        except BaseException:
+            self.stop()  # the dataflows started before, and a coordinator and daemon of this run's own
+            raise
 
-    def problem(self) -> str | None:
-        """None while every dataflow runs or finished; else the first refusal or failure."""
-        from so101.cli.teleop import _refusal
-
+    def _states(self) -> dict[str, str]:
+        """This run's dataflows that the coordinator lists, by name: their status."""
         listed = self.cluster.cli("list", "--format", "json", timeout_s=20)
         states = {}
         for line in listed.stdout.splitlines():
@@ -209,38 +270,45 @@ class _Workers:
                 entry = json.loads(line)
             except ValueError:
                 continue
-            states[entry.get("name")] = str(entry.get("status", "")).lower()
-        failed = [name for name in self.names if states.get(name, "").startswith("fail")]
+            if entry.get("name") in self.names:
+                states[entry["name"]] = str(entry.get("status", "")).lower()
+        return states
+
+    def problem(self) -> str | None:
+        """None while every dataflow runs or finished; else the first refusal or failure."""
+        from so101.cli.teleop import _refusal
+
+        failed = [name for name, state in self._states().items() if state.startswith("fail")]
         if not failed:
             return None
         for node_log in sorted(self.logs.glob("_work/*/out/*/log_*.jsonl")):
             refusal = _refusal(node_log)
             if refusal:
                 return refusal
-        return f"dataflow {failed[0]} failed: see the node logs under {self.logs}"
+        where = self.logs if self.logs.is_dir() else f"`dora logs {failed[0]} NODE` on the cluster"
+        return f"dataflow {failed[0]} failed: see the node logs ({where})"
 
     def wait(self, timeout_s: float) -> None:
         deadline = time.monotonic() + timeout_s
-        while time.monotonic() < deadline:
-            listed = self.cluster.cli("list", "--status", "running", "--quiet", timeout_s=20)
-            if not listed.stdout.strip():
-                return
+        while time.monotonic() < deadline and any(state == "running" for state in self._states().values()):
             time.sleep(0.2)
 
     def stop(self) -> None:
+        running = self._states()
         for name in self.names:
-            try:
-                self.cluster.cli("stop", "--name", name, timeout_s=15)
-            except subprocess.TimeoutExpired:
-                pass
+            if running.get(name) == "running":
+                try:
+                    self.cluster.cli("stop", "--name", name, timeout_s=15)
+                except subprocess.TimeoutExpired:
+                    pass
         self.cluster.stop()
 
 
 def run_flows(command: str, flows: list[Flow], work: Path, log: Path | None,
-              show: Callable[[Outcome, int], None]) -> tuple[list[Outcome], str | None]:
-    """Run `flows` (one or more workers, each on its run of the seeds) to their end; show each
-    outcome, with its worker's number, in seed order as soon as the ones before it are in.
-    (outcomes, None), or what went wrong in one line."""
+              show: Callable[[Outcome, int], None], place: ClusterPlace | None = None) -> tuple[list[Outcome], str | None]:
+    """Run `flows` (one or more workers, each on its run of the seeds) to their end, here or on the
+    cluster at `place`; show each outcome, with its worker's number, in seed order as soon as the
+    ones before it are in. (outcomes, None), or what went wrong in one line."""
     from so101.cli.teleop import TEXT as TELEOP_TEXT, port_held_problem
     from so101.runtime.cluster import ClusterError
     from so101.runtime.venv import dora_executable, env_with_bin_first
@@ -252,21 +320,24 @@ def run_flows(command: str, flows: list[Flow], work: Path, log: Path | None,
     results = [Path(flow.runner_env["SO101_EPISODES_OUT"]) for flow in flows]
     for path in results:
         path.unlink(missing_ok=True)
-    machine = WORKERS_MACHINE if len(flows) > 1 else None
-    dataflow_files = [write_dataflow(lockstep_dataflow(flow, machine), path.parent / "dataflow.yml")
-                      for flow, path in zip(flows, results)]
     runs: _OneRun | _Workers
-    if len(flows) == 1:
+    if len(flows) == 1 and place is None:
         port_problem = port_held_problem(TELEOP_TEXT[flows[0].lang]["port_held"])
         if port_problem:
             return [], port_problem
         log_file = (log or work / "run.log").expanduser().resolve()
-        runs = _OneRun(dataflow_files[0], log_file, env_with_bin_first(dict(os.environ, SO101_LANG=flows[0].lang)))
+        runs = _OneRun(write_dataflow(lockstep_dataflow(flows[0]), results[0].parent / "dataflow.yml"), log_file,
+                       env_with_bin_first(dict(os.environ, SO101_LANG=flows[0].lang)))
     else:
         try:
-            runs = _Workers(command, dataflow_files, work)
+            runs = _Workers(command, flows, work, place)
         except ClusterError as error:
             return [], str(error)
+        if place is not None:
+            for index, (flow, (machine, _)) in enumerate(zip(flows, runs.placements)):
+                first = int(flow.runner_env["SO101_SEED"])
+                last = first + int(flow.runner_env["SO101_EPISODES"]) - 1
+                print(f"{command}: worker {index} (seeds {first}..{last}) on machine {machine!r}", flush=True)
     first_seed = next_seed = min(int(flow.runner_env["SO101_SEED"]) for flow in flows)
     waiting: dict[int, tuple[Outcome, int]] = {}
     outcomes: list[Outcome] = []

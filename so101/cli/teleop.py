@@ -39,8 +39,8 @@ from so101.bodies.registry import BODIES, DEFAULT_BODY, BodyKind, body_node_env
 from so101.dataset.features import DEFAULT_FPS, video_keys_and_sizes
 from so101.dataset.settings import DEFAULT_IMAGE_SIZE
 from so101.runtime.dataflow import (
-    LEADER_READY_MARKS, LOADED_MARKS, PROMPT_NODE_FILE, ROOT, WEB_VIEW_MARKS, dataflow_copy, with_leader, with_recorder,
-    with_task, with_web_view, write_dataflow,
+    LEADER_READY_MARKS, LOADED_MARKS, PROMPT_NODE_FILE, ROOT, WEB_VIEW_MARKS, dataflow_copy, with_expert, with_leader,
+    with_recorder, with_task, with_web_view, write_dataflow,
 )
 from so101.gui.display import MODES, resolve_mode
 from so101.web.settings import (
@@ -333,6 +333,8 @@ def run(args: argparse.Namespace) -> int:
             print(f"so101 teleop: {problem}", file=sys.stderr)
             return 2
         ready_marks += (LEADER_READY_MARKS,)
+    if args.task is not None:  # after the leader: a leader's move takes over from the expert, as a typed one does
+        with_expert(descriptor, launch.body.node_id, {"SO101_TASK": args.task, "SO101_LANG": args.lang})
     if args.record is not None:
         problem = add_recorder(descriptor, launch.body, args.record.expanduser().resolve(), args.fps, args.lang,
                                args.task, args.image_size)

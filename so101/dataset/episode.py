@@ -65,6 +65,7 @@ class EpisodeRecorder:
         self._discarded = False
         self._lock = threading.Lock()
         self.frames = 0  # frames added so far
+        self.seed: int | None = None  # a task's episode: the seed of its layout, kept in info.json (layout.SEEDS_KEY)
 
     def add_frame(self, frame: Mapping[str, Any]) -> None:
         """One frame: a value for each of the dataset's features (self.features), e.g.
@@ -105,7 +106,7 @@ class EpisodeRecorder:
                                        f"{self.frames} rows: the episode is not saved")
             columns = {key: np.stack(rows) for key, rows in self._columns.items()}
             try:
-                self._saved = self._writer.commit_episode(self.task, columns, dict(self._encoded))
+                self._saved = self._writer.commit_episode(self.task, columns, dict(self._encoded), self.seed)
             except CommitIncomplete:
                 # Its videos may still be in the work folder, named by the journal: kept for the next open.
                 self._discarded = True

@@ -70,6 +70,11 @@ class EpisodeSummary:
     duration_s: float
 
 
+# In info.json, beside LeRobot's keys: {episode index: the seed its task's layout was made from}, for
+# the episodes made from a seed (`so101 demos`, `so101 eval`'s runner); LeRobot ignores it.
+SEEDS_KEY = "so101_episode_seeds"
+
+
 def recorder_features(video_sizes: Mapping[str, tuple[int, int]],
                       environment_names: Sequence[str] = ()) -> dict[str, dict[str, Any]]:
     """The features a DatasetWriter writes, in LeRobot's order: ours, then LeRobot's defaults.

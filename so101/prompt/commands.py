@@ -12,7 +12,7 @@ Beyond the course (its mini project 7, and Cartesian targets):
 Episodes, with `so101 teleop --record DIR` (the recorder node answers):
   record TASK TEXT | stop | discard | episodes
 A task's scene, with `so101 teleop --task NAME` (the body answers):
-  reset [SEED] | task
+  reset [SEED] | task | expert     (the scripted expert does the task once; a typed command takes over)
 
 Out-of-limit angles are refused, not clamped: at a keyboard a value beyond the
 URDF limits is far more likely a typo (900 for 90) than a wish for the limit.
@@ -126,6 +126,11 @@ class ShowTask:
 
 
 @dataclass(frozen=True)
+class RunExpert:
+    """`expert`: the task's scripted expert performs it once from where things are; a typed command takes over."""
+
+
+@dataclass(frozen=True)
 class Help:
     pass
 
@@ -147,7 +152,7 @@ class ParseError:
 
 Command = (
     SetJoint | Batch | Home | ListJoints | ShowState | SavePose | GoPose | ListPoses | Snapshot | MoveTip | Where | JogKeys
-    | Episodes | ResetTask | ShowTask | Help | Quit | Empty
+    | Episodes | ResetTask | ShowTask | RunExpert | Help | Quit | Empty
 )
 
 
@@ -176,7 +181,7 @@ TEXT = {
         "none": "无",
         "bye": "  再见",
         "unknown": "  无法识别 '{text}':可用 '关节号 角度'(如 '0 45')、batch、grip、open、close、home、list、"
-        "state、save、go、poses、snapshot、xyz、where、jog、record、stop、discard、episodes、reset、task、help、quit(输入 help 查看)",
+        "state、save、go、poses、snapshot、xyz、where、jog、record、stop、discard、episodes、reset、task、expert、help、quit(输入 help 查看)",
         "joint_form": "  格式错误:关节号 角度(如 '0 45'),关节号 0-5(5 = 夹爪)",
         "joint_range": "  关节号范围 0-5(0-4 手臂,5 夹爪),收到 '{text}';格式:关节号 角度(如 '0 45')",
         "bad_angle": "  '{text}' 不是角度:角度是十进制数字,单位度(如 45、-30.5)",
@@ -208,6 +213,7 @@ TEXT = {
         "body_silent": "  {seconds:.0f} 秒没有收到 joint_state:仿真(或机械臂驱动)、它所在的机器或网络已断开,命令未发送",
         "reset_form": "  reset 命令格式:reset [种子](种子是 ≥ 0 的整数,如 'reset 7';不写则用下一个种子)",
         "task_off": "  没有任务:用 so101 teleop --task cube_to_box 启动",
+        "expert_started": "  → 专家开始做任务;键入任何动作命令即接管",
         "task_silent": "  仿真节点 {seconds:g} 秒内没有回答",
         "laid_out": "  → 按种子 {seed} 重新摆放,机械臂回零位:{layout}",
         "layout": "方块在 ({x:.0f}, {y:.0f}) mm,偏航 {yaw:.0f}°;盒子在 ({box_x:.0f}, {box_y:.0f}) mm",
@@ -238,6 +244,7 @@ TEXT = {
             "    episodes                显示已保存的片段",
             "    reset [种子]             重新摆放任务场景(默认下一个种子),机械臂回零位(需 so101 teleop --task)",
             "    task                    显示任务、摆放和方块是否在盒中",
+            "    expert                  脚本专家把任务做一遍(需 so101 teleop --task;键入任何动作命令即接管)",
             "    help                    显示本帮助",
             "    quit / exit             退出(也可 Ctrl-D、Ctrl-C)",
             "  超出关节限位的角度不会发送(会提示范围)。",
@@ -267,7 +274,7 @@ TEXT = {
         "none": "none",
         "bye": "  bye",
         "unknown": "  cannot read '{text}': use 'JOINT ANGLE' (e.g. '0 45'), batch, grip, open, close, home, list, "
-        "state, save, go, poses, snapshot, xyz, where, jog, record, stop, discard, episodes, reset, task, help, quit (type help)",
+        "state, save, go, poses, snapshot, xyz, where, jog, record, stop, discard, episodes, reset, task, expert, help, quit (type help)",
         "joint_form": "  format: JOINT ANGLE (e.g. '0 45'), JOINT 0-5 (5 = gripper)",
         "joint_range": "  joints are 0-5 (0-4 arm, 5 gripper), got '{text}'; format: JOINT ANGLE (e.g. '0 45')",
         "bad_angle": "  '{text}' is not an angle: angles are decimal numbers in degrees (e.g. 45, -30.5)",
@@ -303,6 +310,7 @@ TEXT = {
         "is gone; not sent",
         "reset_form": "  reset format: reset [SEED] (a whole number >= 0, e.g. 'reset 7'; without one, the next seed)",
         "task_off": "  no task: start with so101 teleop --task cube_to_box",
+        "expert_started": "  → the expert is doing the task; any move you type takes over",
         "task_silent": "  the simulation did not answer within {seconds:g} s",
         "laid_out": "  → laid out from seed {seed}, the arm at home: {layout}",
         "layout": "cube at ({x:.0f}, {y:.0f}) mm, yaw {yaw:.0f}°; box at ({box_x:.0f}, {box_y:.0f}) mm",
@@ -333,6 +341,7 @@ TEXT = {
             "    episodes                list the saved episodes",
             "    reset [SEED]            lay the task's scene out again (default: the next seed), the arm home (with so101 teleop --task)",
             "    task                    the task, its layout, and whether the cube is in the box",
+            "    expert                  the scripted expert does the task once (with so101 teleop --task; any move you type takes over)",
             "    help                    this help",
             "    quit / exit             quit (Ctrl-D and Ctrl-C quit too)",
             "  Angles beyond a joint's limits are not sent (the reply gives the range).",
@@ -398,7 +407,7 @@ NO_ARGUMENT_COMMANDS: dict[str, Command] = {
     "home": Home(), "list": ListJoints(), "state": ShowState(), "poses": ListPoses(), "help": Help(), "?": Help(),
     "quit": Quit(), "exit": Quit(), "where": Where(), "jog": JogKeys(),
     "stop": Episodes("stop"), "discard": Episodes("discard"), "episodes": Episodes("episodes"), "task": ShowTask(),
-    "open": SetJoint(GRIPPER_COMMAND_INDEX, GRIPPER_OPEN_DEG),
+    "expert": RunExpert(), "open": SetJoint(GRIPPER_COMMAND_INDEX, GRIPPER_OPEN_DEG),
     "close": SetJoint(GRIPPER_COMMAND_INDEX, GRIPPER_CLOSED_DEG),
 }
 

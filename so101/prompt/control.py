@@ -16,8 +16,8 @@ import time
 from typing import Callable, Sequence
 
 from so101.prompt.commands import (
-    Batch, Empty, Episodes, GoPose, Help, Home, JogKeys, ListJoints, ListPoses, MoveTip, ParseError, Quit, ResetTask, SavePose,
-    SetJoint, ShowState, ShowTask, Snapshot, Where, format_angle, format_angles, help_lines, joint_lines, parse_command, texts,
+    Batch, Empty, Episodes, GoPose, Help, Home, JogKeys, ListJoints, ListPoses, MoveTip, ParseError, Quit, ResetTask, RunExpert,
+    SavePose, SetJoint, ShowState, ShowTask, Snapshot, Where, format_angle, format_angles, help_lines, joint_lines, parse_command, texts,
 )
 from so101.prompt.landing import SettleWatch, worth_saying
 from so101.prompt.poses import Pose, PoseStore
@@ -67,6 +67,8 @@ class KeyboardControl:
         self.show_news: Callable[[str], None] | None = None
         # The line to a body running a task (`so101 teleop --task`); None: the dataflow runs none.
         self.task: TaskLink | None = None
+        # Sends a word ("run", "stop") to the task's expert node, where the dataflow has one.
+        self.tell_expert: Callable[[str], None] | None = None
 
     # -- events, from the pump thread ----------------------------------------------------
     def on_event(self, event: dict) -> None:
@@ -84,7 +86,7 @@ class KeyboardControl:
                 self.task.on_status(bool(values[0]), dict(event.get("metadata") or {}))
         elif event["type"] == "INPUT" and event["id"] == "object_state" and self.task is not None:
             self.task.on_objects(event["value"])  # 250 a second: read when `task` asks, not here
-        elif event["type"] == "INPUT" and event["id"] == "leader_status" and self.show_news is not None:
+        elif event["type"] == "INPUT" and event["id"] in ("leader_status", "expert_status") and self.show_news is not None:
             for line in event["value"].to_pylist():
                 self.show_news(f"  {line}")
         elif event["type"] == "INPUT" and event["id"] in ("joint_state", "gripper_state"):
@@ -223,6 +225,12 @@ class KeyboardControl:
             return [self._reset_task(command.seed)], False
         if isinstance(command, ShowTask):
             return self._task_lines(state_wait_s), False
+        if isinstance(command, RunExpert):
+            if self.tell_expert is None:
+                return [text["task_off"]], False
+            self._landing = None
+            self.tell_expert("run")
+            return [text["expert_started"]], False
         if isinstance(command, JogKeys):
             if self.keys_fd is None:
                 return [text["jog_needs_terminal"]], False
@@ -262,6 +270,8 @@ class KeyboardControl:
         if self.task is None:
             return self.text["task_off"]
         self._landing = None
+        if self.tell_expert is not None:
+            self.tell_expert("stop")  # its plan was for the scene that is going
         status = self.task.reset(seed)
         if status is None:
             return self.text["task_silent"].format(seconds=task_link.REPLY_WAIT_S)

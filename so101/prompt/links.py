@@ -1,8 +1,9 @@
 """The prompt's links to the dataflow's other nodes, each where the dataflow declares it.
 
-News (the recorder's, the leader's on `leader_status`, where the tip landed after `xyz`, the cube
+News (the recorder's, the leader's on `leader_status`, the expert's on `expert_status`, where the tip landed after `xyz`, the cube
 landing in the box) is printed as it comes, between the person's lines; `record_cmd`, where the
-dataflow has a recorder, is the line to it; `task_cmd`, where the body runs a task, the line to the body. A command that talks to another node wires its output in `link_other_nodes`,
+dataflow has a recorder, is the line to it; `task_cmd`, where the body runs a task, the line to the body; `expert_cmd` the line to the task's
+expert. A command that talks to another node wires its output in `link_other_nodes`,
 so nodes/keyboard_control.py stays the course's file.
 """
 
@@ -21,6 +22,7 @@ def link_other_nodes(control: KeyboardControl, node, interactive: bool) -> None:
     control.show_news = news_printer(control, interactive)
     control.recorder = recorder_link(node, control.show_news)
     control.task = task_link(node, control.task_news)
+    control.tell_expert = expert_sender(node)
 
 
 def has_output(node, output_id: str) -> bool:
@@ -74,3 +76,12 @@ def task_link(node, on_change: Callable[[TaskStatus], None]) -> TaskLink | None:
     """The line to a body running a task, where the dataflow has one (`so101 teleop --task`)."""
     send = request_sender(node, "task_cmd")
     return TaskLink(send, on_change) if send is not None else None
+
+
+def expert_sender(node) -> Callable[[str], None] | None:
+    """What sends a word to the task's expert (`so101 teleop --task`), where the dataflow has one."""
+    if not has_output(node, "expert_cmd"):
+        return None
+    import pyarrow as pa
+
+    return lambda word: node.send_output("expert_cmd", pa.array([word]))

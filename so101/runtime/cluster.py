@@ -51,8 +51,10 @@ def one_line(text: str) -> str:
 class Cluster:
     """A coordinator (token authentication on) and daemons, on 127.0.0.1, under `work_dir`."""
 
-    def __init__(self, work_dir: Path, auth: bool = True):
+    def __init__(self, work_dir: Path, auth: bool = True, coordinator_addr: str = "127.0.0.1"):
         self.work_dir = work_dir
+        self.coordinator_addr = coordinator_addr
+        self.is_joined = False  # joined(): a cluster someone else runs
         # In the environment of every process the cluster starts, and so of every node its daemons
         # start: a node whose daemon was killed outlives it, and is found by this.
         self.marker = f"{work_dir.resolve()}:{os.getpid()}:{time.monotonic_ns()}"
@@ -82,12 +84,24 @@ class Cluster:
 
     def env(self, **extra: str) -> dict[str, str]:
         """The environment of a dora CLI or daemon of this cluster: its coordinator's port and token."""
-        env = env_with_bin_first(dict(os.environ, DORA_COORDINATOR_PORT=str(self.coordinator_port),
+        env = env_with_bin_first(dict(os.environ, DORA_COORDINATOR_ADDR=self.coordinator_addr,
+                                      DORA_COORDINATOR_PORT=str(self.coordinator_port),
                                       SO101_CLUSTER_RUN=self.marker, **extra))
-        env.pop("DORA_AUTH_TOKEN", None)
+        if not self.is_joined:  # a cluster started here: its own token, or none
+            env.pop("DORA_AUTH_TOKEN", None)
         if self.token:
             env["DORA_AUTH_TOKEN"] = self.token
         return env
+
+    @classmethod
+    def joined(cls, work_dir: Path, coordinator_addr: str, coordinator_port: int) -> "Cluster":
+        """A cluster already running (its coordinator at the address, its token, if it asks for one,
+        in DORA_AUTH_TOKEN): dataflows can be started on it; stop() stops nothing but those."""
+        work_dir.mkdir(parents=True, exist_ok=True)
+        cluster = cls(work_dir, auth=False, coordinator_addr=coordinator_addr)
+        cluster.coordinator_port = coordinator_port
+        cluster.is_joined = True
+        return cluster
 
     def start_coordinator(self) -> None:
         home = self.work_dir / "home"  # `--auth` writes the token under $HOME: keep the user's own apart
@@ -126,7 +140,8 @@ class Cluster:
 
     def connected_daemons(self) -> list[str]:
         """The machine ids of the daemons the coordinator lists (`dora cluster status`)."""
-        result = self.cli("cluster", "status", "--coordinator-port", str(self.coordinator_port), timeout_s=20)
+        result = self.cli("cluster", "status", "--coordinator-addr", self.coordinator_addr,
+                          "--coordinator-port", str(self.coordinator_port), timeout_s=20)
         ids = []
         for line in result.stdout.splitlines()[1:]:
             words = line.split()

@@ -20,6 +20,10 @@ LEADER_NODE_FILE = ROOT / "nodes" / "leader_node.py"
 LEADER_NODE_ID = "leader"
 LEADER_DATAFLOW_FILE = ROOT / "dataflow_leader.yml"
 LEADER_TICK = "dora/timer/millis/10"
+EXPERT_NODE_FILE = ROOT / "nodes" / "expert.py"
+EXPERT_NODE_ID = "expert"
+# The expert's pace at the prompt: a target every 40 ms, as in lockstep (25 frames a second).
+EXPERT_TICK = "dora/timer/millis/40"
 # `so101 teleop --web` adds the web view; its "serving" line, as nodes/web_view.py prints it.
 WEB_VIEW_NODE_FILE = ROOT / "nodes" / "web_view.py"
 WEB_VIEW_NODE_ID = "web_view"
@@ -230,6 +234,29 @@ def with_task(descriptor: dict, body_node_id: str, task_name: str, seed: int) ->
     prompt["inputs"] = {**prompt["inputs"],
                         "task_status": {"source": f"{body_node_id}/task_status", "queue_size": 100},
                         "object_state": _queued(f"{body_node_id}/object_state", STATE_QUEUE)}
+    return descriptor
+
+
+def with_expert(descriptor: dict, body_node_id: str, expert_env: dict[str, str], root: PurePath = ROOT) -> dict:
+    """A dataflow (with_task's, and with_leader's if it has one) whose body takes `joint_cmd` from the
+    task's expert, which passes on what came before it (the prompt's, the leader's) as `typed_cmd`
+    and drives on its own when the prompt's `expert` asks (`expert_cmd`), telling it on `expert_status`."""
+    prompt = _node(descriptor, PROMPT_NODE_ID)
+    prompt["outputs"] = [*prompt["outputs"], "expert_cmd"]
+    prompt["inputs"] = {**prompt["inputs"],
+                        "expert_status": {"source": f"{EXPERT_NODE_ID}/expert_status", "queue_size": 100}}
+    body = _node(descriptor, body_node_id)
+    typed_input = body["inputs"]["joint_cmd"]
+    _retarget(body, "joint_cmd", f"{EXPERT_NODE_ID}/joint_cmd")
+    expert = {
+        "id": EXPERT_NODE_ID, "path": str(root / EXPERT_NODE_FILE.relative_to(ROOT)),
+        "inputs": {"tick": {"source": EXPERT_TICK, "queue_size": 1}, "typed_cmd": typed_input,
+                   "expert_cmd": {"source": f"{PROMPT_NODE_ID}/expert_cmd", "queue_size": 10},
+                   **{name: _queued(f"{body_node_id}/{name}", STATE_QUEUE)
+                      for name in ("joint_state", "gripper_state", "object_state")}},
+        "outputs": ["joint_cmd", "expert_status"], "env": expert_env,
+    }
+    descriptor["nodes"].insert(descriptor["nodes"].index(body), expert)
     return descriptor
 
 
