@@ -1,17 +1,19 @@
 """episodes: runs a task's episodes on a body in lockstep, one seed after another, and judges each.
 
-It stands between the driver (the expert, a policy) and the body, as an environment does:
-it lays each episode out (`task_cmd`: `reset SEED`), and at each frame takes the body's frame
+It watches the loop of a driver (the expert, a policy) and a body, as an environment's recorder
+does: it lays each episode out (`task_cmd`: `reset SEED`), and at each frame takes the body's frame
 (`joint_state`, `gripper_state`, `object_state`, `task_status`, and the pictures where there
-are) and the driver's `action` for it, writes the frame into the dataset (SO101_RECORD_DIR, or
-a spool for `so101 demos --workers` to merge: SO101_SPOOL_DIR),
-and either passes the action on to the body (`joint_cmd`) or ends the episode: at the first
-frame whose task_status says success, or at the time limit. `SO101_IDLE=1` has no driver: it
-answers every frame with home, the floor every score must beat. Episodes end in order;
-each one's outcome is a JSON line in SO101_EPISODES_OUT, and `"done"` after the last, which
-ends the node, and with it the body (its task_cmd closes). Episode i uses seed SO101_SEED + i.
-After SILENCE_S with nothing come, a message was lost: it asks the body for the frame again
-(`task_cmd` `again`), or for the reset again.
+are) and the driver's answer to it (`action`), writes the frame into the dataset (SO101_RECORD_DIR,
+or a spool for `so101 demos --workers` to merge: SO101_SPOOL_DIR), and ends the episode at the
+first frame whose task_status says success, or at the time limit, by laying the next one out.
+The driver answers the body directly, so the runner's work (writing, encoding) is off the loop's
+path; the body may run a few frames past an episode's end before the reset comes, and those are
+not the episode's. `SO101_IDLE=1` has no driver: the runner answers every frame with home, the
+floor every score must beat. Episodes end in order; each one's outcome is a JSON line in
+SO101_EPISODES_OUT, and `"done"` after the last, which ends the node, and with it the body (its
+task_cmd closes). Episode i uses seed SO101_SEED + i. After SILENCE_S with nothing come, a message
+was lost: it asks the body for the frame again (`task_cmd` `again`), or for the reset again; a
+frame it never got whole while the body went on has the episode run again from its layout.
 What it judges and scores is so101/tasks/episodes.py.
 Settings: so101.tasks.settings.EpisodeSettings.
 """
@@ -38,6 +40,7 @@ from so101.dataset.features import (  # noqa: E402
     ACTION_KEY, ENVIRONMENT_KEY, IMAGE_KEY, REWARD_KEY, STATE_KEY, SUCCESS_KEY, WRIST_IMAGE_KEY, to_lerobot,
     video_keys_and_sizes,
 )
+from so101.dataset.commit import one_line_os_error  # noqa: E402
 from so101.dataset.layout import DatasetError  # noqa: E402
 from so101.dataset.spool import EpisodeSpool  # noqa: E402
 from so101.dataset.video import StreamingEncoder  # noqa: E402
@@ -54,6 +57,10 @@ logger = logging.getLogger("so101.episodes")
 # After this long without a message, one was lost (a frame takes milliseconds; the expert's first
 # plan, with its kinematics starting, about a second): the runner asks for it again.
 SILENCE_S = 3.0
+
+
+class CannotGoOn(Exception):
+    """The run cannot go on (an episode could not be saved); str() is one line for the user."""
 
 
 def picture(value: Any, size: tuple[int, int]) -> np.ndarray:
@@ -91,16 +98,16 @@ def main() -> int:
     adopted_index = -1  # the index of the episode `adopted` is
     recorder: EpisodeRecorder | None = None
     video: StreamingEncoder | None = None
-    answered: tuple[FrameTag, list[float]] | None = None  # the last frame passed on, and its action
+    done: tuple[FrameTag, list[float]] | None = None  # the last frame recorded, and its action
 
     def lay_out() -> None:
         node.send_output("task_cmd", pa.array([f"reset {seeds[index]}"]))
 
     def begin(episode: int) -> None:
         """The body's episode `episode` is seeds[index] laid out: its frames are this run's."""
-        nonlocal adopted, adopted_index, recorder, video, answered
+        nonlocal adopted, adopted_index, recorder, video, done
         drop()
-        adopted, adopted_index, answered = episode, index, None
+        adopted, adopted_index, done = episode, index, None
         recorder = writer.start_episode(task.instruction) if writer is not None else None
         if recorder is not None:
             recorder.seed = seeds[index]
@@ -122,12 +129,16 @@ def main() -> int:
         nonlocal index, recorder, video
         kept = False
         if recorder is not None:
+            saving, recorder = recorder, None
             if success or settings.keep == "all":
-                recorder.save()
+                try:
+                    saving.save()
+                except (DatasetError, OSError) as error:  # a full disk: what is saved stays whole; nothing more can be
+                    raise CannotGoOn(f"episode {index} (seed {seeds[index]}) could not be saved: {one_line_os_error(error)}"
+                                     if isinstance(error, OSError) else f"{error} (seed {seeds[index]})") from None
                 kept = True
             else:
-                recorder.discard()
-            recorder = None
+                saving.discard()
         if video is not None:
             video.finish()
             video = None
@@ -166,12 +177,21 @@ def main() -> int:
             if tag.frame == 0 and tag.seed == seeds[index] and tag.episode > adopted:
                 begin(tag.episode)  # the body laid it out as asked (the newest such, if asked twice)
             frame = frames.add(event["id"], tag, event["value"])
-            if frame is None or tag.episode != adopted:
-                continue  # not whole yet; or a frame of the body's start, or of an episode before
-            if answered is not None and tag.frame <= answered[0].frame:  # sent again, after a loss
-                if tag.frame == answered[0].frame:
-                    node.send_output("joint_cmd", pa.array(answered[1], type=pa.float64()),
+            if frame is None or tag.episode != adopted or adopted_index != index:
+                continue  # not whole yet; or a frame of the body's start, of an episode before, or past its end
+            if done is not None and tag.frame <= done[0].frame:  # sent again, after a loss
+                if idle and tag.frame == done[0].frame:
+                    node.send_output("joint_cmd", pa.array(done[1], type=pa.float64()),
                                      {**tag.metadata(), STREAM_KEY: NODE_ID})
+                continue
+            if tag.frame != (done[0].frame + 1 if done is not None else 0):
+                # A part of a frame before this one never came, and the body has moved on: the episode
+                # runs again from its layout (the same seed gives the same episode).
+                logger.info("[episodes] frame %d of episode %d (seed %d) was lost: running it again", tag.frame - 1,
+                            index, seeds[index])
+                drop()
+                adopted_index = -1
+                lay_out()
                 continue
             state_deg = frame["joint_state"].to_pylist() + frame["gripper_state"].to_pylist()
             action_deg = list(HOME_POSE_DEG) if idle else frame["action"].to_pylist()
@@ -191,12 +211,17 @@ def main() -> int:
                 if index < len(seeds):
                     lay_out()
                 continue
-            answered = (tag, action_deg)
-            node.send_output("joint_cmd", pa.array(action_deg, type=pa.float64()), {**tag.metadata(), STREAM_KEY: NODE_ID})
+            done = (tag, action_deg)
+            if idle:
+                node.send_output("joint_cmd", pa.array(action_deg, type=pa.float64()),
+                                 {**tag.metadata(), STREAM_KEY: NODE_ID})
         results.write('"done"\n')
         results.flush()
     except KeyboardInterrupt:
         pass
+    except CannotGoOn as error:
+        print(f"[{NODE_ID}] cannot go on: {error}", file=sys.stderr, flush=True)
+        return 1
     finally:
         close()
     return 0  # the body's task_cmd closes: it ends too

@@ -405,3 +405,36 @@ def test_the_saved_camera_results_show_each_cameras_rates_and_the_targets(name, 
 def test_cameras_refuse_the_real_arm_in_one_line(capsys):
     assert run_bench.main(["--cameras", "--body", "real"]) == 1
     assert capsys.readouterr().err == "so101 bench: --cameras measures a simulation's pictures: --body pybullet or mujoco\n"
+
+
+@pytest.mark.parametrize("name", ["latest-demos.json", "latest-demos-mujoco.json"])
+def test_the_saved_demos_results_show_each_run_and_where_a_frames_time_goes(name, capsys):
+    saved = run_bench.ROOT / "bench" / "results" / name
+    result = json.loads(saved.read_text())
+    assert run_bench.main(["--show", str(saved)]) == 0
+    shown = capsys.readouterr().out
+    assert shown.startswith(f"SO-101 demonstrations benchmark ({result['body']}), ")
+    runs = result["demos"]["runs"]
+    assert list(runs) == ["no_video_1_workers", "no_video_2_workers", "video_1_workers", "video_2_workers"]
+    for run in runs.values():
+        label = ("no video" if run["image_size"] is None else "two cameras 320x240") + (
+            ", 1 worker" if run["workers"] == 1 else ", 2 workers")
+        assert re.search(rf"^{label} +{run['episodes_per_min']:.1f} \| {run['times_real_time']:.1f} +\(", shown, re.M)
+        assert run["episodes_per_min"] == pytest.approx(60 * run["episodes"] / run["wall_s"], rel=0.01)
+    stages = result["demos"]["ms_per_frame"]
+    assert all(stages[stage] > 0 for stage in ("physics", "expert", "pictures", "encoding"))
+    assert f"{stages['pictures']:.2f}" in shown
+    assert "demos without video, 1 worker: × real time" in shown
+
+
+def test_a_frames_stages_are_timed_in_process_on_the_expert_s_episode():
+    from bench import demos_bench
+
+    stages = demos_bench.stage_times("mujoco", (64, 48), 10)
+    assert set(stages) == {"physics", "expert", "pictures", "encoding"}
+    assert all(0 < milliseconds < 1000 for milliseconds in stages.values()), stages
+
+
+def test_demos_refuse_the_real_arm_in_one_line(capsys):
+    assert run_bench.main(["--demos", "--body", "real"]) == 1
+    assert capsys.readouterr().err == "so101 bench: --demos measures a simulation's episodes: --body pybullet or mujoco\n"

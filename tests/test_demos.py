@@ -217,6 +217,37 @@ def test_at_the_prompt_the_expert_does_the_task_and_a_typed_command_takes_over(t
         terminal.close()
 
 
+@pytest.mark.skipif(os.geteuid() != 0 or shutil.which("unshare") is None,
+                    reason="a small filesystem of its own needs root (unshare --mount, mount -t tmpfs)")
+def test_a_full_disk_stops_demos_in_one_line_and_the_saved_episodes_stay_whole(tmp_path):
+    small = tmp_path / "small"  # 1 MB, with room for a few episodes: a tmpfs in a mount namespace of its own
+    small.mkdir()
+    demos = f"{SO101} demos {small}/demos --task cube_to_box --no-video --lang en"
+    script = f"""
+        mount -t tmpfs -o size=1m tmpfs {small}
+        head -c 760k /dev/zero > {small}/filler
+        {demos} --episodes 20 > {tmp_path}/full.out 2>&1; echo $? > {tmp_path}/full.code
+        cp -r {small}/demos {tmp_path}/at-full
+        rm {small}/filler
+        {demos} --episodes 1 --seed 20 > {tmp_path}/again.out 2>&1; echo $? > {tmp_path}/again.code
+        cp -r {small}/demos {tmp_path}/again
+    """
+    subprocess.run(["unshare", "--mount", "--propagation", "private", "bash", "-c", script], timeout=600, check=True)
+    full = (tmp_path / "full.out").read_text()
+    assert (tmp_path / "full.code").read_text().strip() == "1", full
+    stopped = re.fullmatch(r"so101 demos: \[episodes\] cannot go on: episode (\d+) is not saved: No space left on device; "
+                           r"the dataset in .* is as it was \(seed \1\) \((\d+) episodes were kept before it\)",
+                           full.strip().splitlines()[-1])
+    assert stopped and stopped.group(1) == stopped.group(2) != "0", full
+    kept = int(stopped.group(2))
+    assert len(Dataset.open(tmp_path / "at-full").episodes) == kept
+    assert (tmp_path / "again.code").read_text().strip() == "0", (tmp_path / "again.out").read_text()
+    dataset = Dataset.open(tmp_path / "again")
+    assert len(dataset.episodes) == kept + 1 and dataset.info[SEEDS_KEY][str(kept)] == 20
+    for index in range(kept + 1):
+        assert bool(dataset.episode_frames(index)[SUCCESS_KEY][-1])
+
+
 @pytest.mark.parametrize("args, message", [
     (["eval", "--expert", "--task", "cube_to_box", "--body", "real"], "the real arm has no object state"),
     (["demos", "DIR", "--task", "cube_to_box", "--body", "real"], "the real arm has no object state"),

@@ -24,6 +24,10 @@ from so101.runtime.lockstep import DEFAULT_LOCKSTEP_FPS
 from so101.tasks.episodes import Outcome
 
 
+class MergeFailed(Exception):
+    """A worker's episode could not be added to the dataset (a full disk); str() is one line."""
+
+
 def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
     parser.add_argument("dataset", type=Path, metavar="DIR", help="the dataset's folder: new, empty, or one made by so101 demos")
     add_common_arguments(parser)
@@ -68,27 +72,27 @@ def run(args: argparse.Namespace) -> int:
           f"{args.seed + args.episodes - 1}, {cameras}, into {root}{workers} (logs: {log_place(args, work)})", flush=True)
     started = time.monotonic()
     kept = 0
-    problem = None
 
     def show(outcome: Outcome, worker: int) -> None:
         """With workers, this command writes the dataset from their spools, an episode as soon as every
         one before it is in: a stop part-way leaves whole episodes, in seed order."""
-        nonlocal kept, problem
-        if outcome.kept and writer is not None and problem is None:
+        nonlocal kept
+        if outcome.kept and writer is not None:
             try:
                 pop(spooled(Path(flows[worker].runner_env["SO101_SPOOL_DIR"]))[0], writer)
-            except (DatasetError, IndexError, OSError) as error:
-                problem = f"episode {outcome.index} (seed {outcome.seed}) could not be merged: {error}"
-        kept += outcome.kept and problem is None
+            except (DatasetError, IndexError, OSError) as error:  # the workers are stopped on the way out
+                raise MergeFailed(f"episode {outcome.index} (seed {outcome.seed}) could not be added: {error}") from None
+        kept += outcome.kept
         print(outcome.line(), flush=True)
 
     try:
-        outcomes, run_problem = run_flows("demos", flows, work, args.log, show, place)
+        outcomes, problem = run_flows("demos", flows, work, args.log, show, place)
+    except MergeFailed as error:
+        return fail(f"so101 demos: {error} ({kept} episodes were kept before it)")
     finally:
         if writer is not None:
             writer.close()
     wall_s = time.monotonic() - started
-    problem = problem or run_problem
     if problem:
         return fail(f"so101 demos: {problem} ({kept} episodes were kept before it)")
     successes = sum(outcome.success for outcome in outcomes)

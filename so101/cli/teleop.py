@@ -213,7 +213,8 @@ def _log_tail(log: Path) -> str:
 
 
 # A node's one-line refusal to start (so101.bodies.node_loop.cannot_start), as dora's log carries it.
-_REFUSAL = re.compile(r"(\[\w+\] cannot start: .*?)\s*$", re.MULTILINE)
+# A node's one line when it refuses to start, or (the episodes' runner) to go on.
+_REFUSAL = re.compile(r"(\[\w+\] cannot (?:start|go on): .*?)\s*$", re.MULTILINE)
 
 
 def _refusal(log: Path) -> str | None:
