@@ -85,7 +85,7 @@ def main() -> int:
         results = open(settings.results_path, "a", encoding="utf-8")
     except (ValueError, DatasetError, OSError) as error:
         return cannot_start(error, NODE_ID)
-    idle = os.environ.get("SO101_IDLE", "") == "1"
+    idle = settings.idle
     pictures = ("image", "wrist_image") if writer is not None and settings.image_size else (
         ("image",) if settings.video_dir is not None and settings.image_size else ())
     observation = ("joint_state", "gripper_state", "object_state", "task_status", *pictures)

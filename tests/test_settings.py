@@ -148,6 +148,8 @@ OTHER_NODES = {
     "### replay (`nodes/replay.py`)": "so101.dataset.settings:ReplaySettings",
     "### leader (`nodes/leader_node.py`)": "so101.leader.settings:LeaderSettings",
     "### web_view (`nodes/web_view.py`)": "so101.web.settings:WebViewSettings",
+    "### expert (`nodes/expert.py`)": "so101.tasks.settings:ExpertSettings",
+    "### episodes (`nodes/episodes.py`)": "so101.tasks.settings:EpisodeSettings",
 }
 
 

@@ -64,6 +64,9 @@ class EpisodeSettings(EnvironSettings):
     spool_dir: Path | None = setting(
         "SO101_SPOOL_DIR", "", "a folder to keep each written episode whole in, for `so101 demos --workers` to merge "
         "in seed order (instead of SO101_RECORD_DIR); empty = none", read_optional_path)
+    idle: bool = setting(
+        "SO101_IDLE", "0", "`1`: no driver, the runner answers every frame with home (`so101 eval --idle`)",
+        lambda environ, declared_setting: read_choice(("0", "1"))(environ, declared_setting) == "1")
     keep: str = setting("SO101_KEEP", "success", "which episodes are written: `success` or `all`", read_choice(KEEP_CHOICES))
     image_size: tuple[int, int] | None = setting(
         "SO101_LOCKSTEP_PICTURES", "", "WIDTHxHEIGHT of the front and wrist pictures written; empty = no video",
