@@ -1,19 +1,19 @@
 """episodes: runs a task's episodes on a body in lockstep, one seed after another, and judges each.
 
-It watches the loop of a driver (the expert, a policy) and a body, as an environment's recorder
-does: it lays each episode out (`task_cmd`: `reset SEED`), and at each frame takes the body's frame
+It stands between the driver (the expert, a policy) and the body, as an environment does:
+it lays each episode out (`task_cmd`: `reset SEED`), and at each frame takes the body's frame
 (`joint_state`, `gripper_state`, `object_state`, `task_status`, and the pictures where there
-are) and the driver's answer to it (`action`), writes the frame into the dataset (SO101_RECORD_DIR,
-or a spool for `so101 demos --workers` to merge: SO101_SPOOL_DIR), and ends the episode at the
-first frame whose task_status says success, or at the time limit, by laying the next one out.
-The driver answers the body directly, so the runner's work (writing, encoding) is off the loop's
-path; the body may run a few frames past an episode's end before the reset comes, and those are
-not the episode's. `SO101_IDLE=1` has no driver: the runner answers every frame with home, the
-floor every score must beat. Episodes end in order; each one's outcome is a JSON line in
-SO101_EPISODES_OUT, and `"done"` after the last, which ends the node, and with it the body (its
-task_cmd closes). Episode i uses seed SO101_SEED + i. After SILENCE_S with nothing come, a message
-was lost: it asks the body for the frame again (`task_cmd` `again`), or for the reset again; a
-frame it never got whole while the body went on has the episode run again from its layout.
+are) and the driver's `action` for it, writes the frame into the dataset (SO101_RECORD_DIR, or
+a spool for `so101 demos --workers` to merge: SO101_SPOOL_DIR), and either passes the action on
+to the body (`joint_cmd`) or ends the episode: at the first frame whose task_status says
+success, or at the time limit. The body steps only on what this node passes on, so an episode
+ends at exactly its last frame and the next starts from the same history whatever the timing:
+the same seeds give the same episodes. `SO101_IDLE=1` has no driver: it answers every frame
+with home, the floor every score must beat. Episodes end in order; each one's outcome is a JSON
+line in SO101_EPISODES_OUT, and `"done"` after the last, which ends the node, and with it the
+body (its task_cmd closes). Episode i uses seed SO101_SEED + i. After SILENCE_S with nothing
+come, a message was lost: it asks the body for the frame again (`task_cmd` `again`), or for the
+reset again. An episode that cannot be saved (a full disk) stops the run in one line.
 What it judges and scores is so101/tasks/episodes.py.
 Settings: so101.tasks.settings.EpisodeSettings.
 """
@@ -98,16 +98,16 @@ def main() -> int:
     adopted_index = -1  # the index of the episode `adopted` is
     recorder: EpisodeRecorder | None = None
     video: StreamingEncoder | None = None
-    done: tuple[FrameTag, list[float]] | None = None  # the last frame recorded, and its action
+    answered: tuple[FrameTag, list[float]] | None = None  # the last frame passed on, and its action
 
     def lay_out() -> None:
         node.send_output("task_cmd", pa.array([f"reset {seeds[index]}"]))
 
     def begin(episode: int) -> None:
         """The body's episode `episode` is seeds[index] laid out: its frames are this run's."""
-        nonlocal adopted, adopted_index, recorder, video, done
+        nonlocal adopted, adopted_index, recorder, video, answered
         drop()
-        adopted, adopted_index, done = episode, index, None
+        adopted, adopted_index, answered = episode, index, None
         recorder = writer.start_episode(task.instruction) if writer is not None else None
         if recorder is not None:
             recorder.seed = seeds[index]
@@ -177,21 +177,12 @@ def main() -> int:
             if tag.frame == 0 and tag.seed == seeds[index] and tag.episode > adopted:
                 begin(tag.episode)  # the body laid it out as asked (the newest such, if asked twice)
             frame = frames.add(event["id"], tag, event["value"])
-            if frame is None or tag.episode != adopted or adopted_index != index:
-                continue  # not whole yet; or a frame of the body's start, of an episode before, or past its end
-            if done is not None and tag.frame <= done[0].frame:  # sent again, after a loss
-                if idle and tag.frame == done[0].frame:
-                    node.send_output("joint_cmd", pa.array(done[1], type=pa.float64()),
+            if frame is None or tag.episode != adopted:
+                continue  # not whole yet; or a frame of the body's start, or of an episode before
+            if answered is not None and tag.frame <= answered[0].frame:  # sent again, after a loss
+                if tag.frame == answered[0].frame:
+                    node.send_output("joint_cmd", pa.array(answered[1], type=pa.float64()),
                                      {**tag.metadata(), STREAM_KEY: NODE_ID})
-                continue
-            if tag.frame != (done[0].frame + 1 if done is not None else 0):
-                # A part of a frame before this one never came, and the body has moved on: the episode
-                # runs again from its layout (the same seed gives the same episode).
-                logger.info("[episodes] frame %d of episode %d (seed %d) was lost: running it again", tag.frame - 1,
-                            index, seeds[index])
-                drop()
-                adopted_index = -1
-                lay_out()
                 continue
             state_deg = frame["joint_state"].to_pylist() + frame["gripper_state"].to_pylist()
             action_deg = list(HOME_POSE_DEG) if idle else frame["action"].to_pylist()
@@ -211,10 +202,8 @@ def main() -> int:
                 if index < len(seeds):
                     lay_out()
                 continue
-            done = (tag, action_deg)
-            if idle:
-                node.send_output("joint_cmd", pa.array(action_deg, type=pa.float64()),
-                                 {**tag.metadata(), STREAM_KEY: NODE_ID})
+            answered = (tag, action_deg)
+            node.send_output("joint_cmd", pa.array(action_deg, type=pa.float64()), {**tag.metadata(), STREAM_KEY: NODE_ID})
         results.write('"done"\n')
         results.flush()
     except KeyboardInterrupt:

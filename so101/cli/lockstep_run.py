@@ -2,10 +2,13 @@
 runner (nodes/episodes.py), run with `dora run` while each episode's line is shown as it ends.
 
 The graph: the body (its node file, SO101_LOCKSTEP_FPS set) publishes each frame; the driver
-(nodes/expert.py) answers it with the body's `joint_cmd`. The runner, beside that loop, hears
-both (the driver's answer as `action`), records and judges each frame, and ends the episode by
-laying out the next (`task_cmd`); the body may have run a few frames past the end by then, which
-the reset throws away. With `--idle` there is no driver: the runner answers each frame with home.
+(nodes/expert.py) answers it on `action`; the runner records and judges the frame and passes
+the action on as the body's `joint_cmd`, or ends the episode and lays out the next. The body
+steps only on what the runner passes on: an episode ends at exactly its last frame, whatever
+the timing, so the next one starts from the same history (a body that ran on past the end while
+the runner caught up would not: tried, and a PyBullet episode after another came out a frame
+longer on one run than on another). With `--idle` there is no driver: the runner holds the arm
+at home.
 """
 
 from __future__ import annotations
@@ -121,9 +124,7 @@ def lockstep_dataflow(flow: Flow, placement: tuple[str, str] | None = None, root
     runner_inputs = {output: queued(f"{body_id}/{output}") for output in frame_outputs}
     nodes = [{
         "id": body_id, "path": path(flow.body.node_file), "restart_policy": "never",
-        # The driver answers the body itself; the runner, beside the loop, only ends episodes (task_cmd).
-        "inputs": {"joint_cmd": queued("expert/joint_cmd" if flow.expert else "episodes/joint_cmd"),
-                   "task_cmd": queued("episodes/task_cmd")},
+        "inputs": {"joint_cmd": queued("episodes/joint_cmd"), "task_cmd": queued("episodes/task_cmd")},
         "outputs": frame_outputs,
         "env": {"SO101_MODE": "direct", "SO101_LANG": flow.lang, "SO101_TASK": flow.runner_env["SO101_TASK"],
                 "SO101_SEED": flow.runner_env["SO101_SEED"], "SO101_LOCKSTEP_FPS": str(DEFAULT_LOCKSTEP_FPS),
@@ -139,7 +140,7 @@ def lockstep_dataflow(flow: Flow, placement: tuple[str, str] | None = None, root
         })
     nodes.append({
         "id": "episodes", "path": path(EPISODES_NODE_FILE), "restart_policy": "never",
-        "inputs": runner_inputs, "outputs": ["task_cmd"] if flow.expert else ["joint_cmd", "task_cmd"],
+        "inputs": runner_inputs, "outputs": ["joint_cmd", "task_cmd"],
         "env": {"SO101_LANG": flow.lang, "SO101_LOCKSTEP_FPS": str(DEFAULT_LOCKSTEP_FPS),
                 **({} if flow.expert else {"SO101_IDLE": "1"}), **flow.runner_env},
     })
@@ -162,9 +163,9 @@ def cluster_place(args: argparse.Namespace) -> ClusterPlace | str | None:
 
 
 def log_place(args: argparse.Namespace, work: Path) -> Path:
-    """Where dora's logs go: --log's file, or run.log in the work folder; with workers, the nodes' logs
-    under the work folder's dora/."""
-    if args.workers > 1:
+    """Where dora's logs go: --log's file, or run.log in the work folder; with workers or a cluster,
+    the nodes' logs under the work folder's dora/ (on a cluster, the other machines' stay there)."""
+    if args.workers > 1 or args.coordinator:
         return work / "dora"
     return args.log or work / "run.log"
 
