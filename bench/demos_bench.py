@@ -47,8 +47,9 @@ def run_demos(work_dir: Path, body: str, episodes: int, workers: int, image_size
             "frames_per_s": round(times * DEFAULT_LOCKSTEP_FPS, 1)}
 
 
-def stage_times(body: str, image_size: tuple[int, int], frames: int) -> dict:
-    """Milliseconds per frame of each stage, in this process: an episode of the expert from seed SEED."""
+def stage_times(work_dir: Path, body: str, image_size: tuple[int, int], frames: int) -> dict:
+    """Milliseconds per frame of each stage, in this process: an episode of the expert from seed SEED
+    (its two videos encoded into `work_dir`, then removed)."""
     from so101.bodies.camera import DEFAULT_CAMERA, WRIST_CAMERA
     from so101.bodies.registry import BODIES
     from so101.dataset.stats import image_histogram
@@ -84,8 +85,8 @@ def stage_times(body: str, image_size: tuple[int, int], frames: int) -> dict:
     finally:
         sim.close()
         planner.close()
-    encoders = [StreamingEncoder(Path(f"/tmp/so101-bench-{camera}-{time.monotonic_ns()}.mp4"), DEFAULT_LOCKSTEP_FPS,
-                                 *image_size, inspect=image_histogram) for camera in range(2)]
+    encoders = [StreamingEncoder(work_dir / f"stages-{camera}.mp4", DEFAULT_LOCKSTEP_FPS, *image_size,
+                                 inspect=image_histogram) for camera in range(2)]
     started = time.perf_counter()
     for index, picture in enumerate(pictures):
         encoders[index % 2].add(picture)
@@ -103,7 +104,7 @@ def run_demos_benchmark(work_dir: Path, body: str, episodes: int, video_episodes
             runs[f"{label}_{workers}_workers"] = run_demos(work_dir, body, count, workers, size)
             print(f"  demos, {label.replace('_', ' ')}, {workers} worker(s): "
                   f"{runs[f'{label}_{workers}_workers']['times_real_time']}× real time", flush=True)
-    stages = stage_times(body, image_size, stage_frames)
+    stages = stage_times(work_dir, body, image_size, stage_frames)
     in_dataflow_ms = 1000 / runs["no_video_1_workers"]["frames_per_s"]
     stages["dora_and_the_rest_without_video"] = round(in_dataflow_ms - stages["physics"] - stages["expert"], 2)
     return {"runs": runs, "ms_per_frame": stages, "image_size": list(image_size)}

@@ -427,12 +427,13 @@ def test_the_saved_demos_results_show_each_run_and_where_a_frames_time_goes(name
     assert "demos without video, 1 worker: × real time" in shown
 
 
-def test_a_frames_stages_are_timed_in_process_on_the_expert_s_episode():
+def test_a_frames_stages_are_timed_in_process_on_the_expert_s_episode(tmp_path):
     from bench import demos_bench
 
-    stages = demos_bench.stage_times("mujoco", (64, 48), 10)
+    stages = demos_bench.stage_times(tmp_path, "mujoco", (64, 48), 10)
     assert set(stages) == {"physics", "expert", "pictures", "encoding"}
     assert all(0 < milliseconds < 1000 for milliseconds in stages.values()), stages
+    assert list(tmp_path.iterdir()) == []  # its videos are gone
 
 
 def test_demos_refuse_the_real_arm_in_one_line(capsys):

@@ -202,24 +202,31 @@ def _retarget(node: dict, input_id: str, source: str) -> None:
     node["inputs"][input_id] = {**spec, "source": source} if isinstance(spec, dict) else source
 
 
+def _before_body(descriptor: dict, body_node_id: str, node_id: str, node_file: PurePath, tick: str,
+                 env: dict[str, str], root: PurePath, inputs: dict | None = None) -> dict:
+    """`node_id` (`node_file`) added between the prompt and the body: the body takes its `joint_cmd`, it
+    takes what the body took as `typed_cmd` (with `tick` and `inputs`), and the prompt hears its news on
+    `{node_id}_status`. Placed before the body, as dataflow_leader.yml has the leader."""
+    status = f"{node_id}_status"
+    prompt = _node(descriptor, PROMPT_NODE_ID)
+    prompt["inputs"] = {**prompt["inputs"], status: {"source": f"{node_id}/{status}", "queue_size": 100}}
+    body = _node(descriptor, body_node_id)
+    typed_input = body["inputs"]["joint_cmd"]
+    _retarget(body, "joint_cmd", f"{node_id}/joint_cmd")
+    node = {
+        "id": node_id, "path": str(root / node_file.relative_to(ROOT)),
+        "inputs": {"tick": {"source": tick, "queue_size": 1}, "typed_cmd": typed_input, **(inputs or {})},
+        "outputs": ["joint_cmd", status], "env": env,
+    }
+    descriptor["nodes"].insert(descriptor["nodes"].index(body), node)
+    return descriptor
+
+
 def with_leader(descriptor: dict, body_node_id: str, leader_env: dict[str, str], root: PurePath = ROOT) -> dict:
     """A dataflow (dataflow_copy's dict) whose body takes `joint_cmd` from the leader node, which takes the
     prompt's `joint_cmd` as `typed_cmd` and tells the prompt its news on `leader_status`: dataflow_leader.yml's
     graph, on any body (tests/test_dataflow_file.py holds the two equal)."""
-    prompt = _node(descriptor, PROMPT_NODE_ID)
-    prompt["inputs"] = {**prompt["inputs"],
-                        "leader_status": {"source": f"{LEADER_NODE_ID}/leader_status", "queue_size": 100}}
-    body = _node(descriptor, body_node_id)
-    typed_input = body["inputs"]["joint_cmd"]
-    _retarget(body, "joint_cmd", f"{LEADER_NODE_ID}/joint_cmd")
-    leader = {
-        "id": LEADER_NODE_ID, "path": str(root / LEADER_NODE_FILE.relative_to(ROOT)),
-        "inputs": {"tick": {"source": LEADER_TICK, "queue_size": 1}, "typed_cmd": typed_input},
-        "outputs": ["joint_cmd", "leader_status"], "env": leader_env,
-    }
-    # Beside the prompt, before the body, as dataflow_leader.yml has it.
-    descriptor["nodes"].insert(descriptor["nodes"].index(body), leader)
-    return descriptor
+    return _before_body(descriptor, body_node_id, LEADER_NODE_ID, LEADER_NODE_FILE, LEADER_TICK, leader_env, root)
 
 
 def with_task(descriptor: dict, body_node_id: str, task_name: str, seed: int) -> dict:
@@ -243,21 +250,10 @@ def with_expert(descriptor: dict, body_node_id: str, expert_env: dict[str, str],
     and drives on its own when the prompt's `expert` asks (`expert_cmd`), telling it on `expert_status`."""
     prompt = _node(descriptor, PROMPT_NODE_ID)
     prompt["outputs"] = [*prompt["outputs"], "expert_cmd"]
-    prompt["inputs"] = {**prompt["inputs"],
-                        "expert_status": {"source": f"{EXPERT_NODE_ID}/expert_status", "queue_size": 100}}
-    body = _node(descriptor, body_node_id)
-    typed_input = body["inputs"]["joint_cmd"]
-    _retarget(body, "joint_cmd", f"{EXPERT_NODE_ID}/joint_cmd")
-    expert = {
-        "id": EXPERT_NODE_ID, "path": str(root / EXPERT_NODE_FILE.relative_to(ROOT)),
-        "inputs": {"tick": {"source": EXPERT_TICK, "queue_size": 1}, "typed_cmd": typed_input,
-                   "expert_cmd": {"source": f"{PROMPT_NODE_ID}/expert_cmd", "queue_size": 10},
-                   **{name: _queued(f"{body_node_id}/{name}", STATE_QUEUE)
-                      for name in ("joint_state", "gripper_state", "object_state")}},
-        "outputs": ["joint_cmd", "expert_status"], "env": expert_env,
-    }
-    descriptor["nodes"].insert(descriptor["nodes"].index(body), expert)
-    return descriptor
+    observed = {name: _queued(f"{body_node_id}/{name}", STATE_QUEUE)
+                for name in ("joint_state", "gripper_state", "object_state")}
+    return _before_body(descriptor, body_node_id, EXPERT_NODE_ID, EXPERT_NODE_FILE, EXPERT_TICK, expert_env, root,
+                        {"expert_cmd": {"source": f"{PROMPT_NODE_ID}/expert_cmd", "queue_size": 10}, **observed})
 
 
 def body_task(descriptor: dict, body_node_id: str) -> str:
