@@ -12,6 +12,7 @@ SO101_LANG; SO101_DAEMON_PORT as the prompt's).
 
 from __future__ import annotations
 
+import math
 import os
 import sys
 import time
@@ -29,7 +30,7 @@ from so101.dataset.features import ACTION_KEY, from_lerobot  # noqa: E402
 from so101.dataset.layout import DatasetError  # noqa: E402
 from so101.dataset.reader import Dataset  # noqa: E402
 from so101.dataset.replay import (  # noqa: E402
-    RAMP_SPEED_DEG_S, SETTLE_TIMEOUT_S, ramp_deg, settled, tracking_errors_deg, tracking_line,
+    RAMP_SPEED_DEG_S, SETTLE_TIMEOUT_S, ramp_deg, send_time_s, settled, tracking_errors_deg, tracking_line,
 )
 from so101.dataset.settings import ReplaySettings  # noqa: E402
 from so101.prompt.join import join_dataflow  # noqa: E402
@@ -107,7 +108,8 @@ class Body:
 
 
 def play(body: Body, actions_deg: np.ndarray, fps: int, text: dict) -> str:
-    """The move to the first frame, then every frame at its time; returns the tracking line."""
+    """The move to the first frame, then every frame at its time (a period after the last one when
+    late); returns the tracking line."""
     deadline = time.monotonic() + FIRST_STATE_WAIT_S
     while body.state_deg() is None:
         if time.monotonic() >= deadline:
@@ -116,22 +118,24 @@ def play(body: Body, actions_deg: np.ndarray, fps: int, text: dict) -> str:
     waypoints = ramp_deg(body.reached_deg(), actions_deg[0], fps)
     print(text["ramp"].format(speed=RAMP_SPEED_DEG_S, seconds=len(waypoints) / fps), flush=True)
     period_s = 1.0 / fps
-    start = time.monotonic()
+    start, sent_s = time.monotonic(), -math.inf
     for index, waypoint in enumerate(waypoints):
-        body.wait_until(start + index * period_s)
+        body.wait_until(send_time_s(start, index, period_s, sent_s))
+        sent_s = time.monotonic()
         body.send(waypoint)
     settle_deadline = time.monotonic() + SETTLE_TIMEOUT_S
     while time.monotonic() < settle_deadline and not settled(body.reached_deg(), actions_deg[0]):
         body.wait_until(time.monotonic() + period_s)
     print(text["play"], flush=True)
     reached_deg = np.empty_like(actions_deg)
-    start = time.monotonic()
+    start, sent_s = time.monotonic(), -math.inf
     for index, action in enumerate(actions_deg):
-        body.wait_until(start + index * period_s)
+        body.wait_until(send_time_s(start, index, period_s, sent_s))
         if index:
             reached_deg[index - 1] = body.reached_deg()
+        sent_s = time.monotonic()
         body.send(action)
-    body.wait_until(start + len(actions_deg) * period_s)
+    body.wait_until(sent_s + period_s)
     reached_deg[-1] = body.reached_deg()
     return tracking_line(tracking_errors_deg(actions_deg, reached_deg))
 

@@ -15,7 +15,7 @@ from so101.dataset.features import ACTION_KEY, IMAGE_KEY, MOTOR_NAMES, STATE_KEY
 from so101.dataset.messages import (RecordCommand, decode_record_cmd, encode_record_cmd, recording_from_metadata,
                                     recording_metadata)
 from so101.dataset.recording import FrameClock, Recording
-from so101.dataset.replay import ramp_deg, tracking_errors_deg, tracking_line
+from so101.dataset.replay import ramp_deg, send_time_s, tracking_errors_deg, tracking_line
 from so101.prompt.commands import Episodes, ParseError, parse_command
 from so101.prompt.recorder_link import RecorderLink
 from so101.runtime.dataflow import DATAFLOW_FILE, dataflow_copy, with_recorder, with_replay, with_web_view
@@ -318,6 +318,43 @@ def test_the_ramp_keeps_every_joint_under_the_speed_and_ends_on_the_goal():
     assert steps.max() <= 30 / 30 + 1e-9
     assert waypoints[-1].tolist() == goal and len(waypoints) == 90
     assert len(ramp_deg(goal, goal, fps=30)) == 1
+
+
+def test_a_late_frame_pushes_the_next_ones_back_instead_of_bunching_them():
+    assert send_time_s(10.0, 3, 0.1, 10.2) == pytest.approx(10.3)  # on time: the schedule
+    assert send_time_s(10.0, 3, 0.1, 10.5) == pytest.approx(10.6)  # the last went out late: a period after it
+
+
+def test_replay_woken_late_never_sends_two_frames_closer_than_a_period(monkeypatch):
+    from nodes import replay
+
+    clock = {"now": 100.0}
+    sent: list[tuple[float, list[float]]] = []
+
+    class LateBody:  # the clock moves only as the node waits; one wait comes back 0.5 s late
+        def __init__(self):
+            self.waits = 0
+
+        def state_deg(self):
+            return np.zeros(6)
+
+        reached_deg = state_deg
+
+        def wait_until(self, deadline):
+            self.waits += 1
+            clock["now"] = max(clock["now"], deadline) + (0.5 if self.waits == 20 else 0.0)
+
+        def send(self, angles):
+            sent.append((clock["now"], list(angles)))
+
+    monkeypatch.setattr(replay.time, "monotonic", lambda: clock["now"])
+    actions = np.zeros((40, 6))
+    actions[:, 0] = np.linspace(30, 60, 40)  # 30 fps, the first frame 30° away: a 1 s ramp
+    replay.play(LateBody(), actions, 30, replay.TEXT["en"])
+    times = np.array([when for when, _ in sent])
+    assert len(sent) == 30 + 40 and np.diff(times).min() >= 1 / 30 - 1e-9
+    pan = np.array([angles[0] for _, angles in sent])
+    assert np.max(np.diff(pan[:30]) / np.diff(times[:30])) <= 30 + 1e-6  # the ramp's 30°/s, late or not
 
 
 def test_tracking_error_line():

@@ -37,6 +37,14 @@ def ramp_deg(start_deg: npt.ArrayLike, goal_deg: npt.ArrayLike, fps: float,
     return start + fractions[:, None] * (goal - start)
 
 
+def send_time_s(start_s: float, index: int, period_s: float, last_sent_s: float) -> float:
+    """When frame `index` goes out: on the schedule from `start_s`, and never less than a period after
+    the last one sent (at `last_sent_s`). A replay that wakes late goes on from there instead of
+    sending the frames it missed in a burst: that burst would turn the joints faster than the ramp
+    or the recording asks."""
+    return max(start_s + index * period_s, last_sent_s + period_s)
+
+
 def settled(state_deg: npt.ArrayLike, goal_deg: npt.ArrayLike, within_deg: float = SETTLED_DEG) -> bool:
     return bool(np.all(np.abs(np.asarray(state_deg) - np.asarray(goal_deg)) <= within_deg))
 
