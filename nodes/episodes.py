@@ -1,19 +1,21 @@
 """episodes: runs a task's episodes on a body in lockstep, one seed after another, and judges each.
 
-It stands between the driver (the expert, a policy) and the body, as an environment does:
-it lays each episode out (`task_cmd`: `reset SEED`), and at each frame takes the body's frame
+It watches the loop of a driver (the expert, a policy) and a body, as an environment's recorder
+does: it lays each episode out (`task_cmd`: `reset SEED`), and at each frame takes the body's frame
 (`joint_state`, `gripper_state`, `object_state`, `task_status`, and the pictures where there
-are) and the driver's `action` for it, writes the frame into the dataset (SO101_RECORD_DIR, or
-a spool for `so101 demos --workers` to merge: SO101_SPOOL_DIR), and either passes the action on
-to the body (`joint_cmd`) or ends the episode: at the first frame whose task_status says
-success, or at the time limit. The body steps only on what this node passes on, so an episode
-ends at exactly its last frame and the next starts from the same history whatever the timing:
-the same seeds give the same episodes. `SO101_IDLE=1` has no driver: it answers every frame
-with home, the floor every score must beat. Episodes end in order; each one's outcome is a JSON
-line in SO101_EPISODES_OUT, and `"done"` after the last, which ends the node, and with it the
-body (its task_cmd closes). Episode i uses seed SO101_SEED + i. After SILENCE_S with nothing
-come, a message was lost: it asks the body for the frame again (`task_cmd` `again`), or for the
-reset again. An episode that cannot be saved (a full disk) stops the run in one line.
+are) and the driver's answer to it (`action`), writes the frame into the dataset (SO101_RECORD_DIR,
+or a spool for `so101 demos --workers` to merge: SO101_SPOOL_DIR), and ends the episode at the
+first frame whose task_status says success, or at the time limit, by laying the next one out.
+The driver answers the body directly, so this node's work (writing, encoding) is off the loop's
+path; the body holds still after an episode's end until the reset (SO101_EPISODE_FRAMES), so every
+episode ends at the same frame however far behind this node is. `SO101_IDLE=1` has no driver: this
+node answers every frame with home, the floor every score must beat. Episodes end in order; each
+one's outcome is a JSON line in SO101_EPISODES_OUT, and `"done"` after the last, which ends the
+node, and with it the body (its task_cmd closes). Episode i uses seed SO101_SEED + i. After
+SILENCE_S with nothing come, a message was lost: it asks the body for the frame again (`task_cmd`
+`again`), or for the reset again; a frame it never got whole while the body went on has the
+episode run again from its layout (the same seed gives the same episode). An episode that cannot
+be saved (a full disk) stops the run in one line.
 What it judges and scores is so101/tasks/episodes.py.
 Settings: so101.tasks.settings.EpisodeSettings.
 """
@@ -98,16 +100,18 @@ def main() -> int:
     adopted_index = -1  # the index of the episode `adopted` is
     recorder: EpisodeRecorder | None = None
     video: StreamingEncoder | None = None
-    answered: tuple[FrameTag, list[float]] | None = None  # the last frame passed on, and its action
+    answered: list[float] | None = None  # idle: the action of the last frame answered (next_frame - 1)
+    next_frame = 0  # the adopted episode's next frame to record
+    whole: dict[int, tuple[FrameTag, dict[str, Any]]] = {}  # frames come whole ahead of next_frame
 
     def lay_out() -> None:
         node.send_output("task_cmd", pa.array([f"reset {seeds[index]}"]))
 
     def begin(episode: int) -> None:
         """The body's episode `episode` is seeds[index] laid out: its frames are this run's."""
-        nonlocal adopted, adopted_index, recorder, video, answered
+        nonlocal adopted, adopted_index, recorder, video, answered, next_frame
         drop()
-        adopted, adopted_index, answered = episode, index, None
+        adopted, adopted_index, answered, next_frame = episode, index, None, 0
         recorder = writer.start_episode(task.instruction) if writer is not None else None
         if recorder is not None:
             recorder.seed = seeds[index]
@@ -118,6 +122,7 @@ def main() -> int:
 
     def drop() -> None:
         nonlocal recorder, video
+        whole.clear()
         if recorder is not None:
             recorder.discard()
         if video is not None:
@@ -127,6 +132,7 @@ def main() -> int:
     def finish(tag: FrameTag, success: bool) -> None:
         """The episode ends at `tag`'s frame."""
         nonlocal index, recorder, video
+        whole.clear()
         kept = False
         if recorder is not None:
             saving, recorder = recorder, None
@@ -148,6 +154,40 @@ def main() -> int:
         logger.info("[episodes] %s", outcome.line())
         index += 1
 
+    def run_again(lost: int) -> None:
+        """A part of frame `lost` never came, and the body went on: the episode again from its layout."""
+        nonlocal adopted_index
+        logger.info("[episodes] frame %d of episode %d (seed %d) was lost: running it again", lost, index, seeds[index])
+        drop()
+        adopted_index = -1
+        lay_out()
+
+    def take(tag: FrameTag, frame: dict[str, Any]) -> None:
+        """Record and judge the adopted episode's next frame; end the episode there, or (idle) answer it."""
+        nonlocal answered, next_frame
+        state_deg = frame["joint_state"].to_pylist() + frame["gripper_state"].to_pylist()
+        action_deg = list(HOME_POSE_DEG) if idle else frame["action"].to_pylist()
+        success = bool(frame["task_status"].to_pylist()[0])
+        if recorder is not None:
+            values = {STATE_KEY: to_lerobot(state_deg), ACTION_KEY: to_lerobot(action_deg),
+                      ENVIRONMENT_KEY: np.asarray(frame["object_state"].to_numpy(zero_copy_only=False), np.float32),
+                      SUCCESS_KEY: np.array([success]), REWARD_KEY: np.array([task.reward(success)], dtype=np.float32)}
+            if settings.image_size:
+                values[IMAGE_KEY] = picture(frame["image"], settings.image_size)
+                values[WRIST_IMAGE_KEY] = picture(frame["wrist_image"], settings.image_size)
+            recorder.add_frame(values)
+        if video is not None and settings.image_size:
+            video.add(picture(frame["image"], settings.image_size))
+        if clock.ended(tag.frame, success):  # the body holds still here until the reset
+            finish(tag, success)
+            if index < len(seeds):
+                lay_out()
+            return
+        next_frame = tag.frame + 1
+        if idle:
+            answered = action_deg
+            node.send_output("joint_cmd", pa.array(action_deg, type=pa.float64()), {**tag.metadata(), STREAM_KEY: NODE_ID})
+
     def close() -> None:
         drop()  # an episode cut short by STOP is not a demonstration
         if writer is not None:
@@ -166,6 +206,8 @@ def main() -> int:
                             seeds[index])
                 if adopted_index != index:
                     lay_out()  # the reset, or its first frame, went missing
+                elif whole:
+                    run_again(next_frame)
                 else:
                     node.send_output("task_cmd", pa.array([AGAIN_WORD]))
                 continue
@@ -177,33 +219,18 @@ def main() -> int:
             if tag.frame == 0 and tag.seed == seeds[index] and tag.episode > adopted:
                 begin(tag.episode)  # the body laid it out as asked (the newest such, if asked twice)
             frame = frames.add(event["id"], tag, event["value"])
-            if frame is None or tag.episode != adopted:
-                continue  # not whole yet; or a frame of the body's start, or of an episode before
-            if answered is not None and tag.frame <= answered[0].frame:  # sent again, after a loss
-                if tag.frame == answered[0].frame:
-                    node.send_output("joint_cmd", pa.array(answered[1], type=pa.float64()),
+            if frame is None or tag.episode != adopted or adopted_index != index:
+                continue  # not whole yet; or a frame of the body's start, of an episode before, or of one ended
+            if tag.frame < next_frame:  # sent again, after a loss
+                if idle and answered is not None and tag.frame == next_frame - 1:
+                    node.send_output("joint_cmd", pa.array(answered, type=pa.float64()),
                                      {**tag.metadata(), STREAM_KEY: NODE_ID})
                 continue
-            state_deg = frame["joint_state"].to_pylist() + frame["gripper_state"].to_pylist()
-            action_deg = list(HOME_POSE_DEG) if idle else frame["action"].to_pylist()
-            success = bool(frame["task_status"].to_pylist()[0])
-            if recorder is not None:
-                values = {STATE_KEY: to_lerobot(state_deg), ACTION_KEY: to_lerobot(action_deg),
-                          ENVIRONMENT_KEY: np.asarray(frame["object_state"].to_numpy(zero_copy_only=False), np.float32),
-                          SUCCESS_KEY: np.array([success]), REWARD_KEY: np.array([task.reward(success)], dtype=np.float32)}
-                if settings.image_size:
-                    values[IMAGE_KEY] = picture(frame["image"], settings.image_size)
-                    values[WRIST_IMAGE_KEY] = picture(frame["wrist_image"], settings.image_size)
-                recorder.add_frame(values)
-            if video is not None and settings.image_size:
-                video.add(picture(frame["image"], settings.image_size))
-            if clock.ended(tag.frame, success):
-                finish(tag, success)
-                if index < len(seeds):
-                    lay_out()
-                continue
-            answered = (tag, action_deg)
-            node.send_output("joint_cmd", pa.array(action_deg, type=pa.float64()), {**tag.metadata(), STREAM_KEY: NODE_ID})
+            whole[tag.frame] = (tag, frame)
+            while next_frame in whole and adopted_index == index:
+                take(*whole.pop(next_frame))
+            if adopted_index == index and len(whole) > FrameParts.KEPT:  # next_frame will not come whole now
+                run_again(next_frame)
         results.write('"done"\n')
         results.flush()
     except KeyboardInterrupt:

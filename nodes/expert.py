@@ -2,7 +2,7 @@
 
 It reads only `joint_state`, `gripper_state` and `object_state`. In lockstep (`so101 eval`,
 `so101 demos`; so101/runtime/lockstep.py), once the three parts of a frame are in, it answers
-that frame with six joint targets, tagged with it. A frame 0 is a new episode (a reset): a fresh
+that frame with six joint targets, tagged with it (a frame sent again gets the same answer). A frame 0 is a new episode (a reset): a fresh
 plan for the layout it shows, its noise drawn from the layout's seed. Its clock is the frame's
 index over the frame rate, so the same layout gives the same episode however fast the machine.
 At the prompt (`so101 teleop --task`), it stands between the prompt and the body, as the leader
@@ -20,6 +20,7 @@ import os
 import sys
 import time
 from pathlib import Path
+from typing import Sequence
 
 ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:  # run as a script from anywhere: the so101 package sits beside nodes/
@@ -30,7 +31,7 @@ from dora import Node  # noqa: E402
 
 from so101.assets import ModelFilesError  # noqa: E402
 from so101.bodies.node_loop import STREAM_KEY, cannot_start  # noqa: E402
-from so101.runtime.lockstep import FrameParts, frame_tag  # noqa: E402
+from so101.runtime.lockstep import FrameParts, FrameTag, frame_tag  # noqa: E402
 from so101.runtime.logs import send_diagnostics_to  # noqa: E402
 from so101.runtime.node_events import inputs_until_stop  # noqa: E402
 from so101.tasks import task_named  # noqa: E402
@@ -65,6 +66,7 @@ def main() -> int:
     text = TEXT[settings.lang]
     frames = FrameParts(OBSERVED)
     expert: Expert | None = None
+    answered: tuple[FrameTag, Sequence[float]] | None = None  # lockstep: the last frame answered, and its answer
     latest: dict[str, list[float]] = {}  # at the prompt: the newest of each observed input
     started_s: float | None = None  # at the prompt: when `run` came; None: not driving
     node = Node()
@@ -81,10 +83,14 @@ def main() -> int:
                 frame = frames.add(input_id, tag, event["value"].to_pylist())
                 if frame is None:
                     continue
-                if expert is None or tag.frame == 0:
-                    expert = Expert(planner, noise=settings.noise, seed=tag.seed)
-                targets_deg = expert.targets(tag.frame / settings.lockstep_fps,
-                                             frame["joint_state"] + frame["gripper_state"], frame["object_state"])
+                if answered is not None and answered[0] == tag:  # the frame again, after a loss: the same answer
+                    targets_deg = answered[1]
+                else:
+                    if expert is None or tag.frame == 0:
+                        expert = Expert(planner, noise=settings.noise, seed=tag.seed)
+                    targets_deg = expert.targets(tag.frame / settings.lockstep_fps,
+                                                 frame["joint_state"] + frame["gripper_state"], frame["object_state"])
+                    answered = (tag, targets_deg)
                 node.send_output("joint_cmd", pa.array(targets_deg, type=pa.float64()), {**tag.metadata(), STREAM_KEY: 1})
             elif input_id in OBSERVED:
                 latest[input_id] = event["value"].to_pylist()

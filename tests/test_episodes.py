@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import pytest
 
+from so101.bodies.registry import SIMULATED_BODIES
+
 from so101.runtime.lockstep import (
     FrameParts, FrameTag, answers, frame_tag, lockstep_rates, steps_per_frame,
 )
@@ -95,3 +97,31 @@ def test_frame_parts_give_a_frame_once_whole_even_with_another_frames_parts_betw
         parts.add("joint_state", FrameTag(3, frame, 5), frame)
     assert parts.add("object_state", first, "x") is None
     assert parts.add("action", first, "y") is None  # its joint_state was forgotten: it is not completed
+
+
+# -- a body in lockstep -----------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("body", SIMULATED_BODIES)
+@pytest.mark.parametrize("last_frame, frames_out", [("2", [0, 1, 2, 0, 1]), ("0", [0, 1, 2, 3, 0, 1])])
+def test_a_body_holds_still_after_an_episodes_last_frame_until_the_reset(monkeypatch, body, last_frame, frames_out):
+    import pyarrow as pa
+
+    from tests.helpers.dataflow import run_simulation_node
+
+    def command(episode: int, frame: int) -> dict:
+        return {"type": "INPUT", "id": "joint_cmd", "value": pa.array([10.0, 0, 0, 0, 0, 0]),
+                "metadata": FrameTag(episode, frame, 4).metadata()}
+
+    # The runner's reset comes after the driver has answered the last frame too (it watches beside the loop).
+    events = [command(0, 0), command(0, 1), command(0, 2),
+              {"type": "INPUT", "id": "task_cmd", "value": pa.array(["reset 5"]), "metadata": {}}, command(1, 0)]
+    config = {"inputs": {"joint_cmd": "expert/joint_cmd", "task_cmd": "episodes/task_cmd"},
+              "outputs": ["joint_state", "gripper_state", "object_state", "task_status"]}
+    sent: list[int] = []
+    code, node = run_simulation_node(
+        monkeypatch, events, config, body=body, SO101_TASK="cube_to_box", SO101_SEED="4", SO101_LOCKSTEP_FPS="25",
+        SO101_EPISODE_FRAMES=last_frame, on_send=lambda output, metadata: sent.append(metadata["frame"])
+        if output == "joint_state" else None)
+    assert code == 0
+    # With SO101_EPISODE_FRAMES=2 the answer to frame 2 is not applied: no frame 3; the reset starts frame 0.
+    assert sent == frames_out

@@ -147,8 +147,9 @@ class TaskReport:
         self.reply_to = ""  # the task_cmd request the next task_status answers
         self.status_sent_at_step = 0
 
-    def tick(self, node: Node, steps: int, tag: FrameTag | None = None) -> None:
-        """`tag`: a lockstep frame's, on both outputs; task_status then goes out every frame."""
+    def tick(self, node: Node, steps: int, tag: FrameTag | None = None) -> bool:
+        """`tag`: a lockstep frame's, on both outputs; task_status then goes out every frame.
+        Returns whether the task has succeeded."""
         scene = self.scene
         object_state = scene.object_state()  # read once a tick: published, and judged
         tags = tag.metadata() if tag is not None else {}
@@ -163,6 +164,7 @@ class TaskReport:
                              {"task": scene.task.name, "seed": scene.layout.seed, "reply_to": self.reply_to, **tags})
             self.status_sent_at_step = steps
         self.last_success, self.reply_to = success, ""
+        return success
 
     def seed_asked(self, words: list[object]) -> int:
         """The seed a task_cmd asks for: the one it names, or the next; ValueError in one line otherwise."""
@@ -224,19 +226,24 @@ def run_body_node(body: Body, node: Node, settings: NodeSettings, identity: str,
     # Lockstep: the frame now (episode: resets so far), the steps a frame takes, the pictures it carries.
     frame_steps = steps_per_frame(lockstep_fps, tick_s) if lockstep_fps else 0
     now = FrameTag(0, 0, scene.layout.seed if scene is not None else 0)
+    # In lockstep, an episode over (success, or its last frame) holds still until a reset: every
+    # episode then ends at the same frame, however late the runner's reset comes.
+    episode_over = False
     pictures = [(output, camera) for output, camera in (("image", DEFAULT_CAMERA), ("wrist_image", WRIST_CAMERA))
                 if settings.lockstep_pictures and output in outputs]
 
     def publish(tag: FrameTag | None = None) -> None:
         """joint_state and gripper_state, the task's outputs, and in lockstep the frame's pictures."""
+        nonlocal episode_over
         tags = tag.metadata() if tag is not None else {}
         angles_deg = body.joint_angles_deg()
         # None: the real arm's read failed this tick; publishing nothing beats stale angles.
         if angles_deg is not None:
             node.send_output("joint_state", pa.array(angles_deg[:NUM_ARM_JOINTS], type=pa.float64()), tags)
             node.send_output("gripper_state", pa.array(angles_deg[NUM_ARM_JOINTS:], type=pa.float64()), tags)
-        if report is not None:
-            report.tick(node, body.steps, tag)
+        success = report.tick(node, body.steps, tag) if report is not None else False
+        if tag is not None and settings.lockstep_episode_frames:
+            episode_over = success or tag.frame >= settings.lockstep_episode_frames
         if tag is not None and settings.lockstep_pictures:
             width, height = settings.lockstep_pictures
             for output, camera in pictures:
@@ -297,8 +304,8 @@ def run_body_node(body: Body, node: Node, settings: NodeSettings, identity: str,
                         now = FrameTag(now.episode + 1, 0, seed)
                         publish(now)
                 elif event["id"] == "joint_cmd":
-                    if lockstep_fps and not answers(frame_tag(event.get("metadata")), now):
-                        continue  # sent for a frame before a reset: the episode it was for is over
+                    if lockstep_fps and (episode_over or not answers(frame_tag(event.get("metadata")), now)):
+                        continue  # sent for a frame before a reset, or past the episode's end: it is over
                     decoded = decode_joint_cmd(event["value"], joint_targets_deg)
                     if decoded.targets_deg is None:  # what arrived is not a command: decoded.error says why
                         logger.warning(text["rejected"].format(error=decoded.error))

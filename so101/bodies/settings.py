@@ -113,6 +113,11 @@ class NodeSettings(EnvironSettings):
         "SO101_LOCKSTEP_PICTURES", "",
         "WIDTHxHEIGHT: in lockstep, each frame carries the task's front and wrist pictures on `image` and "
         "`wrist_image`, drawn for that frame; empty = none", read_image_size)
+    lockstep_episode_frames: int = setting(
+        "SO101_EPISODE_FRAMES", "0",
+        "N > 0: in lockstep, an episode's last frame is at most N; after it, or after a frame whose `task_status` "
+        "says success, the body holds still until the next reset, so the runner that ends episodes can watch "
+        "beside the loop; 0 = no end", read_whole_number)
 
     @classmethod
     def from_environ(cls, environ: Mapping[str, str]) -> Self:

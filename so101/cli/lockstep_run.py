@@ -2,13 +2,14 @@
 runner (nodes/episodes.py), run with `dora run` while each episode's line is shown as it ends.
 
 The graph: the body (its node file, SO101_LOCKSTEP_FPS set) publishes each frame; the driver
-(nodes/expert.py) answers it on `action`; the runner records and judges the frame and passes
-the action on as the body's `joint_cmd`, or ends the episode and lays out the next. The body
-steps only on what the runner passes on: an episode ends at exactly its last frame, whatever
-the timing, so the next one starts from the same history (a body that ran on past the end while
-the runner caught up would not: tried, and a PyBullet episode after another came out a frame
-longer on one run than on another). With `--idle` there is no driver: the runner holds the arm
-at home.
+(nodes/expert.py) answers it with the body's `joint_cmd`. The runner, beside that loop, hears
+both (the driver's answer as `action`), records and judges each frame, and ends the episode by
+laying out the next (`task_cmd`). Its writing and encoding are off the loop's path, and still
+every episode ends at the same frame: the body holds still after an episode's last frame
+(SO101_EPISODE_FRAMES, or success) until the reset comes, so the next episode starts from the
+same history however late the runner is (a body that ran on past the end did not: a PyBullet
+episode after another came out a frame longer on one run than on another). With `--idle` there
+is no driver: the runner answers each frame with home.
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ from so101.cli.argtypes import add_language_option, number, whole_number
 from so101.runtime.dataflow import ROOT, write_dataflow
 from so101.runtime.lockstep import DEFAULT_LOCKSTEP_FPS
 from so101.tasks import TASKS
-from so101.tasks.episodes import Outcome, read_outcomes, seeds_for, split_seeds
+from so101.tasks.episodes import EpisodeClock, Outcome, read_outcomes, seeds_for, split_seeds
 
 EXPERT_NODE_FILE = ROOT / "nodes" / "expert.py"
 EPISODES_NODE_FILE = ROOT / "nodes" / "episodes.py"
@@ -120,15 +121,19 @@ def lockstep_dataflow(flow: Flow, placement: tuple[str, str] | None = None, root
         return str(root / node_file.relative_to(ROOT))
 
     body_id = flow.body.node_id
+    fps = DEFAULT_LOCKSTEP_FPS
+    last_frame = EpisodeClock(fps, float(flow.runner_env["SO101_TIME_LIMIT_S"])).limit_frames
     frame_outputs = [*BODY_FRAME_OUTPUTS, *flow.pictures]
     runner_inputs = {output: queued(f"{body_id}/{output}") for output in frame_outputs}
     nodes = [{
         "id": body_id, "path": path(flow.body.node_file), "restart_policy": "never",
-        "inputs": {"joint_cmd": queued("episodes/joint_cmd"), "task_cmd": queued("episodes/task_cmd")},
+        # The driver answers the body itself; the runner, beside the loop, only ends episodes (task_cmd).
+        "inputs": {"joint_cmd": queued("expert/joint_cmd" if flow.expert else "episodes/joint_cmd"),
+                   "task_cmd": queued("episodes/task_cmd")},
         "outputs": frame_outputs,
         "env": {"SO101_MODE": "direct", "SO101_LANG": flow.lang, "SO101_TASK": flow.runner_env["SO101_TASK"],
-                "SO101_SEED": flow.runner_env["SO101_SEED"], "SO101_LOCKSTEP_FPS": str(DEFAULT_LOCKSTEP_FPS),
-                "SO101_LOCKSTEP_PICTURES": flow.picture_size},
+                "SO101_SEED": flow.runner_env["SO101_SEED"], "SO101_LOCKSTEP_FPS": str(fps),
+                "SO101_EPISODE_FRAMES": str(last_frame), "SO101_LOCKSTEP_PICTURES": flow.picture_size},
     }]
     if flow.expert:
         runner_inputs["action"] = queued("expert/joint_cmd")
@@ -136,12 +141,12 @@ def lockstep_dataflow(flow: Flow, placement: tuple[str, str] | None = None, root
             "id": "expert", "path": path(EXPERT_NODE_FILE), "restart_policy": "never",
             "inputs": {name: queued(f"{body_id}/{name}") for name in ("joint_state", "gripper_state", "object_state")},
             "outputs": ["joint_cmd"],
-            "env": {"SO101_LANG": flow.lang, "SO101_LOCKSTEP_FPS": str(DEFAULT_LOCKSTEP_FPS), **flow.expert_env},
+            "env": {"SO101_LANG": flow.lang, "SO101_LOCKSTEP_FPS": str(fps), **flow.expert_env},
         })
     nodes.append({
         "id": "episodes", "path": path(EPISODES_NODE_FILE), "restart_policy": "never",
-        "inputs": runner_inputs, "outputs": ["joint_cmd", "task_cmd"],
-        "env": {"SO101_LANG": flow.lang, "SO101_LOCKSTEP_FPS": str(DEFAULT_LOCKSTEP_FPS),
+        "inputs": runner_inputs, "outputs": ["task_cmd"] if flow.expert else ["joint_cmd", "task_cmd"],
+        "env": {"SO101_LANG": flow.lang, "SO101_LOCKSTEP_FPS": str(fps),
                 **({} if flow.expert else {"SO101_IDLE": "1"}), **flow.runner_env},
     })
     if placement is not None:

@@ -52,10 +52,11 @@ def body_environment(body: str, tmp_path: Path):
         yield {"SO101_PORT": arm.port, "SO101_CALIBRATION": str(calibration_file), "SO101_MAX_SPEED_DEG_S": "180"}, arm
 
 
-def run_simulation_node(monkeypatch, events, node_config=TICK_TIMER_CONFIG, body="pybullet", **env):
+def run_simulation_node(monkeypatch, events, node_config=TICK_TIMER_CONFIG, body="pybullet", on_send=None, **env):
     """Run a body's node (so101.bodies.registry; nodes/simulation_node.py by default) headless over
     `events`; returns (exit code, the MockNode). The real arm's ticks come at the timer's pace,
-    for its emulated servos move in wall-clock time."""
+    for its emulated servos move in wall-clock time. `on_send(output, metadata)` sees each output
+    as it goes (MockNode keeps the values, not their metadata)."""
     import importlib
 
     from dora.testing import MockNode
@@ -69,6 +70,14 @@ def run_simulation_node(monkeypatch, events, node_config=TICK_TIMER_CONFIG, body
     for name, value in env.items():
         monkeypatch.setenv(name, value)
     node = MockNode(events, node_config=node_config)
+    if on_send is not None:
+        keep = node.send_output
+
+        def send_output(output_id, data, metadata=None):
+            on_send(output_id, metadata or {})
+            keep(output_id, data, metadata)
+
+        node.send_output = send_output
     if not BODIES[body].simulated:
         node = _paced(node, timer_period_s(node_config) or TICK_PERIOD_S)
     monkeypatch.setattr(body_node, "Node", lambda: node)
