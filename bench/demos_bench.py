@@ -5,8 +5,9 @@ video and with both cameras, with one worker and with two: episodes a minute and
 wall time. Where the time goes: the same work in this one process, an episode of the expert on
 the body frame by frame as the lockstep body does, each stage timed alone: the physics (ten 4 ms
 steps and the task's state), the expert, the two pictures, their encoding. What a frame costs in
-the dataflow beyond the sum is dora's: three hops a frame (body, expert, runner, body), the
-messages' copies and the runner's writing.
+the dataflow beyond the sum is dora's and the nodes' Python: two hops a frame (body to expert,
+expert to body), with the runner beside them taking every message. Of that, dora's own part is
+measured alone: the same messages between nodes that do nothing else (bench/nodes/echo_frames.py).
 """
 
 from __future__ import annotations
@@ -62,6 +63,7 @@ def stage_times(work_dir: Path, body: str, image_size: tuple[int, int], frames: 
     sim = BODIES[body].body_class()(mode="direct", time_step_s=0.004, renders=True, light_pictures=True,
                                     log=lambda line: None, task=CUBE_TO_BOX, seed=SEED)
     planner = planner_for(CUBE_TO_BOX)
+    import so101.bodies.mujoco_model  # noqa: F401 (the expert's first plan imports it: once a run, as nodes/expert.py does at its start)
     expert = Expert(planner, seed=SEED)
     steps = steps_per_frame(DEFAULT_LOCKSTEP_FPS, 0.004)
     spent = {"physics": 0.0, "expert": 0.0, "pictures": 0.0, "encoding": 0.0}
@@ -96,6 +98,33 @@ def stage_times(work_dir: Path, body: str, image_size: tuple[int, int], frames: 
     return {stage: round(1000 * seconds / frames, 2) for stage, seconds in spent.items()}
 
 
+ECHO_NODE = Path(__file__).resolve().parent / "nodes" / "echo_frames.py"
+
+
+def dora_alone_ms(work_dir: Path, frames: int) -> float:
+    """Milliseconds a frame of the lockstep loop's messages takes with no work between them: the body's
+    four outputs to a driver and a watcher, the driver's answer to both (bench/nodes/echo_frames.py),
+    wired as so101/cli/lockstep_run.py wires them. The floor dora puts under a frame on this machine."""
+    from so101.cli.lockstep_run import queued
+    from so101.runtime.dataflow import write_dataflow
+    from so101.runtime.venv import dora_executable, env_with_bin_first
+
+    out = work_dir / "echo_ms.txt"
+    state = ["joint_state", "gripper_state", "object_state"]
+    nodes = [
+        {"id": "body", "path": str(ECHO_NODE), "inputs": {"joint_cmd": queued("driver/joint_cmd")},
+         "outputs": [*state, "task_status"], "env": {"ECHO_ROLE": "body", "ECHO_FRAMES": str(frames), "ECHO_OUT": str(out)}},
+        {"id": "driver", "path": str(ECHO_NODE), "inputs": {name: queued(f"body/{name}") for name in state},
+         "outputs": ["joint_cmd"], "env": {"ECHO_ROLE": "driver"}},
+        {"id": "watcher", "path": str(ECHO_NODE), "env": {"ECHO_ROLE": "watcher"},
+         "inputs": {**{name: queued(f"body/{name}") for name in [*state, "task_status"]}, "action": queued("driver/joint_cmd")}},
+    ]
+    dataflow = write_dataflow({"nodes": nodes}, work_dir / "echo.yml")
+    subprocess.run([str(dora_executable()), "run", str(dataflow)], cwd=work_dir, env=env_with_bin_first(),
+                   capture_output=True, timeout=300)
+    return float(out.read_text())
+
+
 def run_demos_benchmark(work_dir: Path, body: str, episodes: int, video_episodes: int,
                         image_size: tuple[int, int], stage_frames: int) -> dict:
     runs = {}
@@ -107,6 +136,7 @@ def run_demos_benchmark(work_dir: Path, body: str, episodes: int, video_episodes
     stages = stage_times(work_dir, body, image_size, stage_frames)
     in_dataflow_ms = 1000 / runs["no_video_1_workers"]["frames_per_s"]
     stages["dora_and_the_rest_without_video"] = round(in_dataflow_ms - stages["physics"] - stages["expert"], 2)
+    stages["dora_alone"] = round(dora_alone_ms(work_dir, 300 if stage_frames < 100 else 3000), 2)
     return {"runs": runs, "ms_per_frame": stages, "image_size": list(image_size)}
 
 
@@ -122,8 +152,11 @@ def table_lines(figures: dict) -> list[str]:
     lines.append("a frame's time, in one process (ms per frame):")
     names = {"physics": "physics (ten 4 ms steps, the task's state)", "expert": "the expert",
              "pictures": f"two pictures, {size}", "encoding": "their encoding (AV1, and the image statistics)",
-             "dora_and_the_rest_without_video": "dora and the rest: a frame in the dataflow, less the above"}
+             "dora_and_the_rest_without_video": "dora and the rest: a frame in the dataflow, less the above",
+             "dora_alone": "of which dora alone: a frame's messages between empty nodes"}
     for stage, name in names.items():
+        if stage not in stages:  # a result saved before the row was measured
+            continue
         lines.append(f"  {name:<62} {stages[stage]:>8.2f}")
     return lines
 

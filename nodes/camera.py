@@ -31,7 +31,7 @@ from dora import Node  # noqa: E402
 
 from so101.assets import ModelFilesError  # noqa: E402
 from so101.bodies.camera import WRIST_CAMERA  # noqa: E402
-from so101.bodies.node_loop import cannot_start  # noqa: E402
+from so101.runtime.node_events import cannot_start  # noqa: E402
 from so101.dataset.features import DEFAULT_FPS  # noqa: E402
 from so101.dataset.settings import CameraSettings  # noqa: E402
 from so101.gui.display import DisplayError  # noqa: E402

@@ -30,7 +30,7 @@ import pyarrow as pa  # noqa: E402
 from dora import Node  # noqa: E402
 
 from so101.assets import ModelFilesError  # noqa: E402
-from so101.bodies.node_loop import STREAM_KEY, cannot_start  # noqa: E402
+from so101.runtime.node_events import STREAM_KEY, cannot_start  # noqa: E402
 from so101.runtime.lockstep import FrameParts, FrameTag, frame_tag  # noqa: E402
 from so101.runtime.logs import send_diagnostics_to  # noqa: E402
 from so101.runtime.node_events import inputs_until_stop  # noqa: E402
@@ -61,6 +61,8 @@ def main() -> int:
     try:
         settings = ExpertSettings.from_environ(os.environ)
         planner: Planner = planner_for(task_named(settings.task))
+        # The plans' kinematics use MuJoCo's maths: imported now, while the body starts, not in the first episode.
+        import so101.bodies.mujoco_model  # noqa: F401
     except (ValueError, ModelFilesError) as error:
         return cannot_start(error, NODE_ID)
     text = TEXT[settings.lang]

@@ -29,7 +29,8 @@ if str(ROOT) not in sys.path:
 import pyarrow as pa  # noqa: E402
 from dora import Node  # noqa: E402
 
-from so101.bodies.node_loop import STREAM_KEY, announce, cannot_start  # noqa: E402
+from so101.bodies.node_loop import announce  # noqa: E402
+from so101.runtime.node_events import STREAM_KEY, cannot_start  # noqa: E402
 from so101.leader.arm import LeaderFailed, SO101Leader  # noqa: E402
 from so101.leader.command import MOVED_DEG, Takeover  # noqa: E402
 from so101.leader.settings import LeaderSettings  # noqa: E402

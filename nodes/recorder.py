@@ -28,7 +28,7 @@ import numpy as np  # noqa: E402
 import pyarrow as pa  # noqa: E402
 from dora import Node  # noqa: E402
 
-from so101.bodies.node_loop import cannot_start  # noqa: E402
+from so101.runtime.node_events import cannot_start  # noqa: E402
 from so101.dataset.features import video_keys_and_sizes  # noqa: E402
 from so101.dataset.layout import DatasetError  # noqa: E402
 from so101.dataset.messages import decode_record_cmd, recording_metadata  # noqa: E402

@@ -439,3 +439,11 @@ def test_a_frames_stages_are_timed_in_process_on_the_expert_s_episode(tmp_path):
 def test_demos_refuse_the_real_arm_in_one_line(capsys):
     assert run_bench.main(["--demos", "--body", "real"]) == 1
     assert capsys.readouterr().err == "so101 bench: --demos measures a simulation's episodes: --body pybullet or mujoco\n"
+
+
+@pytest.mark.dataflow
+def test_dora_alone_times_the_lockstep_loops_messages_between_empty_nodes(tmp_path):
+    from bench.demos_bench import dora_alone_ms
+
+    ms = dora_alone_ms(tmp_path, 50)
+    assert 0 < ms < 1000 and (tmp_path / "echo_ms.txt").read_text().strip() == f"{ms:.3f}"

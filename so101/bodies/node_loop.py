@@ -44,15 +44,13 @@ from so101.joint_cmd import decode_joint_cmd
 from so101.robot import GRIPPER_COMMAND_INDEX, NUM_ARM_JOINTS
 from so101.runtime.dataflow import TICK_PERIOD_S, TickClock, timer_period_s
 from so101.runtime.lockstep import AGAIN_WORD, FrameTag, answers, frame_tag, steps_per_frame
-from so101.runtime.node_events import Event, inputs_until_stop, until_closed
+from so101.runtime.node_events import STREAM_KEY, Event, cannot_start, inputs_until_stop, until_closed
 from so101.tasks import parse_reset
 
 if TYPE_CHECKING:
     from dora import Node
 
 IMAGE_SIZE = (320, 240)
-# A joint_cmd whose metadata has this key is one of a stream (the leader node's, a tick each): not logged.
-STREAM_KEY = "stream"
 # `joint_target` goes out again this often even when unchanged, for a node that joined late.
 TARGET_REFRESH_S = 1.0
 
@@ -96,12 +94,6 @@ logger = logging.getLogger(__name__)
 def announce(line: str) -> None:
     """A line that tools wait for and parse (the "loaded" line, the window's): stdout, as it is, at once."""
     print(line, flush=True)
-
-
-def cannot_start(error: Exception, node_id: str = "simulation") -> int:
-    """One line on stderr and the exit code for a setting or a model that is wrong."""
-    print(f"[{node_id}] cannot start: {error}", file=sys.stderr, flush=True)
-    return 2
 
 
 def check_pictures(body: Body, settings: NodeSettings) -> None:

@@ -3,7 +3,7 @@ dataclass (so101/runtime/settings.py says how). The README's tables of the body 
 to these declarations (tests/test_settings.py).
 `NodeSettings` is what the shared loop reads for every body; each body adds its own
 (so101.bodies.registry names which). A bad value is a ValueError in one line, which the
-node prints and exits 2 on (node_loop.cannot_start).
+node prints and exits 2 on (so101.runtime.node_events.cannot_start).
 
 Light on purpose: no physics engine and no serial port is imported here.
 """

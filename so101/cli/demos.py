@@ -18,7 +18,7 @@ import time
 from pathlib import Path
 
 from so101.cli.argtypes import image_size
-from so101.cli.lockstep_run import add_common_arguments, cluster_place, fail, flows_for, log_place, refuse_real, run_flows, work_folder
+from so101.cli.lockstep_run import add_common_arguments, cluster_place, expert_driver, fail, flows_for, log_place, refuse_real, run_flows, work_folder
 from so101.dataset.settings import DEFAULT_IMAGE_SIZE
 from so101.runtime.lockstep import DEFAULT_LOCKSTEP_FPS
 from so101.tasks.episodes import Outcome
@@ -63,7 +63,7 @@ def run(args: argparse.Namespace) -> int:
     if not merged:  # the runner writes it
         opened.close()
     work = work_folder("demos")
-    flows = flows_for(args, work, True, ("image", "wrist_image"), picture_size,
+    flows = flows_for(args, work, expert_driver(args), ("image", "wrist_image"), picture_size,
                       lambda folder: {"SO101_SPOOL_DIR" if merged else "SO101_RECORD_DIR": str(folder / "spool" if merged else root),
                                       "SO101_KEEP": args.keep})
     cameras = f"front and wrist {flows[0].picture_size}" if flows[0].picture_size else "no video"

@@ -4,7 +4,9 @@ One line per episode (seed, success, time to success), then
 `success: K/N (P%, 95% CI lo–hi, Wilson), mean time to success T s`. A score is a measurement:
 the exit code is 0 whatever it is; bad options and a dataflow that fails exit non-zero with
 one line. `--expert` scores the scripted expert (nodes/expert.py), `--idle` an arm held at
-home: the floor every score must beat. `--video DIR` keeps each episode's front camera as an
+home: the floor every score must beat, `--policy DIR` a trained LeRobot policy (nodes/policy.py,
+run by the Python of a policy environment: `so101 policy-env`, or `--policy-python`); the body
+draws the pictures the policy sees, and in lockstep inference costs no simulated time. `--video DIR` keeps each episode's front camera as an
 mp4 (seed_S.mp4), to see why an episode failed. `--workers K` runs K dataflows at once, each on
 its share of the seeds; the lines still come in seed order.
 """
@@ -14,16 +16,31 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from so101.cli.argtypes import image_size
-from so101.cli.lockstep_run import add_common_arguments, cluster_place, fail, flows_for, log_place, refuse_real, run_flows, work_folder
+from so101.cli.argtypes import image_size, torch_device
+from so101.cli.lockstep_run import (
+    Driver, add_common_arguments, cluster_place, expert_driver, fail, flows_for, log_place, refuse_real, run_flows,
+    work_folder,
+)
 from so101.dataset.settings import DEFAULT_IMAGE_SIZE
+from so101.policy.environment import default_dir, python_in
+from so101.runtime.dataflow import ROOT
 from so101.tasks.episodes import score_line
+
+POLICY_NODE_FILE = ROOT / "nodes" / "policy.py"
 
 
 def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
     driver = parser.add_mutually_exclusive_group(required=True)
     driver.add_argument("--expert", action="store_true", help="the scripted expert drives (nodes/expert.py)")
     driver.add_argument("--idle", action="store_true", help="nothing drives: the arm holds home (the floor of any score)")
+    driver.add_argument("--policy", type=Path, default=None, metavar="DIR",
+                        help="a trained LeRobot policy drives (nodes/policy.py): its folder as lerobot-train writes it, "
+                             ".../checkpoints/last/pretrained_model")
+    parser.add_argument("--policy-python", type=Path, default=None, metavar="PY",
+                        help=f"--policy: the Python that runs it, with LeRobot (default {python_in(default_dir())}, "
+                             "which so101 policy-env makes)")
+    parser.add_argument("--policy-device", type=torch_device, default="cpu", metavar="DEVICE",
+                        help="--policy: the torch device it runs on: cpu (default), cuda or mps")
     add_common_arguments(parser)
     parser.add_argument("--video", type=Path, default=None, metavar="DIR",
                         help="keep each episode's front camera as an mp4 in DIR (drawn every frame: slower)")
@@ -38,12 +55,26 @@ def run(args: argparse.Namespace) -> int:
     place = cluster_place(args)
     if isinstance(place, str):
         return fail(f"so101 eval: {place}")
-    work = work_folder("eval")
     video = str(args.video.expanduser().resolve()) if args.video is not None else ""
-    flows = flows_for(args, work, args.expert, ("image",), args.image_size if video else None,
-                      lambda folder: {"SO101_VIDEO_DIR": video})
-    driver = "the expert" if args.expert else "idle (the arm held at home)"
-    print(f"eval: {args.task} on {args.body}, {driver}, seeds {args.seed}..{args.seed + args.episodes - 1}, "
+    pictures: tuple[str, ...] = ("image",)
+    picture_size = args.image_size if video else None
+    driver: Driver | None
+    if args.policy is not None:
+        chosen = policy_driver(args)
+        if isinstance(chosen, str):
+            return fail(f"so101 eval: {chosen}")
+        driver, seen_size = chosen
+        if seen_size is not None:  # the body draws both cameras, at the size the policy learned from
+            pictures, picture_size = ("image", "wrist_image"), seen_size
+    elif args.policy_python is not None:
+        return fail("so101 eval: --policy-python goes with --policy DIR")
+    else:
+        driver = expert_driver(args) if args.expert else None
+    work = work_folder("eval")
+    flows = flows_for(args, work, driver, pictures, picture_size, lambda folder: {"SO101_VIDEO_DIR": video})
+    who = ("the expert" if args.expert else f"the policy in {args.policy}" if args.policy is not None
+           else "idle (the arm held at home)")
+    print(f"eval: {args.task} on {args.body}, {who}, seeds {args.seed}..{args.seed + args.episodes - 1}, "
           f"time limit {args.time_limit:g} s, {args.workers} worker{'s' if args.workers > 1 else ''} "
           f"(logs: {log_place(args, work)})", flush=True)
     outcomes, problem = run_flows("eval", flows, work, args.log, lambda outcome, worker: print(outcome.line(), flush=True),
@@ -52,3 +83,27 @@ def run(args: argparse.Namespace) -> int:
         return fail(f"so101 eval: {problem}")
     print(score_line(outcomes), flush=True)
     return 0
+
+
+def policy_driver(args: argparse.Namespace) -> tuple[Driver, tuple[int, int] | None] | str:
+    """The policy node as the driver, and the size of the pictures it sees (None: none); or what is
+    wrong, in one line: a folder that is not a policy's, features this dataflow cannot give, no Python
+    to run it. Read from the policy's config.json, before anything starts (the node checks again)."""
+    from so101.policy.features import inputs_for, picture_size_of, read_policy_features
+    from so101.tasks import task_named
+
+    folder = args.policy.expanduser().resolve()
+    try:
+        inputs, outputs = read_policy_features(folder)
+        seen_size = picture_size_of(inputs)
+        needed = inputs_for(inputs, outputs, task_named(args.task).object_state_names, seen_size)
+    except ValueError as error:
+        return str(error)
+    python = (args.policy_python or python_in(default_dir())).expanduser()
+    if not python.exists():
+        return (f"{python} does not exist: make the policy environment with `so101 policy-env`, or give "
+                "--policy-python PY (a Python with LeRobot and dora-rs)")
+    size = f"{seen_size[0]}x{seen_size[1]}" if seen_size else ""
+    env = {"SO101_TASK": args.task, "SO101_POLICY_DIR": str(folder), "SO101_POLICY_DEVICE": args.policy_device,
+           "SO101_LOCKSTEP_PICTURES": size}
+    return Driver("policy", POLICY_NODE_FILE, needed, env, python=str(python.absolute())), seen_size

@@ -75,13 +75,30 @@ def add_common_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 @dataclass(frozen=True)
+class Driver:
+    """The node that answers each frame with the body's joint_cmd: its id, its file, what it reads
+    of the body's frame, its settings, and an interpreter of its own (the policy environment's) or
+    None for this project's."""
+
+    node_id: str
+    node_file: Path
+    inputs: tuple[str, ...]
+    env: dict[str, str]
+    python: str | None = None
+
+
+def expert_driver(args: argparse.Namespace) -> Driver:
+    return Driver("expert", EXPERT_NODE_FILE, ("joint_state", "gripper_state", "object_state"),
+                  {"SO101_TASK": args.task, "SO101_EXPERT_NOISE": repr(args.noise)})
+
+
+@dataclass(frozen=True)
 class Flow:
-    """One lockstep run: its body, whether an expert drives, and the runner's settings."""
+    """One lockstep run: its body, its driver (None: idle, the runner holds home), the runner's settings."""
 
     body: BodyKind
-    expert: bool
+    driver: Driver | None
     runner_env: dict[str, str]
-    expert_env: dict[str, str]
     lang: str
     pictures: tuple[str, ...] = ()  # the body's picture outputs: "image", "wrist_image"
     picture_size: str = ""  # WIDTHxHEIGHT
@@ -91,7 +108,7 @@ def queued(source: str) -> dict:
     return {"source": source, "queue_size": 100, "queue_policy": "backpressure"}
 
 
-def flows_for(args: argparse.Namespace, work: Path, expert: bool, pictures: tuple[str, ...],
+def flows_for(args: argparse.Namespace, work: Path, driver: Driver | None, pictures: tuple[str, ...],
               picture_size: tuple[int, int] | None, runner_env: Callable[[Path], dict[str, str]]) -> list[Flow]:
     """The runs add_common_arguments' options ask for, one per worker, each on its run of the seeds
     (in order): `pictures` (the body's picture outputs) at `picture_size` (None: none), each
@@ -106,8 +123,7 @@ def flows_for(args: argparse.Namespace, work: Path, expert: bool, pictures: tupl
         env = {"SO101_TASK": args.task, "SO101_SEED": str(seeds[0]), "SO101_EPISODES": str(len(seeds)),
                "SO101_TIME_LIMIT_S": repr(args.time_limit), "SO101_EPISODES_OUT": str(folder / "episodes.jsonl"),
                "SO101_LOCKSTEP_PICTURES": size, **runner_env(folder)}
-        flows.append(Flow(BODIES[args.body], expert=expert, runner_env=env,
-                          expert_env={"SO101_TASK": args.task, "SO101_EXPERT_NOISE": repr(args.noise)}, lang=args.lang,
+        flows.append(Flow(BODIES[args.body], driver=driver, runner_env=env, lang=args.lang,
                           pictures=pictures if size else (), picture_size=size))
     return flows
 
@@ -115,12 +131,12 @@ def flows_for(args: argparse.Namespace, work: Path, expert: bool, pictures: tupl
 def lockstep_dataflow(flow: Flow, placement: tuple[str, str] | None = None, root: PurePath = ROOT) -> dict:
     """The dataflow's descriptor: the body, the driver and the runner, every node's path absolute
     under `root` (the project's folder on the machines that run them); with a `placement`
-    (body machine, runner machine), the body and the expert on the first daemon, the runner, who
+    (body machine, runner machine), the body and the driver on the first daemon, the runner, who
     writes the results, on the second."""
     def path(node_file: Path) -> str:
         return str(root / node_file.relative_to(ROOT))
 
-    body_id = flow.body.node_id
+    body_id, driver = flow.body.node_id, flow.driver
     fps = DEFAULT_LOCKSTEP_FPS
     last_frame = EpisodeClock(fps, float(flow.runner_env["SO101_TIME_LIMIT_S"])).limit_frames
     frame_outputs = [*BODY_FRAME_OUTPUTS, *flow.pictures]
@@ -128,26 +144,29 @@ def lockstep_dataflow(flow: Flow, placement: tuple[str, str] | None = None, root
     nodes = [{
         "id": body_id, "path": path(flow.body.node_file), "restart_policy": "never",
         # The driver answers the body itself; the runner, beside the loop, only ends episodes (task_cmd).
-        "inputs": {"joint_cmd": queued("expert/joint_cmd" if flow.expert else "episodes/joint_cmd"),
+        "inputs": {"joint_cmd": queued(f"{driver.node_id}/joint_cmd" if driver else "episodes/joint_cmd"),
                    "task_cmd": queued("episodes/task_cmd")},
         "outputs": frame_outputs,
         "env": {"SO101_MODE": "direct", "SO101_LANG": flow.lang, "SO101_TASK": flow.runner_env["SO101_TASK"],
                 "SO101_SEED": flow.runner_env["SO101_SEED"], "SO101_LOCKSTEP_FPS": str(fps),
                 "SO101_EPISODE_FRAMES": str(last_frame), "SO101_LOCKSTEP_PICTURES": flow.picture_size},
     }]
-    if flow.expert:
-        runner_inputs["action"] = queued("expert/joint_cmd")
+    if driver is not None:
+        runner_inputs["action"] = queued(f"{driver.node_id}/joint_cmd")
         nodes.append({
-            "id": "expert", "path": path(EXPERT_NODE_FILE), "restart_policy": "never",
-            "inputs": {name: queued(f"{body_id}/{name}") for name in ("joint_state", "gripper_state", "object_state")},
+            "id": driver.node_id, "restart_policy": "never",
+            # A driver with a Python of its own runs as that interpreter with the node file as its argument.
+            **({"path": driver.python, "args": path(driver.node_file)} if driver.python
+               else {"path": path(driver.node_file)}),
+            "inputs": {name: queued(f"{body_id}/{name}") for name in driver.inputs if name in frame_outputs},
             "outputs": ["joint_cmd"],
-            "env": {"SO101_LANG": flow.lang, "SO101_LOCKSTEP_FPS": str(fps), **flow.expert_env},
+            "env": {"SO101_LANG": flow.lang, "SO101_LOCKSTEP_FPS": str(fps), **driver.env},
         })
     nodes.append({
         "id": "episodes", "path": path(EPISODES_NODE_FILE), "restart_policy": "never",
-        "inputs": runner_inputs, "outputs": ["task_cmd"] if flow.expert else ["joint_cmd", "task_cmd"],
+        "inputs": runner_inputs, "outputs": ["task_cmd"] if driver else ["joint_cmd", "task_cmd"],
         "env": {"SO101_LANG": flow.lang, "SO101_LOCKSTEP_FPS": str(fps),
-                **({} if flow.expert else {"SO101_IDLE": "1"}), **flow.runner_env},
+                **({} if driver else {"SO101_IDLE": "1"}), **flow.runner_env},
     })
     if placement is not None:
         nodes = [{"deploy": {"machine": placement[node["id"] == "episodes"]}, **node} for node in nodes]

@@ -31,6 +31,7 @@ SUBCOMMANDS = {
     "replay": ("so101.cli.replay", "play an episode of a LeRobot dataset onto any body, then print the tracking error"),
     "demos": ("so101.cli.demos", "demonstrations of a task by the scripted expert, in lockstep, into a LeRobot dataset"),
     "eval": ("so101.cli.evaluate", "score the expert (or an idle arm) on a task's seeded layouts, in lockstep: success rate with its 95%% interval"),
+    "policy-env": ("so101.cli.policy_env", "build (once) and check the environment that runs trained LeRobot policies (--policy-python)"),
     "fake-arm": ("so101.cli.fake_arm", "an emulated SO-101 servo bus on a pseudo-terminal, for trying the real-arm driver without hardware"),
 }
 

@@ -212,7 +212,7 @@ def _log_tail(log: Path) -> str:
     return "\n".join("  " + line for line in lines[-LOG_TAIL_LINES:])
 
 
-# A node's one-line refusal to start (so101.bodies.node_loop.cannot_start), as dora's log carries it.
+# A node's one-line refusal to start (so101.runtime.node_events.cannot_start), as dora's log carries it.
 # A node's one line when it refuses to start, or (the episodes' runner) to go on.
 _REFUSAL = re.compile(r"(\[\w+\] cannot (?:start|go on): .*?)\s*$", re.MULTILINE)
 

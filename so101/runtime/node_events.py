@@ -14,10 +14,19 @@ Ctrl-C, a `return` inside the block, or an exception, which goes on up once it h
 from __future__ import annotations
 
 import contextlib
+import sys
 from typing import Any, Callable, Iterable, Iterator
 
 # A dora event: {"type": "INPUT", "id": ..., "value": ..., "metadata": {...}}, or STOP, ...
 Event = dict[str, Any]
+# A joint_cmd whose metadata has this key is one of a stream (the leader node's, a tick each): not logged.
+STREAM_KEY = "stream"
+
+
+def cannot_start(error: Exception, node_id: str = "simulation") -> int:
+    """One line on stderr and the exit code for a setting or a model that is wrong."""
+    print(f"[{node_id}] cannot start: {error}", file=sys.stderr, flush=True)
+    return 2
 
 
 def inputs(events: Iterable[Event]) -> Iterator[Event]:

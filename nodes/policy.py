@@ -1,0 +1,136 @@
+"""policy: a trained LeRobot policy, a sender of `joint_cmd` like the expert, the prompt or the leader.
+
+It runs under the Python of a policy environment (`so101 policy-env`; `--policy-python`), and
+imports only dora-rs, pyarrow, numpy, LeRobot and this project's plain modules (no simulator).
+At start it loads SO101_POLICY_DIR as LeRobot's `lerobot-train` writes it (config, weights,
+pre- and post-processors) with LeRobot's factory, so any policy type LeRobot knows loads, and
+it takes the inputs its input features ask for: `observation.state` from `joint_state` and
+`gripper_state`, `observation.environment_state` from `object_state`, the cameras from `image`
+and `wrist_image`. A feature the dataflow cannot give refuses the node in one line that names it.
+In lockstep (`so101 eval --policy`; so101/runtime/lockstep.py), once a frame's parts are in, it
+answers that frame with six joint targets, tagged with it, in the body's units (mapped where the
+recorder maps them: so101/policy/features.py); a frame 0 is a new episode and resets the policy
+(an action chunk is played out across the frames that follow, as LeRobot's `select_action` does).
+A frame sent again gets the same answer. Inference that raises stops the node in one line; the
+body then holds where it is (in lockstep it steps only on an answer).
+Settings: so101.policy.settings.PolicySettings.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import sys
+from pathlib import Path
+from typing import Any, Sequence
+
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:  # run as a script from anywhere: the so101 package sits beside nodes/
+    sys.path.insert(0, str(ROOT))
+
+import numpy as np  # noqa: E402
+import pyarrow as pa  # noqa: E402
+from dora import Node  # noqa: E402
+
+from so101.dataset.features import ROBOT_TYPE  # noqa: E402
+from so101.policy.features import inputs_for, joint_targets_deg, observation  # noqa: E402
+from so101.policy.settings import PolicySettings  # noqa: E402
+from so101.runtime.lockstep import FrameParts, FrameTag, frame_tag  # noqa: E402
+from so101.runtime.logs import send_diagnostics_to  # noqa: E402
+from so101.runtime.node_events import STREAM_KEY, cannot_start, inputs_until_stop  # noqa: E402
+from so101.tasks import task_named  # noqa: E402
+
+NODE_ID = "policy"
+logger = logging.getLogger("so101.policy")
+
+
+class PolicyFailed(Exception):
+    """The policy cannot be loaded or run; str() is one line for the user."""
+
+
+class LoadedPolicy:
+    """A LeRobot policy folder, loaded: its features, and one action per observation."""
+
+    def __init__(self, folder: Path, device: str, instruction: str):
+        if not folder.is_dir():
+            raise PolicyFailed(f"{folder} is not a folder: give a trained policy's folder "
+                               "(.../checkpoints/last/pretrained_model)")
+        if not (folder / "config.json").is_file():
+            raise PolicyFailed(f"{folder} has no config.json: it is not a policy folder as lerobot-train writes it "
+                               "(.../checkpoints/last/pretrained_model)")
+        try:
+            import torch
+            from lerobot.configs.policies import PreTrainedConfig
+            from lerobot.policies.factory import get_policy_class, make_pre_post_processors
+            from lerobot.policies.utils import prepare_observation_for_inference
+        except Exception as error:  # noqa: BLE001 (any import failure is the one line a user needs)
+            raise PolicyFailed(f"LeRobot does not import in {sys.executable} ({type(error).__name__}: {error}): "
+                               "run the node with a policy environment's Python (so101 policy-env)") from None
+        try:
+            config = PreTrainedConfig.from_pretrained(str(folder))
+            config.device = device
+            self.policy = get_policy_class(config.type).from_pretrained(str(folder), config=config)
+            self.policy.eval()
+            self.preprocess, self.postprocess = make_pre_post_processors(
+                config, pretrained_path=str(folder), preprocessor_overrides={"device_processor": {"device": device}})
+        except Exception as error:  # noqa: BLE001 (a folder LeRobot cannot load: one line, whatever LeRobot raised)
+            raise PolicyFailed(f"LeRobot cannot load the policy in {folder}: {type(error).__name__}: {error}") from None
+        self.kind = config.type
+        self.input_shapes = {name: tuple(feature.shape) for name, feature in config.input_features.items()}
+        self.output_shapes = {name: tuple(feature.shape) for name, feature in config.output_features.items()}
+        self._torch, self._prepare = torch, prepare_observation_for_inference
+        self._device, self._instruction = torch.device(device), instruction
+
+    def reset(self) -> None:
+        """A new episode: the action chunk and any history go."""
+        self.policy.reset()
+
+    def act(self, values: dict[str, np.ndarray]) -> np.ndarray:
+        with self._torch.inference_mode():
+            batch = self._prepare(dict(values), self._device, self._instruction, ROBOT_TYPE)
+            action = self.postprocess(self.policy.select_action(self.preprocess(batch)))
+        return action.squeeze(0).to("cpu").numpy()
+
+
+def main() -> int:
+    send_diagnostics_to("stdout")
+    try:
+        settings = PolicySettings.from_environ(os.environ)
+        task = task_named(settings.task)
+        loaded = LoadedPolicy(settings.policy_dir, settings.device, task.instruction)
+        needed = inputs_for(loaded.input_shapes, loaded.output_shapes, task.object_state_names, settings.image_size)
+    except (ValueError, PolicyFailed) as error:
+        return cannot_start(error, NODE_ID)
+    logger.warning("[policy] %s from %s: inputs %s", loaded.kind, settings.policy_dir, ", ".join(needed))
+    frames = FrameParts(needed)
+    episode: int | None = None  # the episode the policy's history belongs to
+    answered: tuple[FrameTag, Sequence[float]] | None = None  # the last frame answered, and its answer
+    node = Node()
+    with inputs_until_stop(node, close=lambda: None) as inputs:
+        for event in inputs:
+            tag = frame_tag(event.get("metadata"))
+            if tag is None:
+                continue
+            value: Any = event["value"]
+            frame = frames.add(event["id"], tag, value.to_numpy(zero_copy_only=False))
+            if frame is None:
+                continue
+            if answered is not None and answered[0] == tag:  # the frame again, after a loss: the same answer
+                targets_deg = answered[1]
+            else:
+                if tag.frame == 0 or tag.episode != episode:
+                    loaded.reset()
+                    episode = tag.episode
+                try:
+                    targets_deg = joint_targets_deg(loaded.act(observation(frame, settings.image_size)))
+                except Exception as error:  # noqa: BLE001 (inference that raises: one line, and the node stops)
+                    print(f"[{NODE_ID}] cannot go on: inference failed at frame {tag.frame} (seed {tag.seed}): "
+                          f"{type(error).__name__}: {error}", file=sys.stderr, flush=True)
+                    return 1
+                answered = (tag, targets_deg)
+            node.send_output("joint_cmd", pa.array(targets_deg, type=pa.float64()), {**tag.metadata(), STREAM_KEY: 1})
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,112 @@
+"""The policy environment: a virtual environment of its own with LeRobot, torch and dora-rs, whose
+interpreter runs nodes/policy.py (`--policy-python`). LeRobot and torch are heavy, and LeRobot 0.5
+and later need Python >= 3.12 while this project is 3.11, so they stay out of the project's .venv.
+
+`so101 policy-env` builds it once per machine (in the user's cache by default) and checks it: the
+imports the node makes, offline. A built one is only checked again.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+# LeRobot 0.4.4 is the last release for Python 3.11 (0.5 and later need 3.12); its pins take
+# torch < 2.11. dora-rs is this project's own version: the daemon and the node library must match.
+LEROBOT_REQUIREMENT = "lerobot==0.4.4"
+DORA_REQUIREMENT = "dora-rs==1.1.0"
+REQUIREMENTS = (LEROBOT_REQUIREMENT, DORA_REQUIREMENT)
+STAMP_NAME = "so101-policy-env.json"
+# What nodes/policy.py imports, and the versions it reports; run offline, as the node runs.
+CHECK_SCRIPT = """
+import json
+import dora, numpy, pyarrow, torch
+import lerobot
+from lerobot.configs.policies import PreTrainedConfig
+from lerobot.policies.factory import get_policy_class, make_pre_post_processors
+from importlib.metadata import version
+print(json.dumps({"lerobot": version("lerobot"), "torch": torch.__version__, "dora-rs": version("dora-rs"),
+                  "numpy": numpy.__version__, "pyarrow": pyarrow.__version__}))
+"""
+OFFLINE = {"HF_HUB_OFFLINE": "1", "HF_DATASETS_OFFLINE": "1", "TRANSFORMERS_OFFLINE": "1"}
+
+
+class PolicyEnvError(Exception):
+    """The policy environment cannot be built or does not work; str() is one line for the user."""
+
+
+def default_dir() -> Path:
+    """Once per machine: in the user's cache ($XDG_CACHE_HOME, else ~/.cache), named for its LeRobot."""
+    cache = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+    return cache / "so101" / f"policy-env-{LEROBOT_REQUIREMENT.replace('==', '-')}"
+
+
+def python_in(folder: Path) -> Path:
+    return folder / ("Scripts/python.exe" if os.name == "nt" else "bin/python")
+
+
+@dataclass(frozen=True)
+class PolicyEnv:
+    """A working policy environment: its interpreter and what it holds."""
+
+    python: Path
+    versions: dict[str, str]
+
+    def line(self) -> str:
+        held = ", ".join(f"{name} {self.versions[name]}" for name in ("lerobot", "torch", "dora-rs"))
+        return f"{self.python} ({held})"
+
+
+def check(python: Path, timeout_s: float = 300.0) -> PolicyEnv:
+    """The environment of interpreter `python`, if it imports what the policy node needs (offline);
+    PolicyEnvError in one line otherwise."""
+    if not python.exists():
+        raise PolicyEnvError(f"{python} does not exist: make a policy environment with `so101 policy-env`")
+    try:
+        done = subprocess.run([str(python), "-c", CHECK_SCRIPT], capture_output=True, text=True, timeout=timeout_s,
+                              env={**os.environ, **OFFLINE})
+    except (OSError, subprocess.TimeoutExpired) as error:
+        raise PolicyEnvError(f"{python} could not be run: {error}") from None
+    if done.returncode != 0:
+        last = (done.stderr.strip().splitlines() or ["no message"])[-1]
+        raise PolicyEnvError(f"{python} cannot import what the policy node needs ({last}): "
+                             "make a policy environment with `so101 policy-env`")
+    try:
+        versions = json.loads(done.stdout.strip().splitlines()[-1])
+    except (ValueError, IndexError):
+        raise PolicyEnvError(f"{python} did not say its versions: {done.stdout.strip()[:200]}") from None
+    return PolicyEnv(python, versions)
+
+
+def build(folder: Path, base_python: str = sys.executable, say=print) -> PolicyEnv:
+    """The policy environment in `folder`: checked if it was built; else made with `base_python`'s venv
+    and pip (downloads: torch's wheel and its libraries, several GB), then checked."""
+    python = python_in(folder)
+    stamp = folder / STAMP_NAME
+    if stamp.exists() and python.exists():
+        try:
+            if json.loads(stamp.read_text()).get("requirements") == list(REQUIREMENTS):
+                return check(python)
+        except (OSError, ValueError):
+            pass  # a stamp that cannot be read: build again over it
+    if folder.exists() and any(folder.iterdir()) and not python.exists():
+        raise PolicyEnvError(f"{folder} is a folder with files and no Python environment in it: "
+                             "name an empty or new folder")
+    steps = [[base_python, "-m", "venv", str(folder)],
+             [str(python), "-m", "pip", "install", "--disable-pip-version-check", "--quiet", *REQUIREMENTS]]
+    for command in steps:
+        say("+ " + " ".join(command))
+        try:
+            done = subprocess.run(command, capture_output=True, text=True)
+        except OSError as error:
+            raise PolicyEnvError(f"{command[0]} could not be run: {error}") from None
+        if done.returncode != 0:
+            last = (done.stderr.strip().splitlines() or done.stdout.strip().splitlines() or ["no message"])[-1]
+            raise PolicyEnvError(f"`{' '.join(command[:4])} ...` failed: {last}")
+    env = check(python)
+    stamp.write_text(json.dumps({"requirements": list(REQUIREMENTS), "versions": env.versions}, indent=2))
+    return env

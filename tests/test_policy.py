@@ -1,0 +1,139 @@
+"""A trained policy in the dataflow: its features and units (so101/policy/features.py), its settings, the
+policy environment (so101 policy-env), and `so101 eval --policy`'s refusals."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from so101.dataset.features import ACTION_KEY, ENVIRONMENT_KEY, IMAGE_KEY, STATE_KEY, WRIST_IMAGE_KEY, to_lerobot
+from so101.policy.features import (
+    inputs_for, joint_targets_deg, observation, picture_size_of, read_policy_features,
+)
+from so101.policy.settings import PolicySettings
+from so101.tasks import CUBE_TO_BOX
+from tests.helpers.dataflow import ROOT, SO101
+
+NAMES = CUBE_TO_BOX.object_state_names
+STATE_ONLY = {STATE_KEY: (6,), ENVIRONMENT_KEY: (len(NAMES),)}
+ACTION = {ACTION_KEY: (6,)}
+
+
+def write_config(folder, inputs, outputs=ACTION):
+    folder.mkdir(parents=True, exist_ok=True)
+    features = {key: {name: {"type": "STATE", "shape": list(shape)} for name, shape in features.items()}
+                for key, features in (("input_features", inputs), ("output_features", outputs))}
+    (folder / "config.json").write_text(json.dumps({"type": "act", **features}))
+    return folder
+
+
+# -- features and units -----------------------------------------------------------------------------------------
+
+def test_a_state_only_policy_reads_the_arm_and_the_objects_and_a_vision_one_the_cameras_too():
+    assert inputs_for(STATE_ONLY, ACTION, NAMES, None) == ("joint_state", "gripper_state", "object_state")
+    seeing = {STATE_KEY: (6,), IMAGE_KEY: (3, 240, 320), WRIST_IMAGE_KEY: (3, 240, 320)}
+    assert picture_size_of(seeing) == (320, 240) and picture_size_of(STATE_ONLY) is None
+    assert inputs_for(seeing, ACTION, NAMES, (320, 240)) == ("joint_state", "gripper_state", "image", "wrist_image")
+
+
+@pytest.mark.parametrize("inputs, outputs, size, message", [
+    ({**STATE_ONLY, "observation.images.top": (3, 240, 320)}, ACTION, (320, 240),
+     "the policy asks for observation.images.top, which this dataflow cannot give"),
+    ({STATE_KEY: (14,)}, ACTION, None, "the policy's observation.state has shape (14,), this dataflow's (6,)"),
+    ({ENVIRONMENT_KEY: (7,)}, ACTION, None, "observation.environment_state has shape (7,), this dataflow's (10,)"),
+    (STATE_ONLY, {ACTION_KEY: (14,)}, None, "the policy's action has shape (14,), the SO-101's is (6,)"),
+    ({IMAGE_KEY: (3, 96, 96)}, ACTION, None, "this dataflow has no pictures"),
+    ({IMAGE_KEY: (3, 96, 96)}, ACTION, (320, 240), "has shape (3, 96, 96), this dataflow's (3, 240, 320)"),
+])
+def test_features_this_dataflow_cannot_give_are_refused_in_one_line_naming_them(inputs, outputs, size, message):
+    with pytest.raises(ValueError, match=message.replace("(", r"\(").replace(")", r"\)")) as refused:
+        inputs_for(inputs, outputs, NAMES, size)
+    assert "\n" not in str(refused.value)
+
+
+def test_a_frame_becomes_lerobots_observation_and_an_action_the_bodys_degrees_exactly():
+    arm_deg, gripper_deg = [10.0, -20.0, 30.5, -40.0, 50.0], [-10.0]
+    objects = list(np.linspace(0.1, 1.0, len(NAMES)))
+    picture = np.arange(8 * 6 * 3, dtype=np.uint8)
+    values = observation({"joint_state": arm_deg, "gripper_state": gripper_deg, "object_state": objects,
+                          "image": picture}, (8, 6))
+    assert values[STATE_KEY].dtype == np.float32 and values[STATE_KEY].tolist() == to_lerobot(arm_deg + gripper_deg).tolist()
+    assert values[STATE_KEY][5] == 0.0  # the gripper closed at -10° is LeRobot's 0
+    assert values[ENVIRONMENT_KEY].tolist() == np.float32(objects).tolist()
+    assert values[IMAGE_KEY].shape == (6, 8, 3) and values[IMAGE_KEY][0, 1].tolist() == [3, 4, 5]
+    # Both ways: LeRobot's values back to degrees; the gripper's 0-100 is -10..100°.
+    assert joint_targets_deg([10.0, -20.0, 30.5, -40.0, 50.0, 100.0]) == [10.0, -20.0, 30.5, -40.0, 50.0, 100.0]
+    assert joint_targets_deg(np.array([[0, 0, 0, 0, 0, 0.0]]))[5] == -10.0
+    assert joint_targets_deg(to_lerobot(arm_deg + [45.0])) == pytest.approx(arm_deg + [45.0], abs=1e-4)
+    for bad in ([1, 2, 3], [0, 0, 0, 0, 0, float("nan")]):
+        with pytest.raises(ValueError, match="expected 6 finite numbers"):
+            joint_targets_deg(bad)
+
+
+def test_a_policy_folders_features_are_read_from_its_config_without_lerobot(tmp_path):
+    folder = write_config(tmp_path / "policy", STATE_ONLY)
+    assert read_policy_features(folder) == (STATE_ONLY, ACTION)
+    (tmp_path / "empty").mkdir()
+    for where, message in ((tmp_path / "missing", "is not a folder"), (tmp_path / "empty", "has no config.json")):
+        with pytest.raises(ValueError, match=message):
+            read_policy_features(where)
+    (folder / "config.json").write_text("{not json")
+    with pytest.raises(ValueError, match="is not a LeRobot policy's config"):
+        read_policy_features(folder)
+
+
+def test_the_policy_nodes_settings_need_its_folder_and_refuse_a_device_torch_does_not_know():
+    with pytest.raises(ValueError, match="SO101_POLICY_DIR is empty: set it"):
+        PolicySettings.from_environ({})
+    with pytest.raises(ValueError, match="SO101_POLICY_DEVICE: 'gpu' is not a torch device"):
+        PolicySettings.from_environ({"SO101_POLICY_DIR": "/p", "SO101_POLICY_DEVICE": "gpu"})
+    settings = PolicySettings.from_environ({"SO101_POLICY_DIR": "/p", "SO101_LOCKSTEP_PICTURES": "320x240"})
+    assert (settings.device, settings.frame_rate, settings.image_size) == ("cpu", 25, (320, 240))
+
+
+def test_the_policy_node_imports_nothing_of_the_projects_install_but_numpy_pyarrow_and_dora():
+    # Its Python is the policy environment's, which has LeRobot, torch, dora-rs, pyarrow and numpy only.
+    probe = ("import sys; sys.path.insert(0, 'nodes'); import policy; "
+             "print(','.join(sorted({name.split('.')[0] for name in sys.modules})))")
+    done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, cwd=ROOT, check=True)
+    loaded = set(done.stdout.strip().split(","))
+    assert not loaded & {"pybullet", "mujoco", "av", "viser", "matplotlib", "yaml", "serial", "scservo_sdk",
+                         "trimesh", "PIL", "torch", "lerobot"}
+    assert {"dora", "pyarrow", "numpy", "so101"} <= loaded
+
+
+# -- so101 eval --policy: refused before anything starts ---------------------------------------------------------
+
+@pytest.mark.parametrize("make, extra, message", [
+    (lambda tmp: tmp / "nothing", [], "is not a folder"),
+    (lambda tmp: write_config(tmp / "other", {STATE_KEY: (14,)}), [], "observation.state has shape (14,)"),
+    (lambda tmp: write_config(tmp / "fine", STATE_ONLY), ["--policy-python", "/no/python"], "/no/python does not exist"),
+])
+def test_eval_with_a_policy_it_cannot_run_says_why_in_one_line(tmp_path, make, extra, message):
+    done = subprocess.run([str(SO101), "eval", "--task", "cube_to_box", "--policy", str(make(tmp_path)), *extra,
+                           "--episodes", "1", "--lang", "en"], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 1 and message in done.stderr and len(done.stderr.strip().splitlines()) == 1, done.stderr
+
+
+# -- the policy environment -------------------------------------------------------------------------------------
+
+def test_a_python_without_lerobot_is_not_a_policy_environment_and_says_what_to_do(tmp_path):
+    from so101.policy.environment import PolicyEnvError, check
+
+    with pytest.raises(PolicyEnvError, match=r"cannot import what the policy node needs \(.*No module named") as refused:
+        check(__import__("pathlib").Path(sys.executable))  # this project's Python: no torch, no LeRobot
+    assert "so101 policy-env" in str(refused.value) and "\n" not in str(refused.value)
+    with pytest.raises(PolicyEnvError, match="does not exist: make a policy environment"):
+        check(tmp_path / "bin" / "python")
+
+
+def test_policy_env_leaves_a_folder_of_other_files_alone(tmp_path):
+    keep = tmp_path / "notes.txt"
+    keep.write_text("mine")
+    done = subprocess.run([str(SO101), "policy-env", str(tmp_path)], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 1 and "is a folder with files and no Python environment in it" in done.stderr
+    assert keep.read_text() == "mine" and sorted(tmp_path.iterdir()) == [keep]
