@@ -2,11 +2,14 @@
 """Set up this project from nothing but Python 3.11 and pip, then run it.
 
     python3.11 bootstrap.py          # set up, then start the dataflow with its prompt (so101 teleop)
-    python3.11 bootstrap.py test     # set up with test tools, then run the whole test suite
+    python3.11 bootstrap.py test     # set up with test tools and the policy environment, then run the whole test suite
     python3.11 bootstrap.py setup    # set up only
 
 Set-up is idempotent: a virtual environment in .venv, this project installed in it
-(editable), and the SO-101 model fetched and verified into assets/SO101.
+(editable), and the SO-101 model fetched and verified into assets/SO101. `test` also makes the
+policy environment (`so101 policy-env`: LeRobot and torch, once per machine, several GB), which
+the tests of trained policies run in; where it cannot be made, it says why and those tests are
+skipped, saying so (`test --no-policy-env` skips it on purpose).
 Any further arguments go to the command that runs (so101 teleop or pytest).
 """
 
@@ -78,6 +81,13 @@ def main(argv: list[str]) -> int:
         print(f"ready. Activate with: source {VENV.relative_to(ROOT)}/bin/activate")
         return 0
     if action == "test":
+        if "--no-policy-env" in rest:
+            rest = [arg for arg in rest if arg != "--no-policy-env"]
+        else:
+            print("+", BIN / "so101", "policy-env", flush=True)
+            if subprocess.call([str(BIN / "so101"), "policy-env"], cwd=ROOT, env=env) != 0:
+                print("the policy environment could not be made (above): the tests that run a trained policy "
+                      "will be skipped", flush=True)
         command = [str(PYTHON), "-m", "pytest", *rest]
     else:
         command = [str(BIN / "so101"), "teleop", *rest]

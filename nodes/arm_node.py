@@ -18,11 +18,11 @@ from types import FrameType
 from dora import Node
 
 from so101.bodies.node_loop import run_body_node
-from so101.runtime.node_events import cannot_start
 from so101.bodies.real_arm import ArmFailed, SO101Real, check_node_settings
 from so101.bodies.settings import ArmSettings, NodeSettings
 from so101.feetech.calibration import CalibrationError
 from so101.runtime.logs import send_diagnostics_to
+from so101.runtime.node_events import cannot_start
 
 
 def _interrupt(signum: int, frame: FrameType | None) -> None:

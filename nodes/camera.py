@@ -31,14 +31,13 @@ from dora import Node  # noqa: E402
 
 from so101.assets import ModelFilesError  # noqa: E402
 from so101.bodies.camera import WRIST_CAMERA  # noqa: E402
-from so101.runtime.node_events import cannot_start  # noqa: E402
 from so101.dataset.features import DEFAULT_FPS  # noqa: E402
 from so101.dataset.settings import CameraSettings  # noqa: E402
 from so101.gui.display import DisplayError  # noqa: E402
 from so101.robot import NUM_ARM_JOINTS  # noqa: E402
 from so101.runtime.dataflow import TICK_PERIOD_S, timer_period_s  # noqa: E402
 from so101.runtime.logs import send_diagnostics_to  # noqa: E402
-from so101.runtime.node_events import inputs_until_stop  # noqa: E402
+from so101.runtime.node_events import cannot_start, inputs_until_stop  # noqa: E402
 from so101.runtime.processes import yield_cpu_to_the_body  # noqa: E402
 from so101.tasks import task_named  # noqa: E402
 

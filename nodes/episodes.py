@@ -36,8 +36,8 @@ import numpy as np  # noqa: E402
 import pyarrow as pa  # noqa: E402
 from dora import Node  # noqa: E402
 
-from so101.runtime.node_events import STREAM_KEY, cannot_start  # noqa: E402
 from so101.dataset.episode import EpisodeRecorder  # noqa: E402
+from so101.runtime.node_events import STREAM_KEY, cannot_start  # noqa: E402
 from so101.dataset.features import (  # noqa: E402
     ACTION_KEY, ENVIRONMENT_KEY, IMAGE_KEY, REWARD_KEY, STATE_KEY, SUCCESS_KEY, WRIST_IMAGE_KEY, to_lerobot,
     video_keys_and_sizes,

@@ -2,8 +2,9 @@
 
 It reads only `joint_state`, `gripper_state` and `object_state`. In lockstep (`so101 eval`,
 `so101 demos`; so101/runtime/lockstep.py), once the three parts of a frame are in, it answers
-that frame with six joint targets, tagged with it (a frame sent again gets the same answer). A frame 0 is a new episode (a reset): a fresh
-plan for the layout it shows, its noise drawn from the layout's seed. Its clock is the frame's
+that frame with six joint targets, tagged with it (a frame sent again gets the same answer). A
+frame 0 is a new episode (a reset): a fresh plan for the layout it shows, its noise drawn from
+the layout's seed. Its clock is the frame's
 index over the frame rate, so the same layout gives the same episode however fast the machine.
 At the prompt (`so101 teleop --task`), it stands between the prompt and the body, as the leader
 does: what the prompt sends (`typed_cmd`) goes on to the body as it is; `expert_cmd` `run` has it
@@ -30,10 +31,9 @@ import pyarrow as pa  # noqa: E402
 from dora import Node  # noqa: E402
 
 from so101.assets import ModelFilesError  # noqa: E402
-from so101.runtime.node_events import STREAM_KEY, cannot_start  # noqa: E402
 from so101.runtime.lockstep import FrameParts, FrameTag, frame_tag  # noqa: E402
 from so101.runtime.logs import send_diagnostics_to  # noqa: E402
-from so101.runtime.node_events import inputs_until_stop  # noqa: E402
+from so101.runtime.node_events import STREAM_KEY, cannot_start, inputs_until_stop  # noqa: E402
 from so101.tasks import task_named  # noqa: E402
 from so101.tasks.expert import Expert, Planner, planner_for  # noqa: E402
 from so101.tasks.settings import ExpertSettings  # noqa: E402

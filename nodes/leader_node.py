@@ -30,13 +30,12 @@ import pyarrow as pa  # noqa: E402
 from dora import Node  # noqa: E402
 
 from so101.bodies.node_loop import announce  # noqa: E402
-from so101.runtime.node_events import STREAM_KEY, cannot_start  # noqa: E402
 from so101.leader.arm import LeaderFailed, SO101Leader  # noqa: E402
 from so101.leader.command import MOVED_DEG, Takeover  # noqa: E402
 from so101.leader.settings import LeaderSettings  # noqa: E402
 from so101.runtime.dataflow import timer_period_s  # noqa: E402
 from so101.runtime.logs import send_diagnostics_to  # noqa: E402
-from so101.runtime.node_events import inputs_until_stop  # noqa: E402
+from so101.runtime.node_events import STREAM_KEY, cannot_start, inputs_until_stop  # noqa: E402
 
 NODE_ID = "leader"
 # Marks a joint_cmd as a stream (one per tick): the body does not log each one.

@@ -13,6 +13,12 @@ recorder maps them: so101/policy/features.py); a frame 0 is a new episode and re
 (an action chunk is played out across the frames that follow, as LeRobot's `select_action` does).
 A frame sent again gets the same answer. Inference that raises stops the node in one line; the
 body then holds where it is (in lockstep it steps only on an answer).
+At the prompt (`so101 teleop --policy`) it stands between the prompt and the body, as the expert
+does: what comes before it (`typed_cmd`) goes on to the body as it is; `policy_cmd` `on` resets
+the policy and has it drive, an action every `tick` (the dataset's 40 ms) from the newest state,
+until `off`, a typed command takes over, or inference fails (one line of news; the node stays, and
+typed commands still pass). Its news goes out on `policy_status`. The body's limits and ramps
+apply to its commands as to typed ones.
 Settings: so101.policy.settings.PolicySettings.
 """
 
@@ -42,6 +48,25 @@ from so101.tasks import task_named  # noqa: E402
 
 NODE_ID = "policy"
 logger = logging.getLogger("so101.policy")
+
+TEXT = {
+    "zh": {
+        "loaded": "[策略] {kind} 策略已加载({folder}),读取 {inputs}",
+        "driving": "[策略] {kind} 开始驾驶;键入任何动作命令即接管,policy off 停下",
+        "stopped": "[策略] 停下了",
+        "took_over": "[策略] 键入的命令接管了控制,策略停下",
+        "no_state": "[策略] 还没有收到 {inputs}:没有开始",
+        "failed": "[策略] 推理失败,策略停下:{error}",
+    },
+    "en": {
+        "loaded": "[policy] {kind} policy loaded from {folder}: it reads {inputs}",
+        "driving": "[policy] {kind} is driving: any move you type takes over; policy off stops it",
+        "stopped": "[policy] stopped",
+        "took_over": "[policy] a typed command took over: the policy stopped",
+        "no_state": "[policy] no {inputs} yet: not started",
+        "failed": "[policy] inference failed, the policy stopped: {error}",
+    },
+}
 
 
 class PolicyFailed(Exception):
@@ -101,34 +126,72 @@ def main() -> int:
         needed = inputs_for(loaded.input_shapes, loaded.output_shapes, task.object_state_names, settings.image_size)
     except (ValueError, PolicyFailed) as error:
         return cannot_start(error, NODE_ID)
-    logger.warning("[policy] %s from %s: inputs %s", loaded.kind, settings.policy_dir, ", ".join(needed))
+    text = TEXT[settings.lang]
+    # so101 teleop waits for this line (so101.runtime.dataflow.POLICY_READY_MARKS).
+    logger.warning(text["loaded"].format(kind=loaded.kind, folder=settings.policy_dir, inputs=", ".join(needed)))
     frames = FrameParts(needed)
-    episode: int | None = None  # the episode the policy's history belongs to
-    answered: tuple[FrameTag, Sequence[float]] | None = None  # the last frame answered, and its answer
+    episode: int | None = None  # lockstep: the episode the policy's history belongs to
+    answered: tuple[FrameTag, Sequence[float]] | None = None  # lockstep: the last frame answered, and its answer
+    latest: dict[str, Any] = {}  # at the prompt: the newest of each input the policy needs
+    driving = False  # at the prompt: `on` came, and nothing has stopped it since
     node = Node()
+
+    def say(line: str) -> None:
+        logger.warning(line)
+        node.send_output("policy_status", pa.array([line]))
+
+    def act(frame: dict[str, Any]) -> list[float]:
+        return joint_targets_deg(loaded.act(observation(frame, settings.image_size)))
+
     with inputs_until_stop(node, close=lambda: None) as inputs:
         for event in inputs:
+            input_id, value = event["id"], event["value"]
             tag = frame_tag(event.get("metadata"))
-            if tag is None:
-                continue
-            value: Any = event["value"]
-            frame = frames.add(event["id"], tag, value.to_numpy(zero_copy_only=False))
-            if frame is None:
-                continue
-            if answered is not None and answered[0] == tag:  # the frame again, after a loss: the same answer
-                targets_deg = answered[1]
-            else:
-                if tag.frame == 0 or tag.episode != episode:
+            if tag is not None:  # lockstep: answer the frame once it is whole
+                frame = frames.add(input_id, tag, value.to_numpy(zero_copy_only=False))
+                if frame is None:
+                    continue
+                if answered is not None and answered[0] == tag:  # the frame again, after a loss: the same answer
+                    targets_deg = answered[1]
+                else:
+                    if tag.frame == 0 or tag.episode != episode:
+                        loaded.reset()
+                        episode = tag.episode
+                    try:
+                        targets_deg = act(frame)
+                    except Exception as error:  # noqa: BLE001 (inference that raises: one line, and the node stops)
+                        print(f"[{NODE_ID}] cannot go on: inference failed at frame {tag.frame} (seed {tag.seed}): "
+                              f"{type(error).__name__}: {error}", file=sys.stderr, flush=True)
+                        return 1
+                    answered = (tag, targets_deg)
+                node.send_output("joint_cmd", pa.array(targets_deg, type=pa.float64()), {**tag.metadata(), STREAM_KEY: 1})
+            elif input_id in needed:
+                latest[input_id] = value.to_numpy(zero_copy_only=False)
+            elif input_id == "typed_cmd":
+                node.send_output("joint_cmd", value)
+                if driving:
+                    driving = False
+                    say(text["took_over"])
+            elif input_id == "policy_cmd":
+                word = (value.to_pylist() or [""])[0]
+                if word == "off":
+                    if driving:
+                        driving = False
+                        say(text["stopped"])
+                elif word == "on" and all(name in latest for name in needed):
                     loaded.reset()
-                    episode = tag.episode
+                    driving = True
+                    say(text["driving"].format(kind=loaded.kind))
+                elif word == "on":
+                    say(text["no_state"].format(inputs=", ".join(name for name in needed if name not in latest)))
+            elif input_id == "tick" and driving:
                 try:
-                    targets_deg = joint_targets_deg(loaded.act(observation(frame, settings.image_size)))
-                except Exception as error:  # noqa: BLE001 (inference that raises: one line, and the node stops)
-                    print(f"[{NODE_ID}] cannot go on: inference failed at frame {tag.frame} (seed {tag.seed}): "
-                          f"{type(error).__name__}: {error}", file=sys.stderr, flush=True)
-                    return 1
-                answered = (tag, targets_deg)
-            node.send_output("joint_cmd", pa.array(targets_deg, type=pa.float64()), {**tag.metadata(), STREAM_KEY: 1})
+                    targets_deg = act(latest)
+                except Exception as error:  # noqa: BLE001 (at the prompt: the news, and typed commands still pass)
+                    driving = False
+                    say(text["failed"].format(error=f"{type(error).__name__}: {error}"))
+                    continue
+                node.send_output("joint_cmd", pa.array(targets_deg, type=pa.float64()), {STREAM_KEY: NODE_ID})
     return 0
 
 

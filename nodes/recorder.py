@@ -28,7 +28,6 @@ import numpy as np  # noqa: E402
 import pyarrow as pa  # noqa: E402
 from dora import Node  # noqa: E402
 
-from so101.runtime.node_events import cannot_start  # noqa: E402
 from so101.dataset.features import video_keys_and_sizes  # noqa: E402
 from so101.dataset.layout import DatasetError  # noqa: E402
 from so101.dataset.messages import decode_record_cmd, recording_metadata  # noqa: E402
@@ -36,6 +35,7 @@ from so101.dataset.recording import Recording  # noqa: E402
 from so101.dataset.settings import RecorderSettings  # noqa: E402
 from so101.dataset.writer import DatasetWriter  # noqa: E402
 from so101.runtime.logs import send_diagnostics_to  # noqa: E402
+from so101.runtime.node_events import cannot_start  # noqa: E402
 from so101.runtime.processes import yield_cpu_to_the_body  # noqa: E402
 from so101.tasks import task_named  # noqa: E402
 

@@ -16,11 +16,11 @@ from dora import Node
 
 from so101.assets import ModelFilesError
 from so101.bodies.node_loop import announce, check_pictures, run_body_node
-from so101.runtime.node_events import cannot_start
 from so101.bodies.pybullet_sim import SO101Sim, release_freed_memory
 from so101.bodies.settings import NodeSettings, PyBulletSettings
 from so101.gui.display import DisplayError
 from so101.runtime.logs import send_diagnostics_to
+from so101.runtime.node_events import cannot_start
 
 
 def main() -> int:

@@ -27,11 +27,10 @@ from dora import Node  # noqa: E402
 
 from so101.assets import ModelFilesError, urdf_path  # noqa: E402
 from so101.bodies.node_loop import announce  # noqa: E402
-from so101.runtime.node_events import cannot_start  # noqa: E402
 from so101.dataset.messages import recording_from_metadata  # noqa: E402
 from so101.robot import NUM_ARM_JOINTS  # noqa: E402
 from so101.runtime.logs import send_diagnostics_to  # noqa: E402
-from so101.runtime.node_events import inputs_until_stop  # noqa: E402
+from so101.runtime.node_events import cannot_start, inputs_until_stop  # noqa: E402
 from so101.runtime.processes import yield_cpu_to_the_body  # noqa: E402
 from so101.tasks import task_named  # noqa: E402
 from so101.web.settings import WebViewSettings, page_address  # noqa: E402

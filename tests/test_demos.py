@@ -253,7 +253,7 @@ def test_a_full_disk_stops_demos_in_one_line_and_the_saved_episodes_stay_whole(t
     (["demos", "DIR", "--task", "cube_to_box", "--body", "real"], "the real arm has no object state"),
     (["eval", "--expert", "--task", "stack_cubes"], "invalid choice: 'stack_cubes'"),
     (["eval", "--expert", "--task", "cube_to_box", "--episodes", "0"], "'0' is not a whole number from 1"),
-    (["eval", "--task", "cube_to_box"], "one of the arguments --expert --idle is required"),
+    (["eval", "--task", "cube_to_box"], "one of the arguments --expert --idle --policy is required"),
     (["demos", "DIR", "--task", "cube_to_box", "--workers", "0"], "'0' is not a whole number from 1 to 16"),
     (["demos", "DIR", "--task", "cube_to_box", "--machine", "desk"], "--machine and --root go with --coordinator"),
     (["eval", "--expert", "--task", "cube_to_box", "--coordinator", "10.0.0.1"], "--coordinator needs --machine ID"),

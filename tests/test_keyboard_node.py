@@ -161,7 +161,7 @@ def test_a_piped_script_runs_in_order_echoes_and_stops_at_quit(tmp_path, monkeyp
         "  → joint 0 (shoulder_pan) → 90°",
         "> bogus",
         "  cannot read 'bogus': use 'JOINT ANGLE' (e.g. '0 45'), batch, grip, open, close, home, list, state, save, "
-        "go, poses, snapshot, xyz, where, jog, record, stop, discard, episodes, reset, task, expert, help, quit (type help)",
+        "go, poses, snapshot, xyz, where, jog, record, stop, discard, episodes, reset, task, expert, policy, help, quit (type help)",
         "> save a",
         "  → pose 'a' saved: [-30.0, 44.98, -59.69, 30.0, 0.0]°, gripper 12.35°",
         "> quit",

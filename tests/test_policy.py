@@ -4,6 +4,7 @@ policy environment (so101 policy-env), and `so101 eval --policy`'s refusals."""
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 
@@ -92,7 +93,7 @@ def test_the_policy_nodes_settings_need_its_folder_and_refuse_a_device_torch_doe
     with pytest.raises(ValueError, match="SO101_POLICY_DEVICE: 'gpu' is not a torch device"):
         PolicySettings.from_environ({"SO101_POLICY_DIR": "/p", "SO101_POLICY_DEVICE": "gpu"})
     settings = PolicySettings.from_environ({"SO101_POLICY_DIR": "/p", "SO101_LOCKSTEP_PICTURES": "320x240"})
-    assert (settings.device, settings.frame_rate, settings.image_size) == ("cpu", 25, (320, 240))
+    assert (settings.device, settings.task, settings.image_size) == ("cpu", "cube_to_box", (320, 240))
 
 
 def test_the_policy_node_imports_nothing_of_the_projects_install_but_numpy_pyarrow_and_dora():
@@ -137,3 +138,139 @@ def test_policy_env_leaves_a_folder_of_other_files_alone(tmp_path):
     done = subprocess.run([str(SO101), "policy-env", str(tmp_path)], capture_output=True, text=True, timeout=60)
     assert done.returncode == 1 and "is a folder with files and no Python environment in it" in done.stderr
     assert keep.read_text() == "mine" and sorted(tmp_path.iterdir()) == [keep]
+
+
+# -- the node against a real checkpoint, in the policy environment -----------------------------------------------
+
+TINY_POLICY = ROOT / "tests" / "data" / "policy_act_tiny"  # how it was made: its README.md
+
+
+@pytest.fixture(scope="session")
+def policy_python():
+    """The policy environment's Python ($SO101_POLICY_PYTHON, else so101 policy-env's default), checked;
+    the tests that need it are skipped, saying why, where there is none."""
+    import os
+    from pathlib import Path
+
+    from so101.policy.environment import PolicyEnvError, check, default_dir, python_in
+
+    python = Path(os.environ.get("SO101_POLICY_PYTHON") or python_in(default_dir()))
+    try:
+        return check(python).python
+    except PolicyEnvError as error:
+        pytest.skip(f"no policy environment, so the policy node is not run against a checkpoint: {error}")
+
+
+def probe(python, frames, **env):
+    asked = {"env": {"SO101_POLICY_DIR": str(TINY_POLICY), "SO101_LANG": "en", **env}, "frames": frames}
+    done = subprocess.run([str(python), str(ROOT / "tests" / "helpers" / "policy_probe.py")], input=json.dumps(asked),
+                          capture_output=True, text=True, timeout=300, env={**__import__("os").environ, "HF_HUB_OFFLINE": "1"})
+    assert done.stdout.strip(), done.stderr
+    return json.loads(done.stdout.strip().splitlines()[-1]), done.stderr
+
+
+def test_the_node_answers_each_frame_plays_its_chunk_out_and_resets_at_each_episode(policy_python):
+    here, there = [10.0, -20.0, 30.0, 40.0, 0.0], [-30.0, 40.0, -10.0, 20.0, 60.0]
+    objects = [0.2, 0.05, 0.02, 0.0, 0.0, 0.0, 1.0, -0.1, 0.2, 0.0]
+    frames = [[1, 0, 7, here, [5.0], objects], [1, 1, 7, there, [90.0], objects], [1, 1, 7, there, [90.0], objects],
+              [1, 2, 7, here, [5.0], objects], [2, 0, 8, here, [5.0], objects]]
+    result, stderr = probe(policy_python, frames)
+    assert result["code"] == 0, stderr
+    answers = result["joint_cmd"]
+    assert [answer[:2] for answer in answers] == [[1, 0], [1, 1], [1, 1], [1, 2], [2, 0]]
+    first, second, again, third, next_episode = (answer[2] for answer in answers)
+    assert all(len(targets) == 6 for targets in (first, second, third))
+    # Frame 1 sent again gets the same answer, and does not use up the chunk's next action.
+    assert again == second and len({tuple(first), tuple(second), tuple(third)}) == 3
+    # A new episode resets the policy: the same observation at its frame 0 gets the first frame's answer
+    # (without the reset, the chunk's fourth action would come).
+    assert next_episode == first
+    # In the body's units: the gripper within its −10…100°.
+    assert all(-10.0 - 1e-6 <= targets[5] <= 100.0 + 1e-6 for targets in (first, second, third))
+
+
+def test_inference_that_fails_stops_the_node_in_one_line(policy_python):
+    nan = float("nan")
+    result, stderr = probe(policy_python, [[1, 0, 3, [nan] * 5, [nan], [nan] * 10]])
+    assert result["code"] == 1 and result["joint_cmd"] == []
+    assert "[policy] cannot go on: inference failed at frame 0 (seed 3): ValueError: the policy's action is" in stderr
+
+
+def test_eval_scores_a_policy_in_lockstep_episode_by_episode(policy_python):
+    done = subprocess.run([str(SO101), "eval", "--task", "cube_to_box", "--policy", str(TINY_POLICY), "--policy-python",
+                           str(policy_python), "--episodes", "2", "--seed", "5", "--time-limit", "2", "--lang", "en"],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stdout + done.stderr
+    lines = done.stdout.strip().splitlines()
+    assert lines[0].startswith(f"eval: cube_to_box on pybullet, the policy in {TINY_POLICY}, seeds 5..6")
+    # 20 steps of training: it drives the arm for the whole time limit, and does not do the task.
+    assert lines[1:] == ["episode 0 (seed 5): failed (time limit, 2.0 s), 51 frames",
+                         "episode 1 (seed 6): failed (time limit, 2.0 s), 51 frames",
+                         "success: 0/2 (0%, 95% CI 0–66%, Wilson), mean time to success none (no success)"]
+
+
+def test_a_python_without_lerobot_refuses_the_policy_node_in_one_line(tmp_path):
+    done = subprocess.run([str(SO101), "eval", "--task", "cube_to_box", "--policy", str(TINY_POLICY), "--policy-python",
+                           sys.executable, "--episodes", "1", "--lang", "en"], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 1, done.stdout + done.stderr
+    assert re.search(r"^so101 eval: \[policy\] cannot start: LeRobot does not import in .*: run the node with a policy "
+                     r"environment's Python \(so101 policy-env\)$", done.stderr.strip()), done.stderr
+
+
+# -- at the prompt --------------------------------------------------------------------------------------------------
+
+def test_the_prompt_says_how_to_ask_the_policy_and_without_one_how_to_start_it():
+    from so101.prompt.commands import ParseError, RunPolicy, parse_command
+    from so101.prompt.control import KeyboardControl
+    from so101.prompt.poses import PoseStore
+
+    assert parse_command("policy on", "en") == RunPolicy("on") and parse_command("POLICY Off", "en") == RunPolicy("off")
+    for wrong in ("policy", "policy go", "policy on now"):
+        assert parse_command(wrong, "en") == ParseError("  policy format: policy on (it drives) or policy off (it stops)")
+    control = KeyboardControl(lambda angles: None, PoseStore(__import__("pathlib").Path("/nonexistent/poses.json")), "en")
+    assert control.handle_line("policy on") == (["  no policy: start with so101 teleop --task cube_to_box --policy DIR"], False)
+    told: list[str] = []
+    control.tell_policy = told.append
+    assert control.handle_line("policy on") == (["  → told the policy: on"], False) and told == ["on"]
+
+
+@pytest.mark.skipif(__import__("shutil").which("tmux") is None, reason="tmux is not installed (.ci/run installs it)")
+def test_at_the_prompt_the_policy_drives_and_a_typed_command_takes_over(tmp_path, policy_python):
+    import time
+
+    from tests.helpers.terminal import start_teleop
+
+    terminal, _, _ = start_teleop(tmp_path, "en", extra=f"--task cube_to_box --seed 3 --policy {TINY_POLICY} "
+                                                         f"--policy-python {policy_python}", HF_HUB_OFFLINE="1")
+    try:
+        terminal.seen = terminal.wait_for(r"^=+\n>$", timeout_s=180).start()
+        state = r"  joint angles now: \[(-?[\d.]+), (-?[\d.]+), (-?[\d.]+), (-?[\d.]+), (-?[\d.]+)\].*"
+        assert all(abs(float(angle)) < 1.0 for angle in terminal.command("state", state).groups())  # home
+        terminal.command("policy on", re.escape("  → told the policy: on"))
+        terminal.wait_for(re.escape("  [policy] act is driving: any move you type takes over; policy off stops it"),
+                          timeout_s=10, after=terminal.seen)
+        time.sleep(3.0)
+        driven = [float(angle) for angle in terminal.command("state", state).groups()]
+        assert max(abs(angle) for angle in driven) > 2.0, driven  # the policy moved the arm
+        terminal.command("0 40", re.escape("  → joint 0 (shoulder_pan) → 40°"))
+        terminal.wait_for(re.escape("  [policy] a typed command took over: the policy stopped"), timeout_s=10,
+                          after=terminal.seen)
+        time.sleep(3.0)  # the policy sends nothing more: the arm stays where it was typed to
+        assert abs(float(terminal.command("state", state).group(1)) - 40.0) < 2.0
+        terminal.type_line("quit")
+        terminal.wait_for(r"^TELEOP_EXIT=0$", timeout_s=60, after=terminal.seen)
+    finally:
+        terminal.close()
+
+
+@pytest.mark.parametrize("extra, message", [
+    ("--policy /nowhere", "so101 teleop: /nowhere is not a folder"),
+    (f"--policy {TINY_POLICY} --policy-python /no/python", "so101 teleop: the policy reads a task's objects"),
+    (f"--task cube_to_box --policy {TINY_POLICY} --policy-python /no/python", "so101 teleop: /no/python does not exist"),
+    ("--policy-python /no/python", "so101 teleop: --policy-python goes with --policy DIR"),
+])
+def test_teleop_with_a_policy_it_cannot_run_says_why_in_one_line(extra, message):
+    done = subprocess.run([str(SO101), "teleop", "--mode", "direct", "--lang", "en", *extra.split()],
+                          capture_output=True, text=True, timeout=60, stdin=subprocess.DEVNULL)
+    assert done.returncode == 2 and done.stderr.startswith(message) and len(done.stderr.strip().splitlines()) == 1, \
+        done.stderr

@@ -150,6 +150,7 @@ OTHER_NODES = {
     "### web_view (`nodes/web_view.py`)": "so101.web.settings:WebViewSettings",
     "### expert (`nodes/expert.py`)": "so101.tasks.settings:ExpertSettings",
     "### episodes (`nodes/episodes.py`)": "so101.tasks.settings:EpisodeSettings",
+    "### policy (`nodes/policy.py`)": "so101.policy.settings:PolicySettings",
 }
 
 

@@ -23,10 +23,8 @@ from so101.cli.lockstep_run import (
 )
 from so101.dataset.settings import DEFAULT_IMAGE_SIZE
 from so101.policy.environment import default_dir, python_in
-from so101.runtime.dataflow import ROOT
+from so101.runtime.dataflow import POLICY_NODE_FILE
 from so101.tasks.episodes import score_line
-
-POLICY_NODE_FILE = ROOT / "nodes" / "policy.py"
 
 
 def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
@@ -87,23 +85,14 @@ def run(args: argparse.Namespace) -> int:
 
 def policy_driver(args: argparse.Namespace) -> tuple[Driver, tuple[int, int] | None] | str:
     """The policy node as the driver, and the size of the pictures it sees (None: none); or what is
-    wrong, in one line: a folder that is not a policy's, features this dataflow cannot give, no Python
-    to run it. Read from the policy's config.json, before anything starts (the node checks again)."""
-    from so101.policy.features import inputs_for, picture_size_of, read_policy_features
+    wrong, in one line (so101.policy.choice)."""
+    from so101.policy.choice import choose_policy
     from so101.tasks import task_named
 
-    folder = args.policy.expanduser().resolve()
     try:
-        inputs, outputs = read_policy_features(folder)
-        seen_size = picture_size_of(inputs)
-        needed = inputs_for(inputs, outputs, task_named(args.task).object_state_names, seen_size)
+        chosen = choose_policy(args.policy, args.policy_python, args.task, task_named(args.task).object_state_names)
     except ValueError as error:
         return str(error)
-    python = (args.policy_python or python_in(default_dir())).expanduser()
-    if not python.exists():
-        return (f"{python} does not exist: make the policy environment with `so101 policy-env`, or give "
-                "--policy-python PY (a Python with LeRobot and dora-rs)")
-    size = f"{seen_size[0]}x{seen_size[1]}" if seen_size else ""
-    env = {"SO101_TASK": args.task, "SO101_POLICY_DIR": str(folder), "SO101_POLICY_DEVICE": args.policy_device,
-           "SO101_LOCKSTEP_PICTURES": size}
-    return Driver("policy", POLICY_NODE_FILE, needed, env, python=str(python.absolute())), seen_size
+    driver = Driver("policy", POLICY_NODE_FILE, chosen.inputs, chosen.env(args.task, args.policy_device),
+                    python=str(chosen.python))
+    return driver, chosen.picture_size

@@ -39,8 +39,8 @@ from so101.bodies.registry import BODIES, DEFAULT_BODY, BodyKind, body_node_env
 from so101.dataset.features import DEFAULT_FPS, video_keys_and_sizes
 from so101.dataset.settings import DEFAULT_IMAGE_SIZE
 from so101.runtime.dataflow import (
-    LEADER_READY_MARKS, LOADED_MARKS, PROMPT_NODE_FILE, ROOT, WEB_VIEW_MARKS, dataflow_copy, with_expert, with_leader,
-    with_recorder, with_task, with_web_view, write_dataflow,
+    LEADER_READY_MARKS, LOADED_MARKS, POLICY_READY_MARKS, PROMPT_NODE_FILE, ROOT, WEB_VIEW_MARKS, dataflow_copy,
+    with_expert, with_leader, with_policy, with_recorder, with_task, with_web_view, write_dataflow,
 )
 from so101.gui.display import MODES, resolve_mode
 from so101.web.settings import (
@@ -48,7 +48,7 @@ from so101.web.settings import (
 )
 from so101.prompt.join import port_holder
 from so101.runtime.processes import DAEMON_PORT_TAKEN_MARK, alive, descendants, kill_until_gone, stop_process, who_runs
-from so101.cli.argtypes import add_language_option, image_size, whole_number
+from so101.cli.argtypes import add_language_option, image_size, torch_device, whole_number
 from so101.tasks import TASKS, parse_seed, task_named
 from so101.runtime.venv import dora_executable, env_with_bin_first
 from so101.runtime.versions import DAEMON_DEFAULT_LOCAL_PORT, dora_version_problem
@@ -143,6 +143,15 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
         "--leader-calibration", type=Path, metavar="FILE", default=None,
         help="--leader: the leader's calibration JSON (from `so101 calibrate --leader`, or LeRobot's so101_leader one)",
     )
+    parser.add_argument(
+        "--policy", type=Path, metavar="DIR", default=None,
+        help="a trained LeRobot policy (lerobot-train's .../checkpoints/last/pretrained_model) between the prompt "
+        "and the body: at the prompt, policy on / policy off; a typed move takes over",
+    )
+    parser.add_argument("--policy-python", type=Path, metavar="PY", default=None,
+                        help="--policy: the Python that runs it, with LeRobot (default: so101 policy-env's)")
+    parser.add_argument("--policy-device", type=torch_device, metavar="DEVICE", default="cpu",
+                        help="--policy: the torch device it runs on: cpu (default), cuda or mps")
     add_web_arguments(parser)
     add_log_option(parser)
 
@@ -336,6 +345,15 @@ def run(args: argparse.Namespace) -> int:
         ready_marks += (LEADER_READY_MARKS,)
     if args.task is not None:  # after the leader: a leader's move takes over from the expert, as a typed one does
         with_expert(descriptor, launch.body.node_id, {"SO101_TASK": args.task, "SO101_LANG": args.lang})
+    if args.policy is not None:  # last before the body: any move before it takes over, the expert's too
+        problem = add_policy(descriptor, launch.body, args)
+        if problem:
+            print(f"so101 teleop: {problem}", file=sys.stderr)
+            return 2
+        ready_marks += (POLICY_READY_MARKS,)
+    elif args.policy_python is not None:
+        print("so101 teleop: --policy-python goes with --policy DIR", file=sys.stderr)
+        return 2
     if args.record is not None:
         problem = add_recorder(descriptor, launch.body, args.record.expanduser().resolve(), args.fps, args.lang,
                                args.task, args.image_size)
@@ -369,6 +387,27 @@ def task_problem(args: argparse.Namespace, body: BodyKind) -> str | None:
     if not body.simulated:
         return (f"--task {args.task} is for a simulated body (--body pybullet or mujoco): nothing reports where a real "
                 "cube is, so the real arm has no task scene and no object_state")
+    return None
+
+
+def add_policy(descriptor: dict, body: BodyKind, args: argparse.Namespace) -> str | None:
+    """The policy node added to `descriptor`, before `body`; or, in one line, why it cannot be (a folder that
+    is not a policy's, features this dataflow cannot give, no Python to run it)."""
+    from so101.policy.choice import choose_policy
+    from so101.tasks import task_named
+
+    names = task_named(args.task).object_state_names if args.task else ()
+    try:
+        chosen = choose_policy(args.policy, args.policy_python, args.task, names)
+    except ValueError as error:
+        return str(error)
+    if chosen.picture_size is not None:
+        return ("the policy sees the cameras, and at the prompt the body draws no wrist picture: score it with "
+                "so101 eval --policy, where the body draws both for each frame")
+    env = {**chosen.env(args.task or "", args.policy_device), "SO101_LANG": args.lang}
+    if not args.task:
+        del env["SO101_TASK"]
+    with_policy(descriptor, body.node_id, chosen.inputs, env, str(chosen.python))
     return None
 
 

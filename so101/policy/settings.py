@@ -9,9 +9,8 @@ from pathlib import Path
 from typing import Mapping
 
 from so101.lang import DEFAULT_LANGUAGE, ENV_VAR as LANG_ENV_VAR, language_from_environ
-from so101.runtime.lockstep import DEFAULT_LOCKSTEP_FPS, steps_per_frame
 from so101.runtime.settings import (
-    EnvironSettings, Setting, read_image_size, read_stripped_text, read_whole_number, setting,
+    EnvironSettings, Setting, read_image_size, read_stripped_text, setting,
 )
 from so101.tasks import task_named
 
@@ -27,15 +26,6 @@ def read_task_name(environ: Mapping[str, str], declared_setting: Setting) -> str
     except ValueError as error:
         raise ValueError(f"{declared_setting.env_var}: {error}") from None
     return name
-
-
-def read_frame_rate(environ: Mapping[str, str], declared_setting: Setting) -> int:
-    fps = read_whole_number(environ, declared_setting)
-    try:
-        steps_per_frame(fps)
-    except ValueError as error:
-        raise ValueError(f"{declared_setting.env_var}: {error}") from None
-    return fps
 
 
 def checked_device(device: str) -> str:
@@ -64,9 +54,6 @@ class PolicySettings(EnvironSettings):
                           read_device)
     task: str = setting("SO101_TASK", "cube_to_box", "the task the policy performs: its objects' poses and its "
                         "instruction", read_task_name)
-    frame_rate: int = setting(
-        "SO101_LOCKSTEP_FPS", str(DEFAULT_LOCKSTEP_FPS), "the frame rate of the body's lockstep, and of the "
-        "dataset the policy learned from", read_frame_rate)
     image_size: tuple[int, int] | None = setting(
         "SO101_LOCKSTEP_PICTURES", "", "WIDTHxHEIGHT of the body's pictures, for a policy that sees them; "
         "empty = none", read_image_size)

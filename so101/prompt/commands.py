@@ -13,6 +13,8 @@ Episodes, with `so101 teleop --record DIR` (the recorder node answers):
   record TASK TEXT | stop | discard | episodes
 A task's scene, with `so101 teleop --task NAME` (the body answers):
   reset [SEED] | task | expert     (the scripted expert does the task once; a typed command takes over)
+A trained policy, with `so101 teleop --policy DIR` (the policy node answers):
+  policy on | policy off           (it drives from the newest state; a typed command takes over)
 
 Out-of-limit angles are refused, not clamped: at a keyboard a value beyond the
 URDF limits is far more likely a typo (900 for 90) than a wish for the limit.
@@ -131,6 +133,13 @@ class RunExpert:
 
 
 @dataclass(frozen=True)
+class RunPolicy:
+    """`policy on` / `policy off`: a trained policy drives from the newest state, or stops; a typed command takes over."""
+
+    word: str  # "on" or "off"
+
+
+@dataclass(frozen=True)
 class Help:
     pass
 
@@ -152,7 +161,7 @@ class ParseError:
 
 Command = (
     SetJoint | Batch | Home | ListJoints | ShowState | SavePose | GoPose | ListPoses | Snapshot | MoveTip | Where | JogKeys
-    | Episodes | ResetTask | ShowTask | RunExpert | Help | Quit | Empty
+    | Episodes | ResetTask | ShowTask | RunExpert | RunPolicy | Help | Quit | Empty
 )
 
 
@@ -181,7 +190,7 @@ TEXT = {
         "none": "无",
         "bye": "  再见",
         "unknown": "  无法识别 '{text}':可用 '关节号 角度'(如 '0 45')、batch、grip、open、close、home、list、"
-        "state、save、go、poses、snapshot、xyz、where、jog、record、stop、discard、episodes、reset、task、expert、help、quit(输入 help 查看)",
+        "state、save、go、poses、snapshot、xyz、where、jog、record、stop、discard、episodes、reset、task、expert、policy、help、quit(输入 help 查看)",
         "joint_form": "  格式错误:关节号 角度(如 '0 45'),关节号 0-5(5 = 夹爪)",
         "joint_range": "  关节号范围 0-5(0-4 手臂,5 夹爪),收到 '{text}';格式:关节号 角度(如 '0 45')",
         "bad_angle": "  '{text}' 不是角度:角度是十进制数字,单位度(如 45、-30.5)",
@@ -213,6 +222,9 @@ TEXT = {
         "body_silent": "  {seconds:.0f} 秒没有收到 joint_state:仿真(或机械臂驱动)、它所在的机器或网络已断开,命令未发送",
         "reset_form": "  reset 命令格式:reset [种子](种子是 ≥ 0 的整数,如 'reset 7';不写则用下一个种子)",
         "task_off": "  没有任务:用 so101 teleop --task cube_to_box 启动",
+        "policy_form": "  policy 命令格式:policy on(策略开始驾驶)或 policy off(停下)",
+        "policy_none": "  没有策略:用 so101 teleop --task cube_to_box --policy 文件夹 启动",
+        "policy_asked": "  → 已告诉策略:{word}",
         "expert_started": "  → 专家开始做任务;键入任何动作命令即接管",
         "task_silent": "  仿真节点 {seconds:g} 秒内没有回答",
         "laid_out": "  → 按种子 {seed} 重新摆放,机械臂回零位:{layout}",
@@ -245,6 +257,7 @@ TEXT = {
             "    reset [种子]             重新摆放任务场景(默认下一个种子),机械臂回零位(需 so101 teleop --task)",
             "    task                    显示任务、摆放和方块是否在盒中",
             "    expert                  脚本专家把任务做一遍(需 so101 teleop --task;键入任何动作命令即接管)",
+            "    policy on / policy off  训练好的策略开始驾驶 / 停下(需 so101 teleop --policy 文件夹;键入任何动作命令即接管)",
             "    help                    显示本帮助",
             "    quit / exit             退出(也可 Ctrl-D、Ctrl-C)",
             "  超出关节限位的角度不会发送(会提示范围)。",
@@ -274,7 +287,7 @@ TEXT = {
         "none": "none",
         "bye": "  bye",
         "unknown": "  cannot read '{text}': use 'JOINT ANGLE' (e.g. '0 45'), batch, grip, open, close, home, list, "
-        "state, save, go, poses, snapshot, xyz, where, jog, record, stop, discard, episodes, reset, task, expert, help, quit (type help)",
+        "state, save, go, poses, snapshot, xyz, where, jog, record, stop, discard, episodes, reset, task, expert, policy, help, quit (type help)",
         "joint_form": "  format: JOINT ANGLE (e.g. '0 45'), JOINT 0-5 (5 = gripper)",
         "joint_range": "  joints are 0-5 (0-4 arm, 5 gripper), got '{text}'; format: JOINT ANGLE (e.g. '0 45')",
         "bad_angle": "  '{text}' is not an angle: angles are decimal numbers in degrees (e.g. 45, -30.5)",
@@ -310,6 +323,9 @@ TEXT = {
         "is gone; not sent",
         "reset_form": "  reset format: reset [SEED] (a whole number >= 0, e.g. 'reset 7'; without one, the next seed)",
         "task_off": "  no task: start with so101 teleop --task cube_to_box",
+        "policy_form": "  policy format: policy on (it drives) or policy off (it stops)",
+        "policy_none": "  no policy: start with so101 teleop --task cube_to_box --policy DIR",
+        "policy_asked": "  → told the policy: {word}",
         "expert_started": "  → the expert is doing the task; any move you type takes over",
         "task_silent": "  the simulation did not answer within {seconds:g} s",
         "laid_out": "  → laid out from seed {seed}, the arm at home: {layout}",
@@ -342,6 +358,7 @@ TEXT = {
             "    reset [SEED]            lay the task's scene out again (default: the next seed), the arm home (with so101 teleop --task)",
             "    task                    the task, its layout, and whether the cube is in the box",
             "    expert                  the scripted expert does the task once (with so101 teleop --task; any move you type takes over)",
+            "    policy on / policy off  a trained policy drives / stops (with so101 teleop --policy DIR; any move you type takes over)",
             "    help                    this help",
             "    quit / exit             quit (Ctrl-D and Ctrl-C quit too)",
             "  Angles beyond a joint's limits are not sent (the reply gives the range).",
@@ -431,6 +448,11 @@ def parse_command(line: str, lang: str = "zh") -> Command | ParseError:
         # The task is the rest of the line as typed (commas and spacing are part of a sentence).
         task = " ".join(line.strip()[len(words[0]):].split())
         return Episodes("record", task) if task else ParseError(text["record_form"])
+
+    if keyword == "policy":
+        if len(words) != 2 or words[1].lower() not in ("on", "off"):
+            return ParseError(text["policy_form"])
+        return RunPolicy(words[1].lower())
 
     if keyword == "reset":
         if len(words) == 1:

@@ -16,7 +16,7 @@ import time
 from typing import Callable, Sequence
 
 from so101.prompt.commands import (
-    Batch, Empty, Episodes, GoPose, Help, Home, JogKeys, ListJoints, ListPoses, MoveTip, ParseError, Quit, ResetTask, RunExpert,
+    Batch, Empty, Episodes, GoPose, Help, Home, JogKeys, ListJoints, ListPoses, MoveTip, ParseError, Quit, ResetTask, RunExpert, RunPolicy,
     SavePose, SetJoint, ShowState, ShowTask, Snapshot, Where, format_angle, format_angles, help_lines, joint_lines, parse_command, texts,
 )
 from so101.prompt.landing import SettleWatch, worth_saying
@@ -69,6 +69,8 @@ class KeyboardControl:
         self.task: TaskLink | None = None
         # Sends a word ("run", "stop") to the task's expert node, where the dataflow has one.
         self.tell_expert: Callable[[str], None] | None = None
+        # Sends a word ("on", "off") to the policy node, where the dataflow has one.
+        self.tell_policy: Callable[[str], None] | None = None
 
     # -- events, from the pump thread ----------------------------------------------------
     def on_event(self, event: dict) -> None:
@@ -86,7 +88,7 @@ class KeyboardControl:
                 self.task.on_status(bool(values[0]), dict(event.get("metadata") or {}))
         elif event["type"] == "INPUT" and event["id"] == "object_state" and self.task is not None:
             self.task.on_objects(event["value"])  # 250 a second: read when `task` asks, not here
-        elif event["type"] == "INPUT" and event["id"] in ("leader_status", "expert_status") and self.show_news is not None:
+        elif event["type"] == "INPUT" and event["id"] in ("leader_status", "expert_status", "policy_status") and self.show_news is not None:
             for line in event["value"].to_pylist():
                 self.show_news(f"  {line}")
         elif event["type"] == "INPUT" and event["id"] in ("joint_state", "gripper_state"):
@@ -231,6 +233,12 @@ class KeyboardControl:
             self._landing = None
             self.tell_expert("run")
             return [text["expert_started"]], False
+        if isinstance(command, RunPolicy):
+            if self.tell_policy is None:
+                return [text["policy_none"]], False
+            self._landing = None
+            self.tell_policy(command.word)
+            return [text["policy_asked"].format(word=command.word)], False
         if isinstance(command, JogKeys):
             if self.keys_fd is None:
                 return [text["jog_needs_terminal"]], False
@@ -272,6 +280,8 @@ class KeyboardControl:
         self._landing = None
         if self.tell_expert is not None:
             self.tell_expert("stop")  # its plan was for the scene that is going
+        if self.tell_policy is not None:
+            self.tell_policy("off")  # the scene it was acting in is going
         status = self.task.reset(seed)
         if status is None:
             return self.text["task_silent"].format(seconds=task_link.REPLY_WAIT_S)

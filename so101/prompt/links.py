@@ -1,9 +1,10 @@
 """The prompt's links to the dataflow's other nodes, each where the dataflow declares it.
 
-News (the recorder's, the leader's on `leader_status`, the expert's on `expert_status`, where the tip landed after `xyz`, the cube
-landing in the box) is printed as it comes, between the person's lines; `record_cmd`, where the
-dataflow has a recorder, is the line to it; `task_cmd`, where the body runs a task, the line to the body; `expert_cmd` the line to the task's
-expert. A command that talks to another node wires its output in `link_other_nodes`,
+News (the recorder's, the leader's on `leader_status`, the expert's on `expert_status`, the policy's
+on `policy_status`, where the tip landed after `xyz`, the cube landing in the box) is printed as it
+comes, between the person's lines; `record_cmd`, where the dataflow has a recorder, is the line to
+it; `task_cmd`, where the body runs a task, the line to the body; `expert_cmd` the line to the
+task's expert, `policy_cmd` the line to the policy. A command that talks to another node wires its output in `link_other_nodes`,
 so nodes/keyboard_control.py stays the course's file.
 """
 
@@ -22,7 +23,8 @@ def link_other_nodes(control: KeyboardControl, node, interactive: bool) -> None:
     control.show_news = news_printer(control, interactive)
     control.recorder = recorder_link(node, control.show_news)
     control.task = task_link(node, control.task_news)
-    control.tell_expert = expert_sender(node)
+    control.tell_expert = word_sender(node, "expert_cmd")
+    control.tell_policy = word_sender(node, "policy_cmd")
 
 
 def has_output(node, output_id: str) -> bool:
@@ -78,10 +80,11 @@ def task_link(node, on_change: Callable[[TaskStatus], None]) -> TaskLink | None:
     return TaskLink(send, on_change) if send is not None else None
 
 
-def expert_sender(node) -> Callable[[str], None] | None:
-    """What sends a word to the task's expert (`so101 teleop --task`), where the dataflow has one."""
-    if not has_output(node, "expert_cmd"):
+def word_sender(node, output_id: str) -> Callable[[str], None] | None:
+    """What sends a word on `output_id`: to the task's expert (`expert_cmd`, `so101 teleop --task`) or the
+    policy (`policy_cmd`, `so101 teleop --policy`), where the dataflow has one."""
+    if not has_output(node, output_id):
         return None
     import pyarrow as pa
 
-    return lambda word: node.send_output("expert_cmd", pa.array([word]))
+    return lambda word: node.send_output(output_id, pa.array([word]))

@@ -24,6 +24,14 @@ EXPERT_NODE_FILE = ROOT / "nodes" / "expert.py"
 EXPERT_NODE_ID = "expert"
 # The expert's pace at the prompt: a target every 40 ms, as in lockstep (25 frames a second).
 EXPERT_TICK = "dora/timer/millis/40"
+# `so101 teleop --policy` puts a trained policy between the prompt and the body, run by its own Python;
+# `so101 eval --policy` drives the body with it in lockstep.
+POLICY_NODE_FILE = ROOT / "nodes" / "policy.py"
+POLICY_NODE_ID = "policy"
+# The policy's pace at the prompt: an action every 40 ms, the rate of the datasets it learns from (25 fps).
+POLICY_TICK = "dora/timer/millis/40"
+# The policy node's line once LeRobot has loaded the policy (nodes/policy.py), in its two languages.
+POLICY_READY_MARKS = ("policy loaded from", "策略已加载")
 # `so101 teleop --web` adds the web view; its "serving" line, as nodes/web_view.py prints it.
 WEB_VIEW_NODE_FILE = ROOT / "nodes" / "web_view.py"
 WEB_VIEW_NODE_ID = "web_view"
@@ -203,18 +211,20 @@ def _retarget(node: dict, input_id: str, source: str) -> None:
 
 
 def _before_body(descriptor: dict, body_node_id: str, node_id: str, node_file: PurePath, tick: str,
-                 env: dict[str, str], root: PurePath, inputs: dict | None = None) -> dict:
+                 env: dict[str, str], root: PurePath, inputs: dict | None = None, python: str | None = None) -> dict:
     """`node_id` (`node_file`) added between the prompt and the body: the body takes its `joint_cmd`, it
     takes what the body took as `typed_cmd` (with `tick` and `inputs`), and the prompt hears its news on
-    `{node_id}_status`. Placed before the body, as dataflow_leader.yml has the leader."""
+    `{node_id}_status`. Placed before the body, as dataflow_leader.yml has the leader. With `python`, the
+    node runs as that interpreter with the node file as its argument (the policy environment's)."""
     status = f"{node_id}_status"
     prompt = _node(descriptor, PROMPT_NODE_ID)
     prompt["inputs"] = {**prompt["inputs"], status: {"source": f"{node_id}/{status}", "queue_size": 100}}
     body = _node(descriptor, body_node_id)
     typed_input = body["inputs"]["joint_cmd"]
     _retarget(body, "joint_cmd", f"{node_id}/joint_cmd")
+    where = str(root / node_file.relative_to(ROOT))
     node = {
-        "id": node_id, "path": str(root / node_file.relative_to(ROOT)),
+        "id": node_id, **({"path": python, "args": where} if python else {"path": where}),
         "inputs": {"tick": {"source": tick, "queue_size": 1}, "typed_cmd": typed_input, **(inputs or {})},
         "outputs": ["joint_cmd", status], "env": env,
     }
@@ -254,6 +264,19 @@ def with_expert(descriptor: dict, body_node_id: str, expert_env: dict[str, str],
                 for name in ("joint_state", "gripper_state", "object_state")}
     return _before_body(descriptor, body_node_id, EXPERT_NODE_ID, EXPERT_NODE_FILE, EXPERT_TICK, expert_env, root,
                         {"expert_cmd": {"source": f"{PROMPT_NODE_ID}/expert_cmd", "queue_size": 10}, **observed})
+
+
+def with_policy(descriptor: dict, body_node_id: str, observed: tuple[str, ...], policy_env: dict[str, str], python: str,
+                root: PurePath = ROOT) -> dict:
+    """A dataflow whose body takes `joint_cmd` from the policy node (under the policy environment's
+    `python`), which passes on what came before it (the prompt's, the leader's, the expert's) as
+    `typed_cmd`, reads the body's `observed` outputs, and drives when the prompt's `policy on` asks
+    (`policy_cmd`), telling it on `policy_status`."""
+    prompt = _node(descriptor, PROMPT_NODE_ID)
+    prompt["outputs"] = [*prompt["outputs"], "policy_cmd"]
+    inputs = {name: _queued(f"{body_node_id}/{name}", STATE_QUEUE) for name in observed}
+    return _before_body(descriptor, body_node_id, POLICY_NODE_ID, POLICY_NODE_FILE, POLICY_TICK, policy_env, root,
+                        {"policy_cmd": {"source": f"{PROMPT_NODE_ID}/policy_cmd", "queue_size": 10}, **inputs}, python)
 
 
 def body_task(descriptor: dict, body_node_id: str) -> str:

@@ -1,0 +1,43 @@
+"""A policy folder chosen for a dataflow (`so101 eval --policy`, `so101 teleop --policy`), checked from
+its config.json before anything starts (the node checks again as it loads): what it reads, the size
+of the pictures it sees, and the Python that runs it."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from so101.dataset.features import ENVIRONMENT_KEY
+from so101.policy.environment import default_dir, python_in
+from so101.policy.features import inputs_for, picture_size_of, read_policy_features
+
+
+@dataclass(frozen=True)
+class ChosenPolicy:
+    folder: Path
+    python: Path
+    inputs: tuple[str, ...]  # the body's outputs it reads
+    picture_size: tuple[int, int] | None  # (width, height) of the cameras it sees; None: none
+
+    def env(self, task: str, device: str) -> dict[str, str]:
+        """The policy node's settings (so101.policy.settings.PolicySettings)."""
+        size = f"{self.picture_size[0]}x{self.picture_size[1]}" if self.picture_size else ""
+        return {"SO101_POLICY_DIR": str(self.folder), "SO101_POLICY_DEVICE": device, "SO101_TASK": task,
+                "SO101_LOCKSTEP_PICTURES": size}
+
+
+def choose_policy(folder: Path, python: Path | None, task: str | None, names_of_objects: tuple[str, ...]) -> ChosenPolicy:
+    """The policy in `folder`, run by `python` (default: so101 policy-env's), on a body that runs `task`
+    (None: none) whose object_state has `names_of_objects`; ValueError in one line for a folder that is
+    not a policy's, features the dataflow cannot give, or no Python to run it."""
+    folder = folder.expanduser().resolve()
+    inputs, outputs = read_policy_features(folder)
+    if task is None and ENVIRONMENT_KEY in inputs:
+        raise ValueError(f"the policy reads a task's objects ({ENVIRONMENT_KEY}): give --task (cube_to_box)")
+    picture_size = picture_size_of(inputs)
+    needed = inputs_for(inputs, outputs, names_of_objects, picture_size)
+    chosen = (python or python_in(default_dir())).expanduser()
+    if not chosen.exists():
+        raise ValueError(f"{chosen} does not exist: make the policy environment with `so101 policy-env`, or give "
+                         "--policy-python PY (a Python with LeRobot and dora-rs)")
+    return ChosenPolicy(folder, chosen.absolute(), needed, picture_size)
