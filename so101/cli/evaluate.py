@@ -6,8 +6,9 @@ the exit code is 0 whatever it is; bad options and a dataflow that fails exit no
 one line. `--expert` scores the scripted expert (nodes/expert.py), `--idle` an arm held at
 home: the floor every score must beat, `--policy DIR` a trained LeRobot policy (nodes/policy.py,
 run by the Python of a policy environment: `so101 policy-env`, or `--policy-python`); the body
-draws the pictures the policy sees, and in lockstep inference costs no simulated time. `--video DIR` keeps each episode's front camera as an
-mp4 (seed_S.mp4), to see why an episode failed. `--workers K` runs K dataflows at once, each on
+draws the pictures the policy sees, and in lockstep inference costs no simulated time.
+`--video DIR` keeps each episode's front camera as an mp4 (seed_S.mp4), to see why an episode
+failed. `--workers K` runs K dataflows at once, each on
 its share of the seeds; the lines still come in seed order.
 """
 

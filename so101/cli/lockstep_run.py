@@ -2,7 +2,7 @@
 runner (nodes/episodes.py), run with `dora run` while each episode's line is shown as it ends.
 
 The graph: the body (its node file, SO101_LOCKSTEP_FPS set) publishes each frame; the driver
-(nodes/expert.py) answers it with the body's `joint_cmd`. The runner, beside that loop, hears
+(nodes/expert.py, or nodes/policy.py under its own Python) answers it with the body's `joint_cmd`. The runner, beside that loop, hears
 both (the driver's answer as `action`), records and judges each frame, and ends the episode by
 laying out the next (`task_cmd`). Its writing and encoding are off the loop's path, and still
 every episode ends at the same frame: the body holds still after an episode's last frame
@@ -27,12 +27,11 @@ from typing import Callable
 
 from so101.bodies.registry import BODIES, SIMULATED_BODIES, BodyKind
 from so101.cli.argtypes import add_language_option, number, whole_number
-from so101.runtime.dataflow import ROOT, write_dataflow
+from so101.runtime.dataflow import EXPERT_NODE_FILE, ROOT, write_dataflow
 from so101.runtime.lockstep import DEFAULT_LOCKSTEP_FPS
 from so101.tasks import TASKS
 from so101.tasks.episodes import EpisodeClock, Outcome, read_outcomes, seeds_for, split_seeds
 
-EXPERT_NODE_FILE = ROOT / "nodes" / "expert.py"
 EPISODES_NODE_FILE = ROOT / "nodes" / "episodes.py"
 BODY_FRAME_OUTPUTS = ["joint_state", "gripper_state", "object_state", "task_status"]
 DEFAULT_TIME_LIMIT_S = 30.0

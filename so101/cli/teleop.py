@@ -221,8 +221,8 @@ def _log_tail(log: Path) -> str:
     return "\n".join("  " + line for line in lines[-LOG_TAIL_LINES:])
 
 
-# A node's one-line refusal to start (so101.runtime.node_events.cannot_start), as dora's log carries it.
-# A node's one line when it refuses to start, or (the episodes' runner) to go on.
+# A node's one line when it refuses to start (so101.runtime.node_events.cannot_start), or (the episodes'
+# runner, the policy) to go on, as dora's log carries it.
 _REFUSAL = re.compile(r"(\[\w+\] cannot (?:start|go on): .*?)\s*$", re.MULTILINE)
 
 

@@ -33,7 +33,8 @@ def choose_policy(folder: Path, python: Path | None, task: str | None, names_of_
     folder = folder.expanduser().resolve()
     inputs, outputs = read_policy_features(folder)
     if task is None and ENVIRONMENT_KEY in inputs:
-        raise ValueError(f"the policy reads a task's objects ({ENVIRONMENT_KEY}): give --task (cube_to_box)")
+        raise ValueError(f"the policy reads a task's objects ({ENVIRONMENT_KEY}): run it on a simulation with --task "
+                         "cube_to_box (the real arm reports no objects)")
     picture_size = picture_size_of(inputs)
     needed = inputs_for(inputs, outputs, names_of_objects, picture_size)
     chosen = (python or python_in(default_dir())).expanduser()

@@ -14,6 +14,7 @@ import subprocess
 import sys
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 
 # LeRobot 0.4.4 is the last release for Python 3.11 (0.5 and later need 3.12); its pins take
 # torch < 2.11. dora-rs is this project's own version: the daemon and the node library must match.
@@ -82,7 +83,7 @@ def check(python: Path, timeout_s: float = 300.0) -> PolicyEnv:
     return PolicyEnv(python, versions)
 
 
-def build(folder: Path, base_python: str = sys.executable, say=print) -> PolicyEnv:
+def build(folder: Path, base_python: str = sys.executable, say: Callable[[str], None] = print) -> PolicyEnv:
     """The policy environment in `folder`: checked if it was built; else made with `base_python`'s venv
     and pip (downloads: torch's wheel and its libraries, several GB), then checked."""
     python = python_in(folder)

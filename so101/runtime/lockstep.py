@@ -6,9 +6,12 @@ and waits again. A frame is every output the body declares, each with the same t
 its metadata (`frame_tags`): the episode (how many resets so far), the frame's index in
 it, and the layout's seed. A `task_cmd` reset starts the next episode at frame 0. A
 `joint_cmd` tagged for another frame (one sent for the episode before a reset) is not
-applied; an untagged one applies to the frame now. A `task_cmd` `again` publishes the frame
-now once more, for a receiver that lost part of it (the runner asks after a silence). No wall clock is in the loop, so the
-same seed and the same driver give the same episode, bit for bit, however loaded the machine.
+applied; an untagged one applies to the frame now, and none applies after an episode's last
+frame (SO101_EPISODE_FRAMES) or a frame whose task_status says success: the body holds still
+until the reset, so an episode ends at the same frame however late the reset comes. A
+`task_cmd` `again` publishes the frame now once more, for a receiver that lost part of it (the
+runner asks after a silence). No wall clock is in the loop, so the same seed and the same
+driver give the same episode, bit for bit, however loaded the machine.
 
 Paced mode (the 4 ms timer) stays the default for people; lockstep is for `so101 demos`
 and `so101 eval`. Light: nothing here imports a simulator or dora.
