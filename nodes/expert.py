@@ -21,7 +21,6 @@ import os
 import sys
 import time
 from pathlib import Path
-from typing import Sequence
 
 ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:  # run as a script from anywhere: the so101 package sits beside nodes/
@@ -31,7 +30,7 @@ import pyarrow as pa  # noqa: E402
 from dora import Node  # noqa: E402
 
 from so101.assets import ModelFilesError  # noqa: E402
-from so101.runtime.lockstep import FrameParts, FrameTag, frame_tag  # noqa: E402
+from so101.runtime.lockstep import FrameParts, FrameTag, LastAnswer, frame_tag  # noqa: E402
 from so101.runtime.logs import send_diagnostics_to  # noqa: E402
 from so101.runtime.node_events import STREAM_KEY, cannot_start, inputs_until_stop  # noqa: E402
 from so101.tasks import task_named  # noqa: E402
@@ -68,10 +67,17 @@ def main() -> int:
     text = TEXT[settings.lang]
     frames = FrameParts(OBSERVED)
     expert: Expert | None = None
-    answered: tuple[FrameTag, Sequence[float]] | None = None  # lockstep: the last frame answered, and its answer
+    answered = LastAnswer()  # lockstep
     latest: dict[str, list[float]] = {}  # at the prompt: the newest of each observed input
     started_s: float | None = None  # at the prompt: when `run` came; None: not driving
     node = Node()
+
+    def plan_for(tag: FrameTag) -> Expert:
+        """The expert of `tag`'s episode: a frame 0 is a new episode, a fresh plan from its seed."""
+        nonlocal expert
+        if expert is None or tag.frame == 0:
+            expert = Expert(planner, noise=settings.noise, seed=tag.seed)
+        return expert
 
     def say(line: str) -> None:
         logger.warning(line)
@@ -85,14 +91,8 @@ def main() -> int:
                 frame = frames.add(input_id, tag, event["value"].to_pylist())
                 if frame is None:
                     continue
-                if answered is not None and answered[0] == tag:  # the frame again, after a loss: the same answer
-                    targets_deg = answered[1]
-                else:
-                    if expert is None or tag.frame == 0:
-                        expert = Expert(planner, noise=settings.noise, seed=tag.seed)
-                    targets_deg = expert.targets(tag.frame / settings.lockstep_fps,
-                                                 frame["joint_state"] + frame["gripper_state"], frame["object_state"])
-                    answered = (tag, targets_deg)
+                targets_deg = answered.to(tag, lambda: plan_for(tag).targets(
+                    tag.frame / settings.lockstep_fps, frame["joint_state"] + frame["gripper_state"], frame["object_state"]))
                 node.send_output("joint_cmd", pa.array(targets_deg, type=pa.float64()), {**tag.metadata(), STREAM_KEY: 1})
             elif input_id in OBSERVED:
                 latest[input_id] = event["value"].to_pylist()

@@ -28,7 +28,7 @@ import logging
 import os
 import sys
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:  # run as a script from anywhere: the so101 package sits beside nodes/
@@ -41,7 +41,7 @@ from dora import Node  # noqa: E402
 from so101.dataset.features import ROBOT_TYPE  # noqa: E402
 from so101.policy.features import inputs_for, joint_targets_deg, observation  # noqa: E402
 from so101.policy.settings import PolicySettings  # noqa: E402
-from so101.runtime.lockstep import FrameParts, FrameTag, frame_tag  # noqa: E402
+from so101.runtime.lockstep import FrameParts, FrameTag, LastAnswer, frame_tag  # noqa: E402
 from so101.runtime.logs import send_diagnostics_to  # noqa: E402
 from so101.runtime.node_events import STREAM_KEY, cannot_start, inputs_until_stop  # noqa: E402
 from so101.tasks import task_named  # noqa: E402
@@ -131,7 +131,7 @@ def main() -> int:
     logger.warning(text["loaded"].format(kind=loaded.kind, folder=settings.policy_dir, inputs=", ".join(needed)))
     frames = FrameParts(needed)
     episode: int | None = None  # lockstep: the episode the policy's history belongs to
-    answered: tuple[FrameTag, Sequence[float]] | None = None  # lockstep: the last frame answered, and its answer
+    answered = LastAnswer()  # lockstep
     latest: dict[str, Any] = {}  # at the prompt: the newest of each input the policy needs
     driving = False  # at the prompt: `on` came, and nothing has stopped it since
     node = Node()
@@ -140,7 +140,9 @@ def main() -> int:
         logger.warning(line)
         node.send_output("policy_status", pa.array([line]))
 
-    def act(frame: dict[str, Any]) -> list[float]:
+    def act(frame: dict[str, Any], new_episode: bool = False) -> list[float]:
+        if new_episode:  # the action chunk and any history of the episode before go
+            loaded.reset()
         return joint_targets_deg(loaded.act(observation(frame, settings.image_size)))
 
     with inputs_until_stop(node, close=lambda: None) as inputs:
@@ -151,19 +153,13 @@ def main() -> int:
                 frame = frames.add(input_id, tag, value.to_numpy(zero_copy_only=False))
                 if frame is None:
                     continue
-                if answered is not None and answered[0] == tag:  # the frame again, after a loss: the same answer
-                    targets_deg = answered[1]
-                else:
-                    if tag.frame == 0 or tag.episode != episode:
-                        loaded.reset()
-                        episode = tag.episode
-                    try:
-                        targets_deg = act(frame)
-                    except Exception as error:  # noqa: BLE001 (inference that raises: one line, and the node stops)
-                        print(f"[{NODE_ID}] cannot go on: inference failed at frame {tag.frame} (seed {tag.seed}): "
-                              f"{type(error).__name__}: {error}", file=sys.stderr, flush=True)
-                        return 1
-                    answered = (tag, targets_deg)
+                try:
+                    targets_deg = answered.to(tag, lambda: act(frame, new_episode=tag.frame == 0 or tag.episode != episode))
+                except Exception as error:  # noqa: BLE001 (inference that raises: one line, and the node stops)
+                    print(f"[{NODE_ID}] cannot go on: inference failed at frame {tag.frame} (seed {tag.seed}): "
+                          f"{type(error).__name__}: {error}", file=sys.stderr, flush=True)
+                    return 1
+                episode = tag.episode
                 node.send_output("joint_cmd", pa.array(targets_deg, type=pa.float64()), {**tag.metadata(), STREAM_KEY: 1})
             elif input_id in needed:
                 latest[input_id] = value.to_numpy(zero_copy_only=False)

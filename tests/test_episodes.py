@@ -7,7 +7,7 @@ import pytest
 from so101.bodies.registry import SIMULATED_BODIES
 
 from so101.runtime.lockstep import (
-    FrameParts, FrameTag, answers, frame_tag, lockstep_rates, steps_per_frame,
+    FrameParts, FrameTag, LastAnswer, answers, frame_tag, lockstep_rates, steps_per_frame,
 )
 from so101.tasks.episodes import EpisodeClock, Outcome, read_outcomes, score_line, split_seeds, wilson_interval
 
@@ -81,6 +81,19 @@ def test_a_tag_rides_in_metadata_and_a_command_answers_only_its_own_frame():
     assert frame_tag({"timestamp": 0}) is None and frame_tag(None) is None
     assert answers(tag, tag) and answers(None, tag)  # an untagged command: the frame now
     assert not answers(FrameTag(1, 40, 7), tag) and not answers(FrameTag(2, 39, 7), tag)
+
+
+def test_a_frame_sent_again_gets_the_same_answer_without_asking_the_driver_again():
+    asked: list[int] = []
+
+    def driver(answer: float):
+        return lambda: asked.append(1) or [answer]
+
+    last = LastAnswer()
+    assert last.to(FrameTag(1, 0, 3), driver(1.0)) == [1.0]
+    assert last.to(FrameTag(1, 0, 3), driver(2.0)) == [1.0] and len(asked) == 1
+    assert last.to(FrameTag(1, 1, 3), driver(3.0)) == [3.0] and len(asked) == 2
+    assert last.to(FrameTag(2, 0, 4), driver(4.0)) == [4.0]  # another episode's frame 0
 
 
 def test_frame_parts_give_a_frame_once_whole_even_with_another_frames_parts_between():

@@ -20,7 +20,7 @@ and `so101 eval`. Light: nothing here imports a simulator or dora.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Mapping
+from typing import Any, Callable, Mapping, Sequence
 
 from so101.runtime.dataflow import TICK_PERIOD_S
 
@@ -105,3 +105,18 @@ class FrameParts:
         while len(self._frames) > self.KEPT:
             del self._frames[next(iter(self._frames))]  # the oldest first: dicts keep their order
         return None
+
+
+class LastAnswer:
+    """A driver's answer to the last frame it answered. A frame sent again (after a loss) gets that
+    same answer, and the driver's own state (a plan's clock, an action chunk) does not move on."""
+
+    def __init__(self) -> None:
+        self._tag: FrameTag | None = None
+        self._answer: Sequence[float] = ()
+
+    def to(self, tag: FrameTag, compute: Callable[[], Sequence[float]]) -> Sequence[float]:
+        """The answer to frame `tag`: `compute()`'s, or the one given before if `tag` was the last frame answered."""
+        if tag != self._tag:
+            self._answer, self._tag = compute(), tag
+        return self._answer
