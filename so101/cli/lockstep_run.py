@@ -27,7 +27,7 @@ from typing import Callable
 
 from so101.bodies.registry import BODIES, SIMULATED_BODIES, BodyKind
 from so101.cli.argtypes import add_language_option, number, whole_number
-from so101.runtime.dataflow import EXPERT_NODE_FILE, ROOT, write_dataflow
+from so101.runtime.dataflow import EXPERT_NODE_FILE, ROOT, node_launch, write_dataflow
 from so101.runtime.lockstep import DEFAULT_LOCKSTEP_FPS
 from so101.tasks import TASKS
 from so101.tasks.episodes import EpisodeClock, Outcome, read_outcomes, seeds_for, split_seeds
@@ -132,16 +132,13 @@ def lockstep_dataflow(flow: Flow, placement: tuple[str, str] | None = None, root
     under `root` (the project's folder on the machines that run them); with a `placement`
     (body machine, runner machine), the body and the driver on the first daemon, the runner, who
     writes the results, on the second."""
-    def path(node_file: Path) -> str:
-        return str(root / node_file.relative_to(ROOT))
-
     body_id, driver = flow.body.node_id, flow.driver
     fps = DEFAULT_LOCKSTEP_FPS
     last_frame = EpisodeClock(fps, float(flow.runner_env["SO101_TIME_LIMIT_S"])).limit_frames
     frame_outputs = [*BODY_FRAME_OUTPUTS, *flow.pictures]
     runner_inputs = {output: queued(f"{body_id}/{output}") for output in frame_outputs}
     nodes = [{
-        "id": body_id, "path": path(flow.body.node_file), "restart_policy": "never",
+        "id": body_id, **node_launch(flow.body.node_file, root), "restart_policy": "never",
         # The driver answers the body itself; the runner, beside the loop, only ends episodes (task_cmd).
         "inputs": {"joint_cmd": queued(f"{driver.node_id}/joint_cmd" if driver else "episodes/joint_cmd"),
                    "task_cmd": queued("episodes/task_cmd")},
@@ -154,15 +151,13 @@ def lockstep_dataflow(flow: Flow, placement: tuple[str, str] | None = None, root
         runner_inputs["action"] = queued(f"{driver.node_id}/joint_cmd")
         nodes.append({
             "id": driver.node_id, "restart_policy": "never",
-            # A driver with a Python of its own runs as that interpreter with the node file as its argument.
-            **({"path": driver.python, "args": path(driver.node_file)} if driver.python
-               else {"path": path(driver.node_file)}),
+            **node_launch(driver.node_file, root, driver.python),
             "inputs": {name: queued(f"{body_id}/{name}") for name in driver.inputs if name in frame_outputs},
             "outputs": ["joint_cmd"],
             "env": {"SO101_LANG": flow.lang, "SO101_LOCKSTEP_FPS": str(fps), **driver.env},
         })
     nodes.append({
-        "id": "episodes", "path": path(EPISODES_NODE_FILE), "restart_policy": "never",
+        "id": "episodes", **node_launch(EPISODES_NODE_FILE, root), "restart_policy": "never",
         "inputs": runner_inputs, "outputs": ["task_cmd"] if driver else ["joint_cmd", "task_cmd"],
         "env": {"SO101_LANG": flow.lang, "SO101_LOCKSTEP_FPS": str(fps),
                 **({} if driver else {"SO101_IDLE": "1"}), **flow.runner_env},

@@ -210,6 +210,13 @@ def _retarget(node: dict, input_id: str, source: str) -> None:
     node["inputs"][input_id] = {**spec, "source": source} if isinstance(spec, dict) else source
 
 
+def node_launch(node_file: PurePath, root: PurePath = ROOT, python: str | None = None) -> dict[str, str]:
+    """How dora starts a node file: its path under `root` (the project's folder where it runs); with
+    `python`, that interpreter with the file as its argument (the policy environment's)."""
+    where = str(root / node_file.relative_to(ROOT))
+    return {"path": python, "args": where} if python else {"path": where}
+
+
 def _before_body(descriptor: dict, body_node_id: str, node_id: str, node_file: PurePath, tick: str,
                  env: dict[str, str], root: PurePath, inputs: dict | None = None, python: str | None = None) -> dict:
     """`node_id` (`node_file`) added between the prompt and the body: the body takes its `joint_cmd`, it
@@ -222,9 +229,8 @@ def _before_body(descriptor: dict, body_node_id: str, node_id: str, node_file: P
     body = _node(descriptor, body_node_id)
     typed_input = body["inputs"]["joint_cmd"]
     _retarget(body, "joint_cmd", f"{node_id}/joint_cmd")
-    where = str(root / node_file.relative_to(ROOT))
     node = {
-        "id": node_id, **({"path": python, "args": where} if python else {"path": where}),
+        "id": node_id, **node_launch(node_file, root, python),
         "inputs": {"tick": {"source": tick, "queue_size": 1}, "typed_cmd": typed_input, **(inputs or {})},
         "outputs": ["joint_cmd", status], "env": env,
     }
