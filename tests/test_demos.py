@@ -193,7 +193,7 @@ def test_at_the_prompt_the_expert_does_the_task_and_a_typed_command_takes_over(t
 
     terminal, _, _ = start_teleop(tmp_path, "en", extra="--task cube_to_box --seed 3")
     try:
-        terminal.seen = terminal.wait_for(r"^=+\n>$", timeout_s=120).start()
+        terminal.seen = terminal.wait_for_prompt(timeout_s=120).start()
         terminal.command("expert", re.escape("  → the expert is doing the task; any move you type takes over"))
         # Paced by the wall clock: about 9 s for the task, then home.
         terminal.wait_for(re.escape("  ★ the cube is in the box (task cube_to_box, seed 3)"), timeout_s=60,

@@ -243,7 +243,7 @@ def test_at_the_prompt_the_policy_drives_and_a_typed_command_takes_over(tmp_path
     terminal, _, _ = start_teleop(tmp_path, "en", extra=f"--task cube_to_box --seed 3 --policy {TINY_POLICY} "
                                                          f"--policy-python {policy_python}", HF_HUB_OFFLINE="1")
     try:
-        terminal.seen = terminal.wait_for(r"^=+\n>$", timeout_s=180).start()
+        terminal.seen = terminal.wait_for_prompt(timeout_s=180).start()
         state = r"  joint angles now: \[(-?[\d.]+), (-?[\d.]+), (-?[\d.]+), (-?[\d.]+), (-?[\d.]+)\].*"
         assert all(abs(float(angle)) < 1.0 for angle in terminal.command("state", state).groups())  # home
         terminal.command("policy on", re.escape("  → told the policy: on"))

@@ -36,7 +36,7 @@ def _alive(pid: int) -> bool:
 def test_a_person_drives_the_arm_from_the_prompt(tmp_path):
     terminal, poses_file, log_file = start_teleop(tmp_path, "zh")
     try:
-        terminal.seen = terminal.wait_for(r"^=+\n>$", timeout_s=120).start()
+        terminal.seen = terminal.wait_for_prompt(timeout_s=120).start()
 
         terminal.command("0 90", re.escape("  → 关节 0 (shoulder_pan) → 90°"))
         terminal.command("batch -30 45 -60 30 0", re.escape("  → 全关节 → [-30.0, 45.0, -60.0, 30.0, 0.0]°"))
@@ -82,7 +82,7 @@ def test_a_person_drives_the_arm_from_the_prompt(tmp_path):
 def test_ctrl_c_or_d_on_teleop_stops_everything_and_keeps_poses_and_history(tmp_path, key):
     terminal, poses_file, log_file = start_teleop(tmp_path, "en")
     try:
-        end = terminal.wait_for(r"^=+\n>$", timeout_s=120).start()
+        end = terminal.wait_for_prompt(timeout_s=120).start()
         terminal.type_line("save b")
         end = terminal.wait_for(r"^  → pose 'b' saved: .*$", timeout_s=20, after=end).end()
         # Line editing: the up arrow brings back the last line, Enter runs it again.
@@ -112,7 +112,7 @@ def test_closing_the_terminal_stops_everything_and_saves_the_episode_recording(t
     dataset_dir = tmp_path / "demos"
     terminal, _, log_file = start_teleop(tmp_path, "en", extra=f"--record {dataset_dir}")
     try:
-        terminal.seen = terminal.wait_for(r"^=+\n>$", timeout_s=120).start()
+        terminal.seen = terminal.wait_for_prompt(timeout_s=120).start()
         terminal.command("record closing time", r"  ● recording episode 0: .*")
         time.sleep(1.0)
     finally:
@@ -135,7 +135,7 @@ def test_no_dora_log_line_reaches_the_prompt_with_the_window_open(tmp_path):
     with virtual_display(tmp_path / "xvfb.log") as display:
         terminal, _, _ = start_teleop(tmp_path, "en", mode="gui", DISPLAY=display)
         try:
-            end = terminal.wait_for(r"^=+\n>$", timeout_s=120).start()
+            end = terminal.wait_for_prompt(timeout_s=120).start()
             started = time.monotonic()
             sent = 0
             while time.monotonic() - started < 32:
@@ -160,7 +160,7 @@ def test_no_dora_log_line_reaches_the_prompt_with_the_window_open(tmp_path):
 def test_teleop_drives_the_mujoco_body_with_the_same_prompt(tmp_path):
     terminal, poses_file, log_file = start_teleop(tmp_path, "en", body="mujoco")
     try:
-        end = terminal.wait_for(r"^=+\n>$", timeout_s=120).start()
+        end = terminal.wait_for_prompt(timeout_s=120).start()
         terminal.type_line("0 60")
         end = terminal.wait_for(r"^> 0 60\n  → joint 0 \(shoulder_pan\) → 60°$", timeout_s=20, after=end).end()
         for _ in range(30):  # shoulder_pan carries no weight: MuJoCo's servo holds it within 1°
@@ -210,7 +210,7 @@ def test_a_person_without_an_arm_calibrates_the_emulated_one_and_drives_it(tmp_p
 
         terminal, poses_file, log_file = start_teleop(
             tmp_path, "en", body=f"real --port {port} --calibration {calibration_file}")
-        end = terminal.wait_for(r"^=+\n>$", timeout_s=120).start()
+        end = terminal.wait_for_prompt(timeout_s=120).start()
         assert "the arm is ready (torque on)" in terminal.screen()
 
         def state_reaches(target_deg: list[float]) -> list[float]:
@@ -264,7 +264,7 @@ def test_jog_moves_the_arm_by_keys_and_xyz_reaches_a_point(tmp_path):
     and a sideways step, Esc; then `xyz 200 0 150` and `where`. The terminal is as it was."""
     terminal, _, _ = start_teleop(tmp_path, "en")
     try:
-        end = terminal.wait_for(r"^=+\n>$", timeout_s=120).start()
+        end = terminal.wait_for_prompt(timeout_s=120).start()
         at_prompt = _pane_stty(terminal)
         terminal.type_line("jog")
         end = terminal.wait_for(r"^  jog mode \(a press moves, holding repeats\):$", timeout_s=20, after=end).end()
@@ -340,7 +340,7 @@ def test_the_dataflow_stopping_while_jogging_gives_the_terminal_back(tmp_path):
     try:
         dora.wait_for("SO-101 loaded", timeout_s=60)
         terminal = Terminal(" ".join(PROMPT_COMMAND), prompt_env(tmp_path))
-        end = terminal.wait_for(r"^=+\n>$", timeout_s=60).start()
+        end = terminal.wait_for_prompt(timeout_s=60).start()
         terminal.type_line("jog")
         end = terminal.wait_for(r"^\[joint\] step 2°", timeout_s=20, after=end).end()
         send_keys(terminal, "s", "s")

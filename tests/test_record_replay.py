@@ -34,7 +34,7 @@ def test_a_person_records_two_episodes_quits_and_replays_one_on_both_simulators(
     dataset_dir = tmp_path / "demos"
     terminal, _, log_file = start_teleop(tmp_path, "en", extra=f"--record {dataset_dir}")
     try:
-        terminal.seen = terminal.wait_for(r"^=+\n>$", timeout_s=120).start()
+        terminal.seen = terminal.wait_for_prompt(timeout_s=120).start()
 
         terminal.command("record wave the arm", re.escape("  ● recording episode 0: task 'wave the arm' (stop: stop, drop: discard)"))
         terminal.command("0 40", re.escape("  → joint 0 (shoulder_pan) → 40°"))
@@ -190,7 +190,7 @@ def test_a_person_drives_the_simulation_from_the_emulated_leader_records_and_rep
         port = calibrate_in_tmux(leader, calibration_file, "--leader")
         terminal, _, log_file = start_teleop(
             tmp_path, "en", extra=f"--leader {port} --leader-calibration {calibration_file} --record {dataset_dir}")
-        terminal.seen = terminal.wait_for(r"^=+\n>$", timeout_s=120).start()
+        terminal.seen = terminal.wait_for_prompt(timeout_s=120).start()
         assert "the leader is ready: move it and the body follows" in terminal.screen()
         leader.type_line("figure8 4")
 
@@ -244,7 +244,7 @@ def test_a_person_records_an_episode_of_the_task_resets_it_and_quits(tmp_path, b
                                          extra=f"--task cube_to_box --seed 3 --record {dataset_dir}")
     layout = CUBE_TO_BOX.layout(3)
     try:
-        terminal.seen = terminal.wait_for(r"^=+\n>$", timeout_s=120).start()
+        terminal.seen = terminal.wait_for_prompt(timeout_s=120).start()
         terminal.command("task", r"  task cube_to_box, seed 3: cube at \(173, -62\) mm, yaw -12°; box at \(160, 190\) mm\n"
                                  r"  the cube is now at \(173, -62, 12\) mm: not in the box")
         terminal.command("record put the cube in the box", r"  ● recording episode 0: task 'put the cube in the box'.*")

@@ -24,12 +24,11 @@ from so101.runtime.cluster import CLUSTER_DATAFLOW
 from so101.runtime.dataflow import LEADER_DATAFLOW_FILE, LEADER_NODE_ID, has_dynamic_node
 from so101.runtime.processes import DAEMON_PORT_TAKEN_MARK, on_our_network, running_with_env
 from tests.helpers.dataflow import PROMPT_COMMAND, DoraRun, write_test_dataflow
-from tests.helpers.terminal import Terminal, start_teleop
+from tests.helpers.terminal import PROMPT_READY, Terminal, start_teleop
 
 JOINT_0_TARGET_DEG = 77.0
 COMMAND = f"0 {JOINT_0_TARGET_DEG:g}"
 SENT = re.escape(f"  → joint 0 (shoulder_pan) → {JOINT_0_TARGET_DEG:g}°")
-PROMPT_READY = r"^=+\n>$"
 
 
 @pytest.mark.parametrize(

@@ -36,6 +36,16 @@ def angle_on_page(text: str, joint: str) -> float:
     return float(match.group(1))
 
 
+def page_showing(browser: Browser, joint: str, angle_deg: float, timeout_s: float = 60) -> str:
+    """The page's text once it shows `joint` within 0.5° of `angle_deg`: the arm settled there. The web
+    view runs below the body's priority, so on a loaded machine the page may lag the body by seconds."""
+    deadline = time.monotonic() + timeout_s
+    while abs(angle_on_page(text := browser.text(), joint) - angle_deg) > 0.5:
+        assert time.monotonic() < deadline, f"the page did not show {joint} at {angle_deg}° within {timeout_s} s: {text[:500]!r}"
+        time.sleep(0.3)
+    return text
+
+
 def scene_pixels(path) -> np.ndarray:
     return np.asarray(Image.open(path).convert("RGB"), dtype=np.int16)[:, :PANEL_LEFT_PX]
 
@@ -79,9 +89,7 @@ def test_the_page_draws_the_arm_follows_0_90_and_outlives_a_reload_and_its_brows
         prompt.stdin.write("0 90\n")
         prompt.stdin.close()
         assert prompt.wait(60) == 0, prompt.stdout.read()
-        text = browser.wait_for_text("shoulder_pan: 9")
-        time.sleep(2)  # settled
-        text = browser.text()
+        text = page_showing(browser, "shoulder_pan", 90.0)
         after = the_arm_drawn(browser, tmp_path / "after.png")
         if os.environ.get("SO101_WEB_SCREENSHOT"):  # the README's picture: this test's own
             shutil.copyfile(tmp_path / "after.png", os.environ["SO101_WEB_SCREENSHOT"])
@@ -105,7 +113,6 @@ def test_the_page_draws_the_arm_follows_0_90_and_outlives_a_reload_and_its_brows
     # The angles shown are the body's, within 0.5° (the arm still by then).
     last_state = samples[-1][1]
     assert angle_on_page(text, "shoulder_pan") == pytest.approx(last_state[0], abs=0.5)
-    assert angle_on_page(text, "shoulder_pan") == pytest.approx(90.0, abs=0.5)
     # The page reloaded, then the browser killed: states go on, and the web view did not fail.
     assert any(t > killed_at + 1.5 for t, _ in samples)
     assert "Traceback" not in log and "web_view: daemon exited with code" not in log, log[-3000:]
@@ -132,16 +139,13 @@ def test_every_body_is_shown_posed_by_its_joint_state(tmp_path, body):
             prompt = subprocess.run(PROMPT_COMMAND, input="0 -60\n", capture_output=True, text=True,
                                     env=prompt_env(tmp_path), cwd=tmp_path, timeout=120)
             assert prompt.returncode == 0, prompt.stdout + prompt.stderr
-            browser.wait_for_text("shoulder_pan: -6", timeout_s=60)
-            time.sleep(3)  # settled
-            text = browser.text()
+            text = page_showing(browser, "shoulder_pan", -60.0)
         finally:
             if browser is not None:
                 browser.kill()
             dora.stop()
     last_state = json.loads(record_file.read_text())["samples"][-1][1]
     assert angle_on_page(text, "shoulder_pan") == pytest.approx(last_state[0], abs=0.5)
-    assert angle_on_page(text, "shoulder_pan") == pytest.approx(-60.0, abs=1.0)
     assert "Traceback" not in dora.log(), dora.log()[-3000:]
 
 
@@ -157,7 +161,7 @@ def test_teleop_web_shows_the_camera_and_marks_an_episode_while_it_records(tmp_p
     try:
         address = terminal.wait_for(r"^web view: (http://\S+)$", timeout_s=120).group(1)
         assert address == f"http://127.0.0.1:{web_port}/"
-        terminal.seen = terminal.wait_for(r"^=+\n>$", timeout_s=60).start()
+        terminal.seen = terminal.wait_for_prompt(timeout_s=60).start()
         browser = Browser(free_port())
         browser.open(address)
         browser.wait_for_text("shoulder_pan: 0.0°")

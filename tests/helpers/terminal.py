@@ -13,6 +13,11 @@ from pathlib import Path
 from tests.helpers.dataflow import SO101
 
 
+# The prompt ready for typing: the banner's last rule, any news printed since (each line indented,
+# such as a leader that missed reads while the machine was busy), then `>`.
+PROMPT_READY = r"^=+\n(?:  .*\n)*>$"
+
+
 class Terminal:
     """One tmux session of 200x50 running a shell command; the pane stays after the command exits."""
 
@@ -32,6 +37,9 @@ class Terminal:
         )
         # -J keeps trailing blanks; a person does not see them
         return "\n".join(line.rstrip() for line in result.stdout.splitlines())
+
+    def wait_for_prompt(self, timeout_s: float = 60) -> re.Match:
+        return self.wait_for(PROMPT_READY, timeout_s=timeout_s)
 
     def type_line(self, text: str) -> None:
         # -l: literal text, or tmux reads "home" as the Home key
