@@ -12,7 +12,7 @@ from so101.bodies.registry import BODIES, SIMULATED_BODIES
 from so101.robot import HOME_POSE_DEG
 from so101.tasks import CUBE_TO_BOX
 from so101.tasks.expert import (
-    APPROACH_ABOVE_M, CLOSED_DEG, OPEN_DEG, CubeSeen, Expert, planner_for, seen_in,
+    APPROACH_ABOVE_M, CLOSED_DEG, OPEN_DEG, CubeSeen, Expert, planner_for, quarter_turn_rad, seen_in,
 )
 
 pytestmark = pytest.mark.slow  # steps both simulators for simulated minutes
@@ -58,6 +58,25 @@ def test_the_yaw_of_a_cube_is_read_from_its_quaternion():
         seen = seen_in(state)
         assert seen.cube_yaw_rad == pytest.approx(math.radians(yaw_deg))
         assert seen.cube_xyz_m == layout.cube_xyz_m and seen.box_xyz_m == layout.box_xyz_m
+
+
+def test_a_cube_turned_by_quarter_turns_shows_the_same_yaw_within_45_degrees():
+    for yaw_deg, shown_deg in ((0.0, 0.0), (44.0, 44.0), (46.0, -44.0), (-46.0, 44.0), (100.0, 10.0), (-170.0, 10.0)):
+        assert math.degrees(quarter_turn_rad(math.radians(yaw_deg))) == pytest.approx(shown_deg)
+
+
+def test_the_wrist_roll_at_the_grasp_follows_the_cubes_yaw_with_no_jump(planner):
+    # A policy learns the grasp from plans like these: the roll must be a smooth function of what it
+    # sees. Where the cube stands, turned from -44° to 44° by 2°, the roll steps by the 2° and never
+    # by a quarter turn (the wrist least turned, as first chosen, jumped 90° halfway).
+    for seed in (0, 7):
+        layout = CUBE_TO_BOX.layout(seed)
+        rolls = []
+        for yaw_deg in range(-44, 45, 2):
+            plan = planner.plan(CubeSeen(layout.cube_xyz_m, math.radians(yaw_deg), layout.box_xyz_m), HOME_POSE_DEG)
+            rolls.append(next(w for w in plan if w.phase == "close").targets_deg[4])
+        steps = np.abs(np.diff(rolls))
+        assert steps.max() < 3.0, (seed, rolls)
 
 
 @pytest.mark.parametrize("seed", SEEDS)

@@ -30,7 +30,7 @@ SUBCOMMANDS = {
     "dataset": ("so101.cli.dataset", "summarize a LeRobot dataset (episodes, frames, tasks, features); --plot N draws an episode"),
     "replay": ("so101.cli.replay", "play an episode of a LeRobot dataset onto any body, then print the tracking error"),
     "demos": ("so101.cli.demos", "demonstrations of a task by the scripted expert, in lockstep, into a LeRobot dataset"),
-    "eval": ("so101.cli.evaluate", "score the expert (or an idle arm) on a task's seeded layouts, in lockstep: success rate with its 95%% interval"),
+    "eval": ("so101.cli.evaluate", "score the expert, an idle arm or a trained policy on a task's seeded layouts, in lockstep: success rate with its 95% interval"),
     "policy-env": ("so101.cli.policy_env", "build (once) and check the environment that runs trained LeRobot policies (--policy-python)"),
     "fake-arm": ("so101.cli.fake_arm", "an emulated SO-101 servo bus on a pseudo-terminal, for trying the real-arm driver without hardware"),
 }
@@ -44,7 +44,7 @@ def build_parser() -> argparse.ArgumentParser:
     commands = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name, (module_name, summary) in SUBCOMMANDS.items():
         module = importlib.import_module(module_name)
-        sub = commands.add_parser(name, help=summary, description=summary)
+        sub = commands.add_parser(name, help=summary.replace("%", "%%"), description=summary)  # help is %-formatted
         module.add_arguments(sub, name)
         sub.set_defaults(run=module.run)
     return parser

@@ -1,12 +1,13 @@
 """A grasp from above: where the gripper tip goes so that a cube's centre sits between the pads.
 
 The tip (`gripper_frame_link`) lies at the fixed jaw; the moving jaw swings toward it. So the
-point to put on the cube's centre is beside the tip: the fixed pad's inner face, plus half the
-cube, along the jaws' axis (the tip frame's -x). `TopDownGrasp` finds that point from the pads
-(so101.bodies.jaw_pads, grown as the simulators have them) and the kinematics, and gives the
-five arm angles that hold the gripper pointing straight down, its jaws across a yaw, with that
-point at a place. A cube is the same every 90°, so of the four yaws that grasp it the one
-whose wrist roll is within its limits and nearest 0 is taken.
+point to put on the cube's centre is beside the tip: the fixed pad's inner face, plus a
+clearance and half the cube, along the jaws' axis (the tip frame's -x). `TopDownGrasp` finds that
+point from the pads (so101.bodies.jaw_pads, grown as the simulators have them) and the
+kinematics, and gives the five arm angles that hold the gripper pointing straight down, its jaws
+across a yaw, with that point at a place: at exactly that yaw (`pose_at_yaw`), or, since a cube
+is the same every 90°, at the one of the four whose wrist roll is within its limits and nearest
+0 (`pose`).
 """
 
 from __future__ import annotations
@@ -48,17 +49,19 @@ def top_down_rotation(yaw_rad: float) -> np.ndarray:
 
 
 class TopDownGrasp:
-    """Grasps from above of a cube of `cube_half_m` with the fixed jaw's `fixed_pad`, on `kinematics`."""
+    """Grasps from above of a cube of `cube_half_m` with the fixed jaw's `fixed_pad`, on `kinematics`; the
+    cube's face `clearance_m` from the pad's when the jaws come down around it (the moving jaw, closing,
+    pushes it across)."""
 
-    def __init__(self, kinematics: Kinematics, fixed_pad: JawPad, cube_half_m: float):
+    def __init__(self, kinematics: Kinematics, fixed_pad: JawPad, cube_half_m: float, clearance_m: float = 0.0):
         self.kinematics = kinematics
         gripper_xyz, gripper_rows = kinematics.frame_m(GRIPPER_LINK_INDEX)
         tip_xyz, tip_rows = kinematics.frame_m(TIP_LINK_INDEX)
         gripper_rotation = np.asarray(gripper_rows).reshape(3, 3)
         tip_rotation = np.asarray(tip_rows).reshape(3, 3)
         inward = np.asarray(fixed_pad.inward)
-        # The cube's centre when it rests on the fixed pad's face, in the gripper link's frame...
-        centre = np.asarray(fixed_pad.pos_m) + inward * (fixed_pad.half_size_m[0] + cube_half_m)
+        # The cube's centre `clearance_m` off the fixed pad's face, in the gripper link's frame...
+        centre = np.asarray(fixed_pad.pos_m) + inward * (fixed_pad.half_size_m[0] + clearance_m + cube_half_m)
         world = np.asarray(gripper_xyz) + gripper_rotation @ centre
         # ...and in the tip's.
         self.point_in_tip_m = tip_rotation.T @ (world - np.asarray(tip_xyz))
