@@ -38,9 +38,9 @@ from so101.tasks.grasp import TopDownGrasp
 OPEN_DEG = 35.0
 CLOSED_DEG = 0.0
 # The cube's face this far from the fixed pad's as the jaws come down around it: the middle of the
-# 20 mm the open jaws leave. With the jaws turned 15° off the cube's faces, both simulators lifted
-# the cube from 2 mm to 24 mm off the fixed pad, and MuJoCo not at 0 mm (the face on the pad, as the
-# expert first grasped): a policy that learns this grasp has about ±10 mm to miss by
+# 20 mm the open jaws leave. Probed by hand, the jaws square to the cube lifted it from 3 mm (PyBullet)
+# to past 24 mm off the fixed pad; turned 15°, MuJoCo's failed with the face on the pad (0 mm, as the
+# expert first grasped). So a policy that learns this grasp has several mm to miss by either way
 # (tests/test_task_scene.py holds 7 mm either way, and 15° turned).
 GRASP_CLEARANCE_M = 0.010
 # The jaws' yaw over the cube: the cube's, within ±45°, turned half round. On that one of the four
