@@ -72,6 +72,15 @@ def tick_figures(ticks: list[tuple[int, int, int]], period_s: float) -> dict:
     }
 
 
+def states_per_s(states: list, from_ns: int, to_ns: int | None = None) -> tuple[float, float]:
+    """(joint_state per second, seconds measured) over the states the prober had that were sent
+    from `from_ns` on (up to `to_ns`): by when each was sent, not when it arrived, so a prober
+    that stalls and then takes its queue at once does not count a burst as a rate."""
+    sent_ns = sorted(state[3] for state in states if state[3] >= from_ns and (to_ns is None or state[3] <= to_ns))
+    span_s = (sent_ns[-1] - sent_ns[0]) / 1e9
+    return (len(sent_ns) - 1) / span_s, span_s
+
+
 def reflecting_states(states: list, commands: list, joints: list[int], threshold_deg: float = MOVED_THRESHOLD_DEG) -> list[tuple[int, int]]:
     """For each joint_cmd probe: (send ns, arrival ns of the first joint_state that shows the joint moving toward it).
 
@@ -283,11 +292,9 @@ def realtime_figures(record: dict, period_s: float) -> dict:
     probe = record["probe"]
     states = probe["states"]
     steady_from_ns = max(states[0][0], record["measured_from_ns"]) + int(WARMUP_S * 1e9)
-    steady_states = [state for state in states if state[0] >= steady_from_ns]
     steady_ticks = [tick for tick in record["ticks"] if tick[0] >= steady_from_ns]
     ticks = tick_figures(steady_ticks, period_s)
-    span_s = (steady_states[-1][0] - steady_states[0][0]) / 1e9
-    per_s = (len(steady_states) - 1) / span_s
+    per_s, span_s = states_per_s(states, steady_from_ns)
     commands = probe["commands"]
     tick_starts_ns = [start for start, _, _ in record["ticks"]]
     latency = latency_breakdown(reflecting_states(states, commands, probe["probed_joints"]), tick_starts_ns)

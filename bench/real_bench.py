@@ -24,7 +24,7 @@ from pathlib import Path
 from bench import leader_bench
 from bench.common import (
     PROBE_STEP_DEG, WARMUP_S, latency_breakdown, machine_facts, machine_line, reflecting_states, run_dataflow, target_lines,
-    target_row, tick_figures,
+    states_per_s, target_row, tick_figures,
 )
 from so101.bodies.real_arm import SO101Real
 from so101.feetech.calibration import save_calibration
@@ -81,14 +81,13 @@ def run_real_benchmark(duration_s: float, exchanges: int) -> dict:
     probe = record["probe"]
     states = probe["states"]
     steady_from_ns = max(states[0][0], record["measured_from_ns"]) + int(WARMUP_S * 1e9)
-    steady_states = [state for state in states if state[0] >= steady_from_ns]
     ticks = tick_figures([tick for tick in record["ticks"] if tick[0] >= steady_from_ns], TICK_S)
-    span_s = (steady_states[-1][0] - steady_states[0][0]) / 1e9
+    per_s, span_s = states_per_s(states, steady_from_ns)
     latency = latency_breakdown(reflecting_states(states, probe["commands"], probe["probed_joints"]),
                                 [start for start, _, _ in record["ticks"]])
     dataflow = {
         "measured_s": span_s,
-        "joint_state_per_s": (len(steady_states) - 1) / span_s,
+        "joint_state_per_s": per_s,
         "expected_per_s": 1 / TICK_S,
         "ticks_served": ticks["ticks_served"],
         "ticks_missed": ticks["ticks_missed"],

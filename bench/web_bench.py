@@ -26,7 +26,7 @@ import time
 from pathlib import Path
 
 from bench.browser import CHROMIUM, Browser
-from bench.common import PACED_PROBE_ENV, WARMUP_S, run_dataflow, target_row, tick_figures
+from bench.common import PACED_PROBE_ENV, WARMUP_S, run_dataflow, states_per_s, target_row, tick_figures
 from so101.bodies.registry import BODIES
 from so101.runtime.dataflow import TICK_PERIOD_S, with_web_view
 from so101.runtime.processes import processes_with_env
@@ -179,10 +179,9 @@ def measure(work_dir: Path, duration_s: float, body: str, kind: str) -> dict:
     record = run_dataflow(run_dir, duration_s, {"SO101_FAST_STEPS": "0"}, PACED_PROBE_ENV, body=body,
                           extend=add_web_view, during=viewers.watch)
     start_ns, end_ns = viewers.figures.pop("window_ns")
-    states = [state for state in record["probe"]["states"] if start_ns <= state[0] <= end_ns]
     ticks = tick_figures([tick for tick in record["ticks"] if start_ns <= tick[0] <= end_ns], TICK_PERIOD_S)
-    span_s = (states[-1][0] - states[0][0]) / 1e9
-    return {**viewers.figures, "joint_state_per_s": (len(states) - 1) / span_s, "measured_s": span_s,
+    per_s, span_s = states_per_s(record["probe"]["states"], start_ns, end_ns)
+    return {**viewers.figures, "joint_state_per_s": per_s, "measured_s": span_s,
             "sim_over_wall": ticks["steps_per_s"] * TICK_PERIOD_S, "ticks_missed": ticks["ticks_missed"]}
 
 

@@ -45,6 +45,17 @@ def test_tick_log_bytes_become_start_end_steps_records():
     assert common.tick_records(raw + b"\x01\x02") == [(10, 15, 1), (20, 26, 3)]  # a torn write is ignored
 
 
+def test_states_per_s_counts_by_sending_so_a_stalled_prober_does_not_make_a_burst_a_rate():
+    # Sent every 4 ms for 2 s; the prober stalled and took the first 0.8 s of them at 0.8 s at once.
+    sent_ms = [4 * k for k in range(501)]
+    states = [[max(t, 800) * MS, 0.0, 0.0, t * MS] for t in sent_ms]
+    assert common.states_per_s(states, 0) == pytest.approx((250.0, 2.0))
+    assert common.states_per_s(states, 1000 * MS) == pytest.approx((250.0, 1.0))
+    assert common.states_per_s(states, 0, 400 * MS) == pytest.approx((250.0, 0.4))
+    # Every other state lost: half the rate.
+    assert common.states_per_s(states[::2], 0)[0] == pytest.approx(125.0)
+
+
 def test_latency_is_send_to_first_state_moving_toward_the_target():
     # States every 4 ms; joint 0 rests at 0.0 until the state at 16 ms shows +0.07°.
     states = [[t * MS, 0.0, 0.0] for t in (0, 4, 8, 12)] + [[16 * MS, 0.07, 0.0], [20 * MS, 0.3, 0.0]]

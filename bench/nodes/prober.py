@@ -4,7 +4,8 @@ Every $PROBE_PERIOD_S seconds (0 = never) it moves joint 0 or joint 4 (in turn) 
 ±$PROBE_STEP_DEG around 0, at a random phase of the tick ($PROBE_PHASE_S, default 4 ms)
 so the wait for the next tick is sampled fairly. It records when each joint_state arrived
 (time.monotonic_ns, the clock `so101 bench` and the simulation node's tick log use) with the
-angles of joints 0 and 4, and writes everything to $PROBE_LOG (JSON) at STOP.
+angles of joints 0 and 4 and when it was sent (dora's timestamp, on the same clock), and writes
+everything to $PROBE_LOG (JSON) at STOP.
 With $PROBE_COUNT_ONLY=1 it only counts states and keeps the first and last arrival:
 the fast mode publishes far too many to keep. With $PROBE_RECORD_TASK set (and the recorder in
 the dataflow) it starts an episode of that task at the first joint_state, as `record TASK`
@@ -31,7 +32,7 @@ def main() -> None:
     count_only = os.environ.get("PROBE_COUNT_ONLY", "0") == "1"
     phase_ns = int(float(os.environ.get("PROBE_PHASE_S", "0.004")) * 1e9)
     record_task = os.environ.get("PROBE_RECORD_TASK", "")
-    states = []  # [arrival ns, angle of joint 0, angle of joint 4]
+    states = []  # [arrival ns, angle of joint 0, angle of joint 4, sent ns]
     commands = []  # [send ns, joint, target deg]
     state_count, first_ns, last_ns = 0, None, None
     node = Node()
@@ -55,7 +56,9 @@ def main() -> None:
                 last_ns = now_ns
                 if not count_only:
                     angles = event["value"].to_pylist()
-                    states.append([now_ns, angles[0], angles[4]])
+                    # dora stamps each message with the sender's wall clock: moved onto the monotonic one.
+                    sent_ago_ns = time.time_ns() - int(event["metadata"]["timestamp"].timestamp() * 1e9)
+                    states.append([now_ns, angles[0], angles[4], now_ns - sent_ago_ns])
                     if next_send_ns is None and period_ns:
                         next_send_ns = now_ns + period_ns
         elif next_send_ns is None:
