@@ -58,6 +58,15 @@ def test_the_same_seed_lays_the_same_scene_out_on_each_simulator_and_it_stays(bo
                 run_for(sim, 1.0)
 
 
+def grasp_and_lift(sim, layout: Layout, above_deg, down_deg, lifted_deg) -> None:
+    """The expert's grasp in four moves, with time to settle: open above the cube, down, close, up."""
+    sim.scene.lay_out(layout)
+    for arm_deg, gripper_deg, seconds in ((above_deg, OPEN_DEG, 1.5), (down_deg, OPEN_DEG, 1.5),
+                                          (down_deg, CLOSED_DEG, 1.0), (lifted_deg, CLOSED_DEG, 1.5)):
+        sim.set_targets_deg([*arm_deg, gripper_deg])
+        run_for(sim, seconds)
+
+
 @pytest.mark.parametrize("body_name", SIMULATED_BODIES)
 def test_a_cube_grasped_and_lifted_10_cm_stays_in_the_gripper_for_5_s(body_name, grasp):
     layout = Layout(0, (0.2, -0.05, CUBE_TO_BOX.cube.half_size_m), math.radians(20), (*CUBE_TO_BOX.box.xy_m, 0.0))
@@ -71,11 +80,7 @@ def test_a_cube_grasped_and_lifted_10_cm_stays_in_the_gripper_for_5_s(body_name,
     lifted = grasp.kinematics.solve(tip_mm + [0, 0, 100], seed_deg=down.arm_deg)
     assert lifted.reachable
     with make(body_name) as sim:
-        sim.scene.lay_out(layout)
-        for pose, gripper_deg, seconds in ((above, OPEN_DEG, 1.5), (down, OPEN_DEG, 1.5), (down, CLOSED_DEG, 1.0),
-                                           (lifted, CLOSED_DEG, 1.5)):
-            sim.set_targets_deg([*(pose.joints_deg if pose is lifted else pose.arm_deg), gripper_deg])
-            run_for(sim, seconds)
+        grasp_and_lift(sim, layout, above.arm_deg, down.arm_deg, lifted.joints_deg)
         lifted_xyz = sim.scene.object_state()[0:3].copy()
         assert lifted_xyz[2] > cube[2] + 0.08, "the cube did not come up with the gripper"
         run_for(sim, 5.0)
@@ -96,11 +101,7 @@ def lifts_the_cube(body_name, grasp, off_m: float, turned_deg: float) -> bool:
     lifted = grasp.kinematics.solve(np.array(grasp.kinematics.tip_mm(down.arm_deg)) + [0, 0, 80], seed_deg=down.arm_deg)
     assert above.exact and down.exact and lifted.reachable
     with make(body_name) as sim:
-        sim.scene.lay_out(layout)
-        for arm_deg, gripper_deg, seconds in ((above.arm_deg, OPEN_DEG, 1.5), (down.arm_deg, OPEN_DEG, 1.5),
-                                              (down.arm_deg, CLOSED_DEG, 1.0), (lifted.joints_deg, CLOSED_DEG, 1.5)):
-            sim.set_targets_deg([*arm_deg, gripper_deg])
-            run_for(sim, seconds)
+        grasp_and_lift(sim, layout, above.arm_deg, down.arm_deg, lifted.joints_deg)
         return bool(sim.scene.object_state()[2] > layout.cube_xyz_m[2] + 0.05)
 
 
