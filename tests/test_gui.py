@@ -52,6 +52,9 @@ def test_arm_is_drawn_and_moves_in_the_gui_window(tmp_path, xvfb_display, body):
     try:
         dora.wait_for("SO-101 loaded", timeout_s=120)
         assert "(GUI mode" in dora.log()
+        # The window loads in its own process after the physics: on a busy CI machine MuJoCo's
+        # showed no arm for the minute after "loaded", so the screenshots start when it says it shows.
+        dora.wait_for("window open: it shows the arm", timeout_s=120)
         before = settled_arm(xvfb_display, tmp_path / "before.png", lambda m: m.sum() >= MIN_ARM_PIXELS)
         assert before.sum() >= MIN_ARM_PIXELS, f"the arm is not drawn: {before.sum()} yellow pixels"
 
