@@ -34,16 +34,15 @@ from so101.tasks.cube_to_box import CubeToBox
 from so101.tasks.grasp import TopDownGrasp
 
 # The jaws, in the gripper's degrees: open leaves 62 mm between the pads' faces for the 25 mm cube
-# (35° left 45 mm, and less room for a policy's miss: see GRASP_CLEARANCE_M); closed is the goal
-# the jaw squeezes toward (the cube stops it).
+# (35° leaves 45 mm: see GRASP_CLEARANCE_M); closed is the goal the jaw squeezes toward (the cube stops it).
 OPEN_DEG = 50.0
 CLOSED_DEG = 0.0
 # The cube's face this far from the fixed pad's as the jaws come down around it (the moving jaw,
 # closing, pushes it across). Probed along the jaws' axis in both simulators, on two layouts, the jaws
 # square or turned 15° either way: open 50°, every grasp from 10 mm toward the fixed jaw to 12 mm
 # toward the moving one lifted the cube; open 35°, MuJoCo's turned 15° dropped it from 4 mm toward
-# the moving jaw on one of them. So a policy that learns this grasp has about 10 mm to miss by either way
-# (tests/test_task_scene.py holds it).
+# the moving jaw on one of them. So a policy that learns this grasp has about 10 mm to miss by
+# either way (tests/test_task_scene.py holds it).
 GRASP_CLEARANCE_M = 0.010
 # The jaws' yaw over the cube: the cube's, within ±45°, turned half round. On that one of the four
 # branches the wrist's roll stays within -66°…124° over the sector a cube starts in (the wrist turns
