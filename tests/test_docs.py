@@ -70,14 +70,11 @@ def test_the_commands_page_is_so101s_own_help():
     assert str(ROOT) not in made
 
 
-def test_a_dataflow_entry_is_the_files_own():
+def test_the_dataflow_entries_are_the_files_and_the_commands_own():
     made = hooks().dataflow_node("dataflow.yml", "simulation")
     entry = yaml.safe_load(made.removeprefix("```yaml\n").removesuffix("\n```"))["nodes"]
     described = yaml.safe_load((ROOT / "dataflow.yml").read_text(encoding="utf-8"))["nodes"]
     assert entry == [node for node in described if node["id"] == "simulation"]
-
-
-def test_each_made_dataflow_entry_names_its_node_file():
     for node_id in ("recorder", "camera", "expert", "web_view", "replay", "policy", "episodes"):
         made = hooks().made_node(node_id)
         nodes = yaml.safe_load(made.removeprefix("```yaml\n").removesuffix("\n```"))["nodes"]

@@ -110,3 +110,24 @@ def test_the_readme_is_a_front_page_with_the_course_steps_and_a_path_to_each_par
     first_screen = "\n".join(README.splitlines()[:60])
     for page in ("docs/loop/record-replay.md", "docs/loop/leader.md"):
         assert f"]({page}" in first_screen, page
+
+
+def test_the_readmes_links_reach_their_pages_and_anchors():
+    """GitHub shows the README outside the site, so mkdocs does not check its links: this does."""
+    from markdown.extensions.toc import slugify
+
+    def anchors(text: str, slug) -> set[str]:
+        indented = re.compile(r"^ {4,}\S.*$", re.M)  # a `#` comment in a quoted command is no heading
+        return {slug(heading.replace("`", "")) for heading in re.findall(r"^#+ (.*)$", indented.sub("", text), re.M)}
+
+    def github_slug(heading: str) -> str:
+        return re.sub(r"[^\w\- ]", "", heading.strip().lower()).replace(" ", "-")
+
+    for target in re.findall(r"\]\(([^)]+)\)", README):
+        path, _, anchor = target.partition("#")
+        if not path:
+            assert anchor in anchors(README, github_slug), target
+            continue
+        assert (ROOT / path).exists(), target
+        if anchor:
+            assert anchor in anchors((ROOT / path).read_text(encoding="utf-8"), lambda text: slugify(text, "-")), target
