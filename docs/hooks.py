@@ -8,17 +8,15 @@ A page asks for them with one HTML comment on a line of its own:
 - `<!-- so101-help -->`: `so101 --help` and each subcommand's `--help`, from the parser `so101` runs
   (so101/cli/main.py, `build_parser`).
 - `<!-- dataflow-node: dataflow.yml simulation -->`: that node's entry, as the dataflow file has it.
-- `<!-- dataflow-made: recorder -->`: a node that the `so101` commands add to a dataflow, as
-  so101/runtime/dataflow.py writes it.
+- `<!-- dataflow-made: recorder -->`: a node as the `so101` commands add it to a dataflow, made by
+  the code they run (so101/runtime/dataflow.py; so101/cli/lockstep_run.py for `so101 eval`'s).
 
 tests/test_docs.py builds the site with `mkdocs build --strict` and holds the pages to these markers.
 """
 
 from __future__ import annotations
 
-import contextlib
 import importlib
-import io
 import os
 import re
 import sys
@@ -200,5 +198,4 @@ def expand(markdown: str) -> str:
 
 
 def on_page_markdown(markdown: str, page, config, files) -> str:  # noqa: ANN001 (MkDocs' hook signature)
-    with contextlib.redirect_stdout(io.StringIO()):
-        return expand(markdown)
+    return expand(markdown)

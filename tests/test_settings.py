@@ -22,6 +22,7 @@ from so101.runtime.settings import Setting, declared
 from tests.helpers.dataflow import ROOT
 from tests.helpers.docs import hooks, page_text
 
+
 def node_settings(body: str) -> tuple[Setting, ...]:
     return declared(NodeSettings) + declared(BODIES[body].settings)
 
