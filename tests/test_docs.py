@@ -43,7 +43,7 @@ def test_every_marker_is_filled_in(site):
 
 
 def test_every_page_is_in_the_navigation():
-    config = yaml.safe_load((ROOT / "mkdocs.yml").read_text(encoding="utf-8").replace("!!python", "#"))
+    config = yaml.safe_load((ROOT / "mkdocs.yml").read_text(encoding="utf-8"))
 
     def listed(entries):
         for entry in entries:
