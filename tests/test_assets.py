@@ -241,8 +241,8 @@ def mesh_names() -> list[str]:
 @pytest.mark.slow
 @pytest.mark.parametrize("name", mesh_names())
 def test_pybullet_snaps_hull_vertices_to_a_grid_of_the_bounding_box(model_dir, pybullet_client, name):
-    # What the hull files rest on (PyBullet's btConvexHullComputer; pinned here, README "The
-    # model files"): every hull vertex lies on a grid of HULL_GRID_STEPS steps per axis, centred
+    # What the hull files rest on (PyBullet's btConvexHullComputer; pinned here, docs/model-files.md,
+    # "The model files"): every hull vertex lies on a grid of HULL_GRID_STEPS steps per axis, centred
     # on the points' bounding box. Another PyBullet that snaps otherwise fails here.
     mesh = model_dir / "assets" / name
     points = stl_points(mesh).astype(np.float64)

@@ -203,7 +203,7 @@ def test_when_the_simulations_daemon_dies_the_prompt_says_so_in_one_line(tmp_pat
 
 
 def test_when_the_prompts_daemon_dies_the_simulation_goes_on_and_a_restart_lets_a_new_prompt_drive(tmp_path):
-    """What the README says of the prompt's machine dropping out, in dora 1.1: the simulation keeps
+    """What docs/clusters.md says of the prompt's machine dropping out, in dora 1.1: the simulation keeps
     publishing; a daemon started again rejoins the coordinator, but not the running dataflow, so a
     new prompt is refused, in one line that says what to do; after `dora restart so101` a new
     prompt drives the arm again."""

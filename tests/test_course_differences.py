@@ -1,4 +1,4 @@
-"""Evidence for the README's "Where this project differs from the course": what dora-rs 1.1 does with the course's files."""
+"""Evidence for docs/differences.md, "Where this project differs from the course": what dora-rs 1.1 does with the course's files."""
 
 from __future__ import annotations
 

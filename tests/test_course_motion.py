@@ -3,7 +3,7 @@
 The reference is written from the course's own calls (step C's `setup_pybullet` and
 `set_all_joint_positions`) in plain PyBullet, on its own client, with the node's 4 ms
 step; the simulator must match it at every step. The course leaves the gripper out of
-its loop (README, difference 8): here the same call drives it too, as the node does.
+its loop (docs/differences.md, difference 8): here the same call drives it too, as the node does.
 """
 
 from __future__ import annotations

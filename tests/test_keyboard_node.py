@@ -378,18 +378,6 @@ def test_when_joint_state_stops_coming_commands_are_not_sent_and_one_line_says_w
     assert sent(node) == [[0.0, 10.0]]
 
 
-def test_the_readme_lists_the_settings_the_prompt_declares():
-    import re
-
-    from so101.prompt.settings import PromptSettings
-    from so101.runtime.settings import declared
-
-    readme = (keyboard_control.ROOT / "README.md").read_text(encoding="utf-8")
-    section = readme.split("### keyboard_control (`nodes/keyboard_control.py`)")[1].split("\n### ")[0]
-    listed = re.findall(r"^\| `(SO101_\w+)` \|", section, flags=re.MULTILINE)
-    assert listed == [setting.env_var for setting in declared(PromptSettings)]
-
-
 # -- after xyz: where the tip landed, once the arm stopped ------------------------------------
 
 

@@ -37,7 +37,7 @@ def in_language(line: str, lang: str) -> bool:
     (None, {"LANG": "zh_CN.UTF-8"}, "zh"),
     (None, {"LANG": "zh_TW.Big5"}, "zh"),
     (None, {"LANG": "en_US.UTF-8"}, "en"),
-    (None, {"LANG": "de_DE.UTF-8"}, "en"),  # another language: the README's, English
+    (None, {"LANG": "de_DE.UTF-8"}, "en"),  # another language: the docs', English
     (None, {"LANG": "en_US.UTF-8", "LC_MESSAGES": "zh_CN.UTF-8"}, "zh"),  # LC_MESSAGES before LANG
     (None, {"LANG": "zh_CN.UTF-8", "LC_ALL": "en_GB.UTF-8", "LC_MESSAGES": "zh_CN.UTF-8"}, "en"),  # LC_ALL first
     (None, {"LANG": "en_US.UTF-8", "LC_ALL": ""}, "en"),  # an empty variable is an unset one

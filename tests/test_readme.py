@@ -1,4 +1,5 @@
-"""The README tells the truth about the tree: every file it names exists, every `so101` subcommand is real."""
+"""The README and the documentation site (docs/) tell the truth about the tree: every file they name exists,
+every `so101` subcommand is real, the figures they quote are the latest; and the README stays a front page."""
 
 from __future__ import annotations
 
@@ -8,20 +9,24 @@ import pytest
 
 from so101.cli.main import SUBCOMMANDS
 from tests.helpers.dataflow import ROOT
+from tests.helpers.docs import docs_text, page_text, pages
 
 README = (ROOT / "README.md").read_text(encoding="utf-8")
+DOCS = docs_text()  # the README and every page of the site
 
-# The project's folders (and the set-up's): a path in the README that starts with one must exist.
+# The project's folders (and the set-up's): a path in the docs that starts with one must exist.
 PROJECT_FOLDERS = ("so101", "nodes", "tests", "examples", "bench", "docs", "assets", ".ci", ".venv")
 # path, or path::test_name
 TOKEN = re.compile(r"[\w.*/-]+(?:::\w+)?")
 
 
 def code_spans() -> list[str]:
-    """Inline code, indented blocks and image links: where the README names files and commands."""
+    """Inline code, indented blocks and the README's links: where the docs name files and commands (the
+    pages' own links are relative to the page, and `mkdocs build --strict` checks them: tests/test_docs.py)."""
     indented = re.compile(r"^ {4,}(\S.*)$", re.M)  # quoted output may hold backticks of its own
-    return (re.findall(r"`([^`]+)`", indented.sub("", README)) + indented.findall(README)
-            + re.findall(r"\]\(([^)#]+)\)", README))
+    spans = [span for text in (README, *pages().values())
+             for span in re.findall(r"`([^`]+)`", indented.sub("", text)) + indented.findall(text)]
+    return spans + re.findall(r"\]\(([^)#]+)\)", README)
 
 
 def named_paths() -> list[tuple[str, str | None]]:
@@ -34,28 +39,28 @@ def named_paths() -> list[tuple[str, str | None]]:
     return found
 
 
-def test_the_readme_names_files_that_exist():
+def test_the_docs_name_files_that_exist():
     paths = named_paths()
     assert len(paths) > 30  # the pattern still finds them
     missing = sorted({path for path, _ in paths if not list(ROOT.glob(path.rstrip("/")))})
     assert missing == []
 
 
-def test_the_tests_the_readme_cites_exist():
+def test_the_tests_the_docs_cite_exist():
     cited = [(path, name) for path, name in named_paths() if name]
     assert cited
     for path, name in cited:
         assert re.search(rf"^def {name}\(", (ROOT / path).read_text(), re.M), f"{path}::{name}"
 
 
-def test_every_so101_command_in_the_readme_exists():
+def test_every_so101_command_in_the_docs_exists():
     used = {name for code in code_spans() for name in re.findall(r"(?:^|\s)so101 ([a-z][a-z-]*)", code)}
     assert {"assets", "inspect", "joints", "teleop", "plot-step", "snapshot", "bench", "fake-arm", "calibrate"} <= used
     assert used <= set(SUBCOMMANDS), used - set(SUBCOMMANDS)
 
 
 @pytest.mark.parametrize("body", ["pybullet", "mujoco", "real", "cluster"])
-def test_the_benchmark_tables_in_the_readme_are_the_latest_results(body):
+def test_the_benchmark_tables_in_the_docs_are_the_latest_results(body):
     import json
 
     from bench import cluster_bench, real_bench, run_bench
@@ -64,16 +69,16 @@ def test_the_benchmark_tables_in_the_readme_are_the_latest_results(body):
     result = json.loads(latest.read_text())
     table = {"real": real_bench.table, "cluster": cluster_bench.table}.get(body, run_bench.table)
     shown = "\n".join(("    " + line).rstrip() for line in table(result).splitlines())
-    assert shown in README, f"README's benchmark figures differ from {latest.name} (so101 bench --show prints them)"
+    assert shown in DOCS, f"the docs' benchmark figures differ from {latest.name} (so101 bench --show prints them)"
 
 
-SUITE_LINES = {  # the README's Tests section: each command's time and how many tests it ran
+SUITE_LINES = {  # docs/tests.md: each command's time and how many tests it ran
     "": re.compile(r"python3\.11 bootstrap\.py test .*: [\d a-z]+ here \((\d+) tests\)"),
     "not slow": re.compile(r"\.venv/bin/pytest -m \"not slow\" .*: [\d a-z]+ \((\d+) tests\)"),
 }
 
 
-def test_the_suite_times_in_the_readme_are_from_a_run_of_about_todays_suite():
+def test_the_suite_times_in_the_docs_are_from_a_run_of_about_todays_suite():
     """A time quoted for a suite of 544 tests, when it has 805, is a figure from another project."""
     import subprocess
     import sys
@@ -85,7 +90,44 @@ def test_the_suite_times_in_the_readme_are_from_a_run_of_about_todays_suite():
     ).stdout
     fast, whole = map(int, re.search(r"^(\d+)/(\d+) tests collected", collected, re.MULTILINE).groups())
     for marks, count in (("", whole), ("not slow", fast)):
-        quoted = SUITE_LINES[marks].search(README)
-        assert quoted, f"README's Tests section has no time with its test count for {marks or 'the whole suite'!r}"
+        quoted = SUITE_LINES[marks].search(page_text("tests.md"))
+        assert quoted, f"docs/tests.md has no time with its test count for {marks or 'the whole suite'!r}"
         # Within a tenth: a few tests added since the timed run are fine, another era's figure is not.
         assert abs(int(quoted.group(1)) - count) <= count / 10, (quoted.group(0), count)
+
+
+def test_the_readme_is_a_front_page_with_the_course_steps_and_a_path_to_each_part():
+    """At most 300 lines; steps A to D each under a heading of its own, in the course's order; a link to
+    each part's page, the SO-101 owner's (record, replay, the leader) among the first."""
+    assert len(README.splitlines()) <= 300
+    steps = re.findall(r"^#+ Step ([A-D])\b", README, re.MULTILINE)
+    assert steps == ["A", "B", "C", "D"]
+    linked = re.findall(r"\]\((docs/[^)#]+)", README)
+    for page in ("docs/course.md", "docs/bodies/mujoco.md", "docs/bodies/real-arm.md", "docs/loop/record-replay.md",
+                 "docs/loop/leader.md", "docs/loop/task.md", "docs/loop/demos.md", "docs/loop/policy.md",
+                 "docs/clusters.md"):
+        assert page in linked, page
+    first_screen = "\n".join(README.splitlines()[:60])
+    for page in ("docs/loop/record-replay.md", "docs/loop/leader.md"):
+        assert f"]({page}" in first_screen, page
+
+
+def test_the_readmes_links_reach_their_pages_and_anchors():
+    """GitHub shows the README outside the site, so mkdocs does not check its links: this does."""
+    from markdown.extensions.toc import slugify
+
+    def anchors(text: str, slug) -> set[str]:
+        indented = re.compile(r"^ {4,}\S.*$", re.M)  # a `#` comment in a quoted command is no heading
+        return {slug(heading.replace("`", "")) for heading in re.findall(r"^#+ (.*)$", indented.sub("", text), re.M)}
+
+    def github_slug(heading: str) -> str:
+        return re.sub(r"[^\w\- ]", "", heading.strip().lower()).replace(" ", "-")
+
+    for target in re.findall(r"\]\(([^)]+)\)", README):
+        path, _, anchor = target.partition("#")
+        if not path:
+            assert anchor in anchors(README, github_slug), target
+            continue
+        assert (ROOT / path).exists(), target
+        if anchor:
+            assert anchor in anchors((ROOT / path).read_text(encoding="utf-8"), lambda text: slugify(text, "-")), target

@@ -1,5 +1,6 @@
-"""The body nodes' settings (so101/bodies/settings.py): each declared once, read as declared, and
-documented in the README's table of its node, no more and no less.
+"""The nodes' settings (so101/bodies/settings.py and the other nodes' settings modules): each declared once,
+read as declared, and documented on its node's page (docs/nodes/) by a table made from the declarations
+(docs/hooks.py), so no node's settings are left out and no table differs from the code.
 """
 
 from __future__ import annotations
@@ -10,7 +11,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from so101.bodies.registry import BODIES, DEFAULT_BODY
+from so101.bodies.registry import BODIES
 from so101.bodies.settings import (
     ArmSettings,
     MuJoCoSettings,
@@ -19,38 +20,11 @@ from so101.bodies.settings import (
 )
 from so101.runtime.settings import Setting, declared
 from tests.helpers.dataflow import ROOT
-
-# Each body node's table of environment variables in the README: the heading of the section it is in.
-README_SECTIONS = {
-    "pybullet": "### simulation (`nodes/simulation_node.py`)",
-    "mujoco": "## MuJoCo: the same contract, another body",
-    "real": "## The real arm: swap one driver node",
-}
-TABLE_HEADER = "| Environment variable | Default | Meaning |"
+from tests.helpers.docs import hooks, page_text
 
 
 def node_settings(body: str) -> tuple[Setting, ...]:
     return declared(NodeSettings) + declared(BODIES[body].settings)
-
-
-def readme_table(heading: str) -> list[tuple[list[str], str, str]]:
-    """(the SO101_* variables a row names, its Default cell, its Meaning cell) for each row of the
-    section's one table of environment variables."""
-    text = (ROOT / "README.md").read_text(encoding="utf-8")
-    level = heading.split(" ")[0]
-    section = text[text.index(heading + "\n"):]
-    end = re.search(rf"^#{{1,{len(level)}}} ", section[len(heading):], re.MULTILINE)
-    section = section[: len(heading) + end.start()] if end else section
-    lines = section.splitlines()
-    assert lines.count(TABLE_HEADER) == 1, heading
-    start = lines.index(TABLE_HEADER)
-    rows = []
-    for line in lines[start + 2:]:
-        if not line.startswith("|"):
-            break
-        cells = [cell.strip() for cell in line.strip("|").split("|")]
-        rows.append((re.findall(r"`(SO101_\w+)`", cells[0]), cells[1], cells[2]))
-    return rows
 
 
 def test_every_body_names_its_settings_class():
@@ -64,29 +38,6 @@ def test_no_variable_is_declared_twice_for_a_node(body):
     names = [setting.env_var for setting in node_settings(body)]
     assert len(names) == len(set(names))
     assert all(name.startswith("SO101_") for name in names)
-
-
-@pytest.mark.parametrize("body", list(BODIES))
-def test_the_readme_documents_each_nodes_settings_and_no_others(body):
-    rows = readme_table(README_SECTIONS[body])
-    documented = [name for names, _, _ in rows for name in names]
-    assert sorted(documented) == sorted(setting.env_var for setting in node_settings(body))
-    settings = {setting.env_var: setting for setting in node_settings(body)}
-    # The shared loop's settings are told in full in the course's node's table; the others say "as for".
-    told_here = {setting.env_var for setting in declared(BODIES[body].settings)}
-    if body == DEFAULT_BODY:
-        told_here |= {setting.env_var for setting in declared(NodeSettings)}
-    for names, default_cell, meaning_cell in rows:
-        if default_cell.startswith("as for"):
-            continue
-        for name in names:
-            # The default: "empty" for an empty one, else the value itself.
-            if settings[name].default:
-                assert f"`{settings[name].default}`" in default_cell, name
-            else:
-                assert default_cell.startswith("empty"), name
-        if len(names) == 1 and names[0] in told_here:
-            assert meaning_cell == settings[names[0]].meaning, names[0]
 
 
 @pytest.mark.parametrize("body", list(BODIES))
@@ -141,32 +92,79 @@ def test_a_bad_value_is_one_line_naming_it(settings_class, environ, message):
 
 
 
-# The other nodes' settings (recording, replay, the leader), each class against its node's table in the README.
-OTHER_NODES = {
-    "### recorder (`nodes/recorder.py`)": "so101.dataset.settings:RecorderSettings",
-    "### camera (`nodes/camera.py`)": "so101.dataset.settings:CameraSettings",
-    "### replay (`nodes/replay.py`)": "so101.dataset.settings:ReplaySettings",
-    "### leader (`nodes/leader_node.py`)": "so101.leader.settings:LeaderSettings",
-    "### web_view (`nodes/web_view.py`)": "so101.web.settings:WebViewSettings",
-    "### expert (`nodes/expert.py`)": "so101.tasks.settings:ExpertSettings",
-    "### episodes (`nodes/episodes.py`)": "so101.tasks.settings:EpisodeSettings",
-    "### policy (`nodes/policy.py`)": "so101.policy.settings:PolicySettings",
+# Each node file -> its reference page in docs/nodes/ and the settings classes its table is made from.
+NODE_PAGES = {
+    "simulation_node.py": ("simulation.md", ["so101.bodies.settings:NodeSettings", "so101.bodies.settings:PyBulletSettings"]),
+    "simulation_mujoco.py": ("simulation_mujoco.md", ["so101.bodies.settings:NodeSettings",
+                                                      "so101.bodies.settings:MuJoCoSettings"]),
+    "arm_node.py": ("arm.md", ["so101.bodies.settings:ArmSettings"]),
+    "keyboard_control.py": ("keyboard_control.md", ["so101.prompt.settings:PromptSettings"]),
+    "recorder.py": ("recorder.md", ["so101.dataset.settings:RecorderSettings"]),
+    "camera.py": ("camera.md", ["so101.dataset.settings:CameraSettings"]),
+    "replay.py": ("replay.md", ["so101.dataset.settings:ReplaySettings"]),
+    "leader_node.py": ("leader.md", ["so101.leader.settings:LeaderSettings"]),
+    "web_view.py": ("web_view.md", ["so101.web.settings:WebViewSettings"]),
+    "expert.py": ("expert.md", ["so101.tasks.settings:ExpertSettings"]),
+    "episodes.py": ("episodes.md", ["so101.tasks.settings:EpisodeSettings"]),
+    "policy.py": ("policy.md", ["so101.policy.settings:PolicySettings"]),
 }
 
 
-@pytest.mark.parametrize("heading, class_path", list(OTHER_NODES.items()))
-def test_the_readme_documents_the_other_nodes_settings(heading, class_path):
+def settings_class(class_path: str) -> type:
     import importlib
 
     module, class_name = class_path.split(":")
-    declared_settings = declared(getattr(importlib.import_module(module), class_name))
-    rows = readme_table(heading)
-    assert sorted(name for names, _, _ in rows for name in names) == sorted(each.env_var for each in declared_settings)
-    by_name = {each.env_var: each for each in declared_settings}
-    for names, default_cell, meaning_cell in rows:
-        (name,) = names
-        assert (f"`{by_name[name].default}`" in default_cell) if by_name[name].default else default_cell.startswith("empty")
-        assert meaning_cell == by_name[name].meaning, name
+    return getattr(importlib.import_module(module), class_name)
+
+
+def test_every_node_file_has_a_reference_page():
+    assert sorted(NODE_PAGES) == sorted(path.name for path in (ROOT / "nodes").glob("*.py"))
+
+
+def test_each_nodes_page_has_its_settings_table_and_its_dataflow_entry():
+    for node_file, (page, class_paths) in NODE_PAGES.items():
+        text = page_text(f"nodes/{page}")
+        assert text.startswith("# ") and f"(`nodes/{node_file}`)" in text.splitlines()[0], page
+        assert re.findall(r"^<!-- settings: (.*) -->$", text, re.MULTILINE) == [" ".join(class_paths)], page
+        assert re.search(r"^<!-- dataflow-(node|made): .* -->$", text, re.MULTILINE), page
+
+
+def test_each_body_page_names_every_setting_of_its_node():
+    """A body node's page covers the shared loop's settings (NodeSettings) too, in its table or, for the real
+    arm, in the table of what each one does there."""
+    for body in BODIES:
+        _, class_paths = NODE_PAGES[BODIES[body].node_file.name]
+        covered = {each.env_var for path in class_paths for each in declared(settings_class(path))}
+        if body == "real":
+            covered |= set(re.findall(r"`(SO101_\w+)`", page_text("bodies/real-arm.md").split("| On the real arm |")[1]
+                                      .split("\n\n")[0]))
+        assert covered == {setting.env_var for setting in node_settings(body)}, body
+
+
+def test_the_made_tables_are_the_declared_settings():
+    """docs/hooks.py's table for a class: one row per declared setting, in order, with its default and meaning."""
+    for class_path in sorted({path for _, paths in NODE_PAGES.values() for path in paths}):
+        lines = hooks().settings_table([class_path]).splitlines()
+        assert lines[0] == "| Environment variable | Default | Meaning |"
+        rows = [[cell.strip() for cell in line.strip("|").split("|")] for line in lines[2:]]
+        settings = declared(settings_class(class_path))
+        assert [row[0] for row in rows] == [f"`{each.env_var}`" for each in settings], class_path
+        for (_, default_cell, meaning_cell), each in zip(rows, settings):
+            if not each.default:
+                assert default_cell == ("empty (required)" if each.required else "empty"), each.env_var
+            elif not each.default.startswith(str(ROOT)):
+                assert default_cell == f"`{each.default}`", each.env_var
+            assert meaning_cell == each.meaning.replace("|", "&#124;"), each.env_var
+
+
+def test_a_default_inside_the_checkout_is_shown_beside_dataflow_yml():
+    from so101.prompt.settings import PromptSettings
+
+    made = hooks().settings_table(["so101.prompt.settings:PromptSettings"])
+    poses_file = next(each for each in declared(PromptSettings) if each.env_var == "SO101_POSES_FILE")
+    assert poses_file.default.startswith(str(ROOT))
+    assert "| `SO101_POSES_FILE` | `saved_poses.json` beside `dataflow.yml` |" in made
+    assert str(ROOT) not in made
 
 
 def test_a_task_is_read_by_name_and_an_unknown_one_is_refused_in_one_line():

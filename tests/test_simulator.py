@@ -153,7 +153,7 @@ def test_close_twice_is_safe(make_sim):
 
 
 def test_position_control_targets_persist_without_re_issuing(make_sim):
-    # Evidence for the README: PyBullet keeps a POSITION_CONTROL target until told
+    # Evidence for docs/differences.md (difference 4): PyBullet keeps a POSITION_CONTROL target until told
     # otherwise, so a node only needs to send a target when it changes.
     sim = make_sim()
     cid = sim.client

@@ -1,4 +1,4 @@
-"""The README's two-machine steps, between two network namespaces that stand in for two machines:
+"""The two-machine steps of docs/clusters.md, between two network namespaces that stand in for two machines:
 each has an address and a firewall of its own, and a virtual cable joins them. The arm's machine
 lets in only the coordinator's port and the Zenoh rendezvous; the laptop lets in nothing. A
 capture on the laptop's end of the cable shows what travels in clear. The cable is pulled for a
@@ -25,7 +25,7 @@ from so101.runtime.venv import env_with_bin_first
 from tests.helpers.dataflow import PROMPT_COMMAND, SO101
 
 ARM_IP, DESK_IP = "10.231.0.1", "10.231.0.2"
-COORDINATOR_PORT, ZENOH_PORT = 6013, 7447  # dora's default, and the README's rendezvous
+COORDINATOR_PORT, ZENOH_PORT = 6013, 7447  # dora's default, and docs/clusters.md's rendezvous
 CAN_SPLIT = os.geteuid() == 0 and shutil.which("ip") and shutil.which("iptables")
 
 pytestmark = [
@@ -153,7 +153,7 @@ def test_the_readme_steps_across_two_firewalled_machines_and_dropped_networks(tm
         machines.wire()
         captured = tmp_path / "frames.bin"
         machines.run("desk", [sys.executable, "-c", SNIFFER, machines.cable["desk"], str(captured)], "sniffer")
-        # The arm's machine, terminals 1 and 2 (README, "Across machines").
+        # The arm's machine, terminals 1 and 2 (docs/clusters.md, "Across machines").
         machines.run("arm", ["dora", "coordinator", "--interface", ARM_IP, "--auth"], "coordinator")
         token_file = tmp_path / "home-arm" / ".config" / "dora" / ".dora-token"
         deadline = time.monotonic() + 30

@@ -91,7 +91,7 @@ def test_the_page_draws_the_arm_follows_0_90_and_outlives_a_reload_and_its_brows
         assert prompt.wait(60) == 0, prompt.stdout.read()
         text = page_showing(browser, "shoulder_pan", 90.0)
         after = the_arm_drawn(browser, tmp_path / "after.png")
-        if os.environ.get("SO101_WEB_SCREENSHOT"):  # the README's picture: this test's own
+        if os.environ.get("SO101_WEB_SCREENSHOT"):  # docs/web_view.png: this test's own
             shutil.copyfile(tmp_path / "after.png", os.environ["SO101_WEB_SCREENSHOT"])
         browser.open(f"http://127.0.0.1:{web_port}/")  # a reload mid-stream: the new page is served the pose
         browser.wait_for_text("shoulder_pan: 9")
