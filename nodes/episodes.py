@@ -4,7 +4,9 @@ It watches the loop of a driver (the expert, a policy) and a body, as an environ
 does: it lays each episode out (`task_cmd`: `reset SEED`), and at each frame takes the body's frame
 (`joint_state`, `gripper_state`, `object_state`, `task_status`, and the pictures where there
 are) and the driver's answer to it (`action`), writes the frame into the dataset (SO101_RECORD_DIR,
-or a spool for `so101 demos --workers` to merge: SO101_SPOOL_DIR), and ends the episode at the
+or a spool for `so101 demos --workers` to merge: SO101_SPOOL_DIR) unless the answer says
+`not_written` (the expert's miss on purpose: the episode written starts at its recovery; one with
+nothing written is not kept), and ends the episode at the
 first frame whose task_status says success, or at the time limit, by laying the next one out.
 The driver answers the body directly, so this node's work (writing, encoding) is off the loop's
 path; the body holds still after an episode's end until the reset (SO101_EPISODE_FRAMES), so every
@@ -48,7 +50,7 @@ from so101.dataset.spool import EpisodeSpool  # noqa: E402
 from so101.dataset.video import StreamingEncoder  # noqa: E402
 from so101.dataset.writer import DatasetWriter  # noqa: E402
 from so101.robot import HOME_POSE_DEG  # noqa: E402
-from so101.runtime.lockstep import AGAIN_WORD, FrameParts, FrameTag, frame_tag  # noqa: E402
+from so101.runtime.lockstep import AGAIN_WORD, NOT_WRITTEN_KEY, FrameParts, FrameTag, frame_tag  # noqa: E402
 from so101.runtime.logs import send_diagnostics_to  # noqa: E402
 from so101.tasks import task_named  # noqa: E402
 from so101.tasks.episodes import EpisodeClock, Outcome, seeds_for  # noqa: E402
@@ -103,6 +105,7 @@ def main() -> int:
     answered: list[float] | None = None  # idle: the action of the last frame answered (next_frame - 1)
     next_frame = 0  # the adopted episode's next frame to record
     whole: dict[int, tuple[FrameTag, dict[str, Any]]] = {}  # frames come whole ahead of next_frame
+    not_written: set[int] = set()  # the adopted episode's frames whose action the driver said not to write
 
     def lay_out() -> None:
         node.send_output("task_cmd", pa.array([f"reset {seeds[index]}"]))
@@ -123,6 +126,7 @@ def main() -> int:
     def drop() -> None:
         nonlocal recorder, video
         whole.clear()
+        not_written.clear()
         if recorder is not None:
             recorder.discard()
         if video is not None:
@@ -133,10 +137,11 @@ def main() -> int:
         """The episode ends at `tag`'s frame."""
         nonlocal index, recorder, video
         whole.clear()
+        not_written.clear()
         kept = False
         if recorder is not None:
             saving, recorder = recorder, None
-            if success or settings.keep == "all":
+            if saving.frames and (success or settings.keep == "all"):
                 try:
                     saving.save()
                 except (DatasetError, OSError) as error:  # a full disk: what is saved stays whole; nothing more can be
@@ -168,7 +173,7 @@ def main() -> int:
         state_deg = frame["joint_state"].to_pylist() + frame["gripper_state"].to_pylist()
         action_deg = list(HOME_POSE_DEG) if idle else frame["action"].to_pylist()
         success = bool(frame["task_status"].to_pylist()[0])
-        if recorder is not None:
+        if recorder is not None and tag.frame not in not_written:
             values = {STATE_KEY: to_lerobot(state_deg), ACTION_KEY: to_lerobot(action_deg),
                       ENVIRONMENT_KEY: np.asarray(frame["object_state"].to_numpy(zero_copy_only=False), np.float32),
                       SUCCESS_KEY: np.array([success]), REWARD_KEY: np.array([task.reward(success)], dtype=np.float32)}
@@ -218,6 +223,8 @@ def main() -> int:
                 continue
             if tag.frame == 0 and tag.seed == seeds[index] and tag.episode > adopted:
                 begin(tag.episode)  # the body laid it out as asked (the newest such, if asked twice)
+            if event["id"] == "action" and tag.episode == adopted and (event.get("metadata") or {}).get(NOT_WRITTEN_KEY):
+                not_written.add(tag.frame)
             frame = frames.add(event["id"], tag, event["value"])
             if frame is None or tag.episode != adopted or adopted_index != index:
                 continue  # not whole yet; or a frame of the body's start, of an episode before, or of one ended

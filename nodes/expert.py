@@ -6,12 +6,14 @@ that frame with six joint targets, tagged with it (a frame sent again gets the s
 frame 0 is a new episode (a reset): a fresh plan for the layout it shows, its noise drawn from
 the layout's seed. Its clock is the frame's
 index over the frame rate, so the same layout gives the same episode however fast the machine.
+While it plays a miss on purpose (SO101_EXPERT_MISSES) its answers say `not_written`: the
+runner keeps the recovery that follows, not the miss.
 At the prompt (`so101 teleop --task`), it stands between the prompt and the body, as the leader
 does: what the prompt sends (`typed_cmd`) goes on to the body as it is; `expert_cmd` `run` has it
 do the task once from where things are, a target every `tick` (40 ms) by the wall clock, until
 its plan ends, a typed command takes over, or `stop` (a reset) comes. Its news goes out on
 `expert_status`. What it plans is so101/tasks/expert.py.
-Settings: so101.tasks.settings.ExpertSettings (SO101_TASK, SO101_EXPERT_NOISE, SO101_LOCKSTEP_FPS, SO101_LANG).
+Settings: so101.tasks.settings.ExpertSettings (SO101_TASK, SO101_EXPERT_NOISE, SO101_EXPERT_MISSES, SO101_LOCKSTEP_FPS, SO101_LANG).
 """
 
 from __future__ import annotations
@@ -30,7 +32,7 @@ import pyarrow as pa  # noqa: E402
 from dora import Node  # noqa: E402
 
 from so101.assets import ModelFilesError  # noqa: E402
-from so101.runtime.lockstep import FrameParts, FrameTag, LastAnswer, frame_tag  # noqa: E402
+from so101.runtime.lockstep import NOT_WRITTEN_KEY, FrameParts, FrameTag, LastAnswer, frame_tag  # noqa: E402
 from so101.runtime.logs import send_diagnostics_to  # noqa: E402
 from so101.runtime.node_events import STREAM_KEY, cannot_start, inputs_until_stop  # noqa: E402
 from so101.tasks import task_named  # noqa: E402
@@ -76,7 +78,7 @@ def main() -> int:
         """The expert of `tag`'s episode: a frame 0 is a new episode, a fresh plan from its seed."""
         nonlocal expert
         if expert is None or tag.frame == 0:
-            expert = Expert(planner, noise=settings.noise, seed=tag.seed)
+            expert = Expert(planner, noise=settings.noise, seed=tag.seed, misses=settings.misses)
         return expert
 
     def say(line: str) -> None:
@@ -93,7 +95,8 @@ def main() -> int:
                     continue
                 targets_deg = answered.to(tag, lambda: plan_for(tag).targets(
                     tag.frame / settings.lockstep_fps, frame["joint_state"] + frame["gripper_state"], frame["object_state"]))
-                node.send_output("joint_cmd", pa.array(targets_deg, type=pa.float64()), {**tag.metadata(), STREAM_KEY: 1})
+                node.send_output("joint_cmd", pa.array(targets_deg, type=pa.float64()),
+                                 {**tag.metadata(), STREAM_KEY: 1, NOT_WRITTEN_KEY: int(expert is not None and expert.rehearsing)})
             elif input_id in OBSERVED:
                 latest[input_id] = event["value"].to_pylist()
             elif input_id == "typed_cmd":

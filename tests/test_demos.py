@@ -69,6 +69,24 @@ def test_the_same_seeds_make_the_same_demonstrations_bit_for_bit(tmp_path, body)
     assert dataset.info[SEEDS_KEY] == {"0": 5, "1": 6}
 
 
+def test_with_misses_an_episode_is_written_from_the_recovery_on(tmp_path):
+    result = so101("demos", str(tmp_path / "misses"), "--task", "cube_to_box", "--episodes", "2", "--seed", "300",
+                   "--no-video", "--misses", "1")
+    assert result.returncode == 0, result.stdout + result.stderr
+    played = [int(EPISODE_LINE.match(line).group(4)) for line in episode_lines(result.stdout)]
+    assert len(played) == 2 and all(line.endswith(", kept") for line in episode_lines(result.stdout)), result.stdout
+    dataset = Dataset.open(tmp_path / "misses")
+    for index, frames_played in enumerate(played):
+        frames = dataset.episode_frames(index)
+        written = len(frames[STATE_KEY])
+        assert 100 < written < frames_played - 100  # the approach, the miss and the lift (6 s or more) are not written
+        first_state, cube_xyz = np.asarray(frames[STATE_KEY][0]), np.asarray(frames[ENVIRONMENT_KEY][0])[:3]
+        # It starts with the arm up from the miss, its jaws shut on nothing, the cube still on the floor.
+        assert np.abs(first_state[:5]).max() > 10.0 and first_state[5] < 15.0, first_state
+        assert abs(cube_xyz[2] - 0.0125) < 0.002, cube_xyz
+        assert bool(frames[SUCCESS_KEY][-1])
+
+
 def test_eval_scores_the_expert_and_an_idle_arm_scores_nothing(tmp_path):
     expert = so101("eval", "--expert", "--task", "cube_to_box", "--episodes", "3", "--seed", "20")
     assert expert.returncode == 0, expert.stdout + expert.stderr
@@ -255,6 +273,7 @@ def test_a_full_disk_stops_demos_in_one_line_and_the_saved_episodes_stay_whole(t
     (["eval", "--expert", "--task", "cube_to_box", "--episodes", "0"], "'0' is not a whole number from 1"),
     (["eval", "--task", "cube_to_box"], "one of the arguments --expert --idle --policy is required"),
     (["demos", "DIR", "--task", "cube_to_box", "--workers", "0"], "'0' is not a whole number from 1 to 16"),
+    (["demos", "DIR", "--task", "cube_to_box", "--misses", "2"], "'2' is not a share from 0 to 1"),
     (["demos", "DIR", "--task", "cube_to_box", "--machine", "desk"], "--machine and --root go with --coordinator"),
     (["eval", "--expert", "--task", "cube_to_box", "--coordinator", "10.0.0.1"], "--coordinator needs --machine ID"),
     (["eval", "--idle", "--task", "cube_to_box", "--coordinator", "10.0.0.1:port", "--machine", "desk"],

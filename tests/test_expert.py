@@ -1,5 +1,6 @@
 """The scripted expert (so101/tasks/expert.py), in process on both simulators: its plan, its success on
-seeded layouts by the task's own success function, its noise, and its recovery from a missed grasp."""
+seeded layouts by the task's own success function, its noise, and its recovery from a missed grasp
+(a cube knocked away, or a grasp put beside it on purpose)."""
 
 from __future__ import annotations
 
@@ -12,8 +13,9 @@ from so101.bodies.registry import BODIES, SIMULATED_BODIES
 from so101.robot import HOME_POSE_DEG
 from so101.tasks import CUBE_TO_BOX
 from so101.tasks.expert import (
-    APPROACH_ABOVE_M, CLOSED_DEG, OPEN_DEG, CubeSeen, Expert, planner_for, quarter_turn_rad, seen_in,
+    APPROACH_ABOVE_M, CLOSED_DEG, MISS_ASIDE_M, OPEN_DEG, CubeSeen, Expert, planner_for, quarter_turn_rad, seen_in,
 )
+from so101.kinematics import TIP_LINK_INDEX
 
 pytestmark = pytest.mark.slow  # steps both simulators for simulated minutes
 
@@ -79,6 +81,12 @@ def test_the_wrist_roll_at_the_grasp_follows_the_cubes_yaw_with_no_jump(planner)
         assert steps.max() < 3.0, (seed, rolls)
 
 
+def grasp_point_m(planner, arm_deg):
+    """Where the jaws close, for the arm's five angles."""
+    tip, rows = planner.kinematics.frame_m(TIP_LINK_INDEX, arm_deg)
+    return np.asarray(tip) + np.asarray(rows).reshape(3, 3) @ planner.grasp.point_in_tip_m
+
+
 @pytest.mark.parametrize("seed", SEEDS)
 def test_the_plan_opens_above_the_cube_closes_on_it_and_lets_go_inside_the_box(planner, seed):
     layout = CUBE_TO_BOX.layout(seed)
@@ -86,22 +94,14 @@ def test_the_plan_opens_above_the_cube_closes_on_it_and_lets_go_inside_the_box(p
     phases = [waypoint.phase for waypoint in plan]
     assert phases[0] == "approach" and phases[-1] == "home"
     assert phases.index("close") < phases.index("lift") < phases.index("carry") < phases.index("release")
-    kinematics, grasp = planner.kinematics, planner.grasp
-
-    def grasp_point_m(arm_deg):
-        from so101.kinematics import TIP_LINK_INDEX
-
-        tip, rows = kinematics.frame_m(TIP_LINK_INDEX, arm_deg)
-        return np.asarray(tip) + np.asarray(rows).reshape(3, 3) @ grasp.point_in_tip_m
-
     approach, closing = plan[0], plan[phases.index("close")]
     cube = np.asarray(layout.cube_xyz_m)
     assert approach.targets_deg[-1] == OPEN_DEG and closing.targets_deg[-1] == CLOSED_DEG
     # Above the cube by the approach height, then on it, within a millimetre.
-    assert np.linalg.norm(grasp_point_m(approach.targets_deg[:5]) - (cube + [0, 0, APPROACH_ABOVE_M])) < 0.001
-    assert np.linalg.norm(grasp_point_m(closing.targets_deg[:5]) - cube) < 0.001
+    assert np.linalg.norm(grasp_point_m(planner, approach.targets_deg[:5]) - (cube + [0, 0, APPROACH_ABOVE_M])) < 0.001
+    assert np.linalg.norm(grasp_point_m(planner, closing.targets_deg[:5]) - cube) < 0.001
     # Let go where the cube falls inside the box's walls, below their top.
-    released = grasp_point_m(plan[phases.index("release")].targets_deg[:5]) - np.asarray(layout.box_xyz_m)
+    released = grasp_point_m(planner, plan[phases.index("release")].targets_deg[:5]) - np.asarray(layout.box_xyz_m)
     inner = CUBE_TO_BOX.box.inner_half_m - CUBE_TO_BOX.cube.half_size_m
     assert abs(released[0]) < inner and abs(released[1]) < inner and released[2] < CUBE_TO_BOX.box.wall_height_m
     # No move is a jump: each is paced, the fastest joint at most 90°/s.
@@ -153,3 +153,23 @@ def test_a_cube_knocked_away_after_the_grasp_is_picked_up_again(planner, body_na
         succeeded, _, _ = run_episode(sim, expert, disturb=knock_away)
     assert moved and succeeded
     assert expert.attempts == 2
+
+
+@pytest.mark.parametrize("body_name", SIMULATED_BODIES)
+def test_a_grasp_missed_on_purpose_closes_beside_the_cube_and_the_recovery_puts_it_in(planner, body_name):
+    seed = 3
+    cube_xy = np.asarray(CUBE_TO_BOX.layout(seed).cube_xyz_m[:2])
+    first_plans = []
+
+    def keep_the_first_plan(frame, sim, expert):
+        if frame == 1:
+            first_plans.append(list(expert.plan))
+
+    with make(body_name, seed) as sim:
+        expert = Expert(planner, seed=seed, misses=1.0)
+        succeeded, seconds, _ = run_episode(sim, expert, disturb=keep_the_first_plan)
+    (plan,) = first_plans
+    closing = next(waypoint for waypoint in plan if waypoint.phase == "close")
+    aside_m = np.linalg.norm(grasp_point_m(planner, closing.targets_deg[:5])[:2] - cube_xy)
+    assert MISS_ASIDE_M[0] - 0.001 < aside_m < MISS_ASIDE_M[1] + 0.001
+    assert succeeded and expert.attempts == 2, (succeeded, expert.attempts, seconds)

@@ -19,6 +19,7 @@ from so101.bodies.settings import (
     PyBulletSettings,
 )
 from so101.runtime.settings import Setting, declared
+from so101.tasks.settings import ExpertSettings
 from tests.helpers.dataflow import ROOT
 from tests.helpers.docs import hooks, page_text
 
@@ -77,6 +78,7 @@ def test_the_arm_settings_read_every_variable():
     (PyBulletSettings, {"SO101_CONTROL": "torque"}, "unknown control mode 'torque'; use one of: position, servo"),
     (PyBulletSettings, {"SO101_SERVO_ZETA": "nan"}, "SO101_SERVO_ZETA='nan' is not a number >= 0"),
     (MuJoCoSettings, {"SO101_MUJOCO_DAMPING": "soft"}, "SO101_MUJOCO_DAMPING='soft' is not a number >= 0"),
+    (ExpertSettings, {"SO101_EXPERT_MISSES": "1.5"}, "SO101_EXPERT_MISSES=1.5 is not a share from 0 to 1"),
     (ArmSettings, {"SO101_PORT": "p", "SO101_CALIBRATION": "c", "SO101_TORQUE_LIMIT": "120"},
      "SO101_TORQUE_LIMIT=120 is above 100 (a percentage of the servo's maximum)"),
     (ArmSettings, {"SO101_PORT": "p", "SO101_CALIBRATION": "c", "SO101_JOINT_SIGNS": "1,1"},

@@ -68,7 +68,7 @@ def run(args: argparse.Namespace) -> int:
                                       "SO101_KEEP": args.keep})
     cameras = f"front and wrist {flows[0].picture_size}" if flows[0].picture_size else "no video"
     workers = f", {args.workers} workers merged in seed order" if merged else ""
-    print(f"demos: {args.task} on {args.body} by the expert (noise {args.noise:g}), seeds {args.seed}.."
+    print(f"demos: {args.task} on {args.body} by the expert (noise {args.noise:g}, misses {args.misses:g}), seeds {args.seed}.."
           f"{args.seed + args.episodes - 1}, {cameras}, into {root}{workers} (logs: {log_place(args, work)})", flush=True)
     started = time.monotonic()
     kept = 0

@@ -55,6 +55,9 @@ def add_common_arguments(parser: argparse.ArgumentParser) -> None:
                         help=f"simulated seconds an episode may take before it fails (default {DEFAULT_TIME_LIMIT_S:g})")
     parser.add_argument("--noise", type=number(lambda value: 0 <= value <= 10, "a scale from 0 to 10"), default=0.0,
                         metavar="SCALE", help="the expert's perturbations, as a multiple of its standard ones (default 0)")
+    parser.add_argument("--misses", type=number(lambda value: 0 <= value <= 1, "a share from 0 to 1"), default=0.0,
+                        metavar="SHARE", help="the share of episodes whose first grasp the expert puts 30-45 mm beside "
+                             "the cube on purpose, so that they show its recovery (default 0)")
     parser.add_argument("--workers", type=whole_number(1, MAX_WORKERS), default=1, metavar="K",
                         help="dataflows run at once, each on its share of the seeds; the results are merged in seed "
                              "order (default 1)")
@@ -88,7 +91,8 @@ class Driver:
 
 def expert_driver(args: argparse.Namespace) -> Driver:
     return Driver("expert", EXPERT_NODE_FILE, ("joint_state", "gripper_state", "object_state"),
-                  {"SO101_TASK": args.task, "SO101_EXPERT_NOISE": repr(args.noise)})
+                  {"SO101_TASK": args.task, "SO101_EXPERT_NOISE": repr(args.noise),
+                   "SO101_EXPERT_MISSES": repr(args.misses)})
 
 
 @dataclass(frozen=True)

@@ -28,6 +28,9 @@ from so101.runtime.dataflow import TICK_PERIOD_S
 EPISODE_KEY = "episode"
 FRAME_KEY = "frame"
 SEED_KEY = "seed"
+# A driver's joint_cmd with this key true is played but not written into a dataset: the expert's miss
+# on purpose, whose recovery alone is a demonstration (so101.tasks.expert.Expert.rehearsing).
+NOT_WRITTEN_KEY = "not_written"
 # A task_cmd that asks a body in lockstep for the frame now once more: dora 1.1 loses a message now
 # and then (dora-rs/dora#3428 reports it for lockstep), and a lockstep loop that lost one would wait for ever.
 AGAIN_WORD = "again"

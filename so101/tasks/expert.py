@@ -15,7 +15,11 @@ gripper's and object_state, as a policy would.
 
 `noise` perturbs a plan (where the approach, the carry and the release are, how fast it
 moves, and a little where it grasps) from a seeded generator: demonstrations that do not
-all look alike, and, when a grasp misses, that show a recovery.
+all look alike. `misses` is the share of episodes whose first grasp is put beside the cube on
+purpose (`MISS_ASIDE_M`, any way round): the jaws close on nothing, the check after the lift
+sees it, and the expert recovers. Until it does, it is `rehearsing`: a demonstration is the
+recovery alone (nodes/episodes.py does not write those frames), for a policy which misses
+needs to learn the way back, not the miss.
 """
 
 from __future__ import annotations
@@ -74,6 +78,9 @@ NOISE_GRASP_M = 0.003
 NOISE_CARRY_M = 0.03
 NOISE_RELEASE_M = 0.012
 NOISE_TIME = 0.15
+# A first grasp missed on purpose lands this far beside the cube's centre (metres, the least and the
+# most), in a direction drawn at random: beyond the 10-12 mm a grasp may be off by and still lift it.
+MISS_ASIDE_M = (0.030, 0.045)
 
 
 @dataclass(frozen=True)
@@ -141,9 +148,10 @@ class Planner:
         self.kinematics.close()
 
     def plan(self, seen: CubeSeen, start_deg: Sequence[float], noise: float = 0.0,
-             draw: random.Random | None = None) -> list[Waypoint]:
+             draw: random.Random | None = None, grasp_aside_m: Sequence[float] = (0.0, 0.0)) -> list[Waypoint]:
         """The waypoints that put the cube `seen` into its box, from the arm at `start_deg` (six angles).
-        `noise` > 0 perturbs them with `draw` (a seeded random.Random)."""
+        `noise` > 0 perturbs them with `draw` (a seeded random.Random); `grasp_aside_m` (x, y) moves
+        the grasp off the cube's centre (a miss on purpose)."""
         draw = draw or random.Random(0)
 
         def jitter(scale_m: float, count: int = 3) -> np.ndarray:
@@ -154,6 +162,7 @@ class Planner:
 
         half = self.task.cube.half_size_m
         grasp_point = np.array(seen.cube_xyz_m) + jitter(NOISE_GRASP_M) * [1, 1, 0]  # the cube's centre
+        grasp_point[:2] += grasp_aside_m
         approach = grasp_point + [0, 0, APPROACH_ABOVE_M] + jitter(NOISE_APPROACH_M)
         approach[2] = max(approach[2], grasp_point[2] + 0.03)
         box = self.task.box
@@ -248,6 +257,7 @@ class Expert:
     planner: Planner
     noise: float = 0.0
     seed: int = 0
+    misses: float = 0.0  # the chance that the first grasp is put beside the cube (MISS_ASIDE_M)
     plan: list[Waypoint] = field(default_factory=list)
     attempts: int = 0
     done: bool = False  # the plan played out to its end; `succeeded` is the task's own judgement
@@ -256,6 +266,7 @@ class Expert:
     _from_deg: tuple[float, ...] = ()
     _index: int = 0
     _checked: set[int] = field(default_factory=set)
+    _missing: bool = False  # the first plan misses on purpose
 
     def __post_init__(self) -> None:
         self._draw = random.Random(self.seed)
@@ -263,7 +274,13 @@ class Expert:
     def start(self, now_s: float, joints_deg: Sequence[float], object_state: Sequence[float]) -> None:
         """A fresh plan for the scene as it is: a new episode."""
         self.attempts, self.done = 1, False
-        self._begin(now_s, joints_deg, self.planner.plan(seen_in(object_state), joints_deg, self.noise, self._draw))
+        aside_m = (0.0, 0.0)
+        # Drawn only where misses > 0, so that without them the noise's draws are as they were.
+        self._missing = self.misses > 0 and self._draw.random() < self.misses
+        if self._missing:
+            bearing, distance_m = self._draw.uniform(-math.pi, math.pi), self._draw.uniform(*MISS_ASIDE_M)
+            aside_m = (distance_m * math.cos(bearing), distance_m * math.sin(bearing))
+        self._begin(now_s, joints_deg, self.planner.plan(seen_in(object_state), joints_deg, self.noise, self._draw, aside_m))
 
     def _begin(self, now_s: float, joints_deg: Sequence[float], plan: list[Waypoint]) -> None:
         self.plan, self._index, self._checked = plan, 0, set()
@@ -296,6 +313,11 @@ class Expert:
 
     def _cube_up(self, object_state: Sequence[float]) -> bool:
         return seen_in(object_state).cube_xyz_m[2] > self.planner.task.cube.half_size_m + LIFTED_M
+
+    @property
+    def rehearsing(self) -> bool:
+        """Playing a miss on purpose, its recovery not begun (to the end, where the cube came up all the same)."""
+        return self._missing and self.attempts == 1
 
     @property
     def phase(self) -> str:

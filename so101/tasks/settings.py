@@ -31,6 +31,13 @@ def read_positive_number(environ: Mapping[str, str], declared_setting: Setting) 
     return value
 
 
+def read_fraction(environ: Mapping[str, str], declared_setting: Setting) -> float:
+    value = parse_number(declared_setting.env_var, declared_setting.raw(environ), 0.0)
+    if value > 1:
+        raise ValueError(f"{declared_setting.env_var}={value:g} is not a share from 0 to 1")
+    return value
+
+
 @dataclass(frozen=True)
 class ExpertSettings(EnvironSettings):
     """The scripted expert's (nodes/expert.py)."""
@@ -39,6 +46,9 @@ class ExpertSettings(EnvironSettings):
     noise: float = setting(
         "SO101_EXPERT_NOISE", "0", "perturbations of the expert's path, as a multiple of its standard ones (0 = none)",
         read_number(0.0))
+    misses: float = setting(
+        "SO101_EXPERT_MISSES", "0", "the share of episodes whose first grasp is put 30-45 mm beside the cube on purpose, "
+        "so that they show a recovery: 0 (none) to 1", read_fraction)
     lockstep_fps: int = setting(
         "SO101_LOCKSTEP_FPS", "25", "the body's lockstep frame rate: the expert's clock is frames / fps",
         read_lockstep_fps)
