@@ -274,6 +274,7 @@ def test_a_full_disk_stops_demos_in_one_line_and_the_saved_episodes_stay_whole(t
     (["eval", "--task", "cube_to_box"], "one of the arguments --expert --idle --policy is required"),
     (["demos", "DIR", "--task", "cube_to_box", "--workers", "0"], "'0' is not a whole number from 1 to 16"),
     (["demos", "DIR", "--task", "cube_to_box", "--misses", "2"], "'2' is not a share from 0 to 1"),
+    (["eval", "--idle", "--task", "cube_to_box", "--misses", "0.5"], "--noise and --misses are the scripted expert's"),
     (["demos", "DIR", "--task", "cube_to_box", "--machine", "desk"], "--machine and --root go with --coordinator"),
     (["eval", "--expert", "--task", "cube_to_box", "--coordinator", "10.0.0.1"], "--coordinator needs --machine ID"),
     (["eval", "--idle", "--task", "cube_to_box", "--coordinator", "10.0.0.1:port", "--machine", "desk"],

@@ -58,6 +58,8 @@ def run(args: argparse.Namespace) -> int:
     pictures: tuple[str, ...] = ("image",)
     picture_size = args.image_size if video else None
     driver: Driver | None
+    if not args.expert and (args.noise or args.misses):
+        return fail("so101 eval: --noise and --misses are the scripted expert's: they go with --expert")
     if args.policy is not None:
         chosen = policy_driver(args)
         if isinstance(chosen, str):
