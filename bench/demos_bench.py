@@ -24,7 +24,7 @@ from so101.runtime.lockstep import DEFAULT_LOCKSTEP_FPS
 
 SO101 = Path(sys.executable).parent / "so101"
 LAST_LINE = re.compile(r"demos: (\d+) episodes kept, (\d+) of (\d+) succeeded \(\d+%\), ([\d.]+) s, ([\d.]+)× real time")
-SEED = 1000  # layouts the README's scores do not use
+SEED = 1000  # layouts the docs' scores do not use
 TARGET_NO_VIDEO_X = 10.0  # the issue's: without video, one worker, at least 10× real time
 TARGET_VIDEO_TWO_WORKERS_X = 2.0  # with both cameras at 320x240 and two workers, at least 2×
 

@@ -40,7 +40,7 @@ LEADER_TICK_S = timer_period_s({"inputs": {"tick": LEADER_TICK}}) or 0.01
 READY_TIMEOUT_S = 60.0
 # For comparison, in the table: LeRobot's leader -> follower loop on an SO-100, measured by its users.
 # The issue asking for this row cites LeRobot issue #560 for 12-34 ms a loop; that thread could not be
-# checked here, and a loop period is not a move-to-state latency: the README says both.
+# checked here, and a loop period is not a move-to-state latency: docs/loop/leader.md says both.
 LEROBOT_NOTE = "LeRobot on an SO-100, as cited from its issue #560: 12-34 ms a teleoperation loop, a period, not this latency"
 
 

@@ -529,7 +529,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", type=Path, default=None,
                         help="JSON file to write (default " + ", ".join(f"{path.relative_to(ROOT)} for {body}" for body, path in DEFAULT_OUT.items()) + ")")
     parser.add_argument("--quick", action="store_true",
-                        help="a short smoke run (3 s paced, 2 s per fast-mode run, fewer in-process steps, a 5 s episode saved; about a minute in all); not for the README")
+                        help="a short smoke run (3 s paced, 2 s per fast-mode run, fewer in-process steps, a 5 s episode saved; about a minute in all); not for the docs")
     parser.add_argument("--show", type=Path, metavar="JSON",
                         help="print the table of a saved result (e.g. bench/results/latest.json) and measure nothing")
 

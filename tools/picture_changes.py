@@ -4,7 +4,7 @@ how many of its frames differ from the frame before (mean absolute difference ab
     .venv/bin/python tools/picture_changes.py DATASET_DIR [--episode N] [--threshold LEVELS]
 
 A camera that keeps up gives a new picture at every frame while the arm moves; one that falls
-behind repeats the last picture until it draws the next (the README's section on tasks says why).
+behind repeats the last picture until it draws the next (docs/loop/task.md says why).
 """
 
 from __future__ import annotations

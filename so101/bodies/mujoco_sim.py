@@ -33,7 +33,7 @@ from so101.tasks.mujoco_scene import WRIST_CAMERA_NAME, MuJoCoScene
 
 import mujoco  # after so101.bodies.mujoco_model, which chooses its OpenGL back end
 
-# The Debian packages EGL drawing needs (the README names them, .ci/run installs them).
+# The Debian packages EGL drawing needs (docs/install.md names them, .ci/run installs them).
 EGL_PACKAGES = "libegl1 libegl-mesa0 libgl1-mesa-dri"
 
 FloatArray = npt.NDArray[np.float64]

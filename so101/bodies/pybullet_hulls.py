@@ -2,7 +2,7 @@
 
 PyBullet collides a URDF's STL mesh through its convex hull alone, but it computes that
 hull from every point of the full-resolution mesh, and room for all of them makes the
-loading's memory peak (README, "Peak memory"). So each collision mesh's hull points are
+loading's memory peak (docs/benchmark.md, "Peak memory"). So each collision mesh's hull points are
 derived once (`so101 assets`, or on demand), written as small STL files beside the model,
 with a copy of the URDF whose `<collision>` meshes point at them; its `<visual>` meshes
 stay the full ones, for pictures.

@@ -184,7 +184,7 @@ class SO101Sim:
         self._indices = [joint.index for joint in ACTUATED_JOINTS]
         if link_damping is not None:
             # The course's setting, on the links it sets it on. Note: these are drag
-            # coefficients on the links' Cartesian motion, not joint damping (README, exercise 2).
+            # coefficients on the links' Cartesian motion, not joint damping (docs/exercise-2.md).
             for index in range(len(self.joints)):
                 p.changeDynamics(
                     self.robot_id, index, linearDamping=link_damping, angularDamping=link_damping,

@@ -1,6 +1,6 @@
 """The body nodes' settings: environment variables, each declared once, as a field of a frozen
-dataclass (so101/runtime/settings.py says how). The README's tables of the body nodes are held
-to these declarations (tests/test_settings.py).
+dataclass (so101/runtime/settings.py says how). The docs' tables of the body nodes are made from
+these declarations (docs/hooks.py; tests/test_settings.py).
 `NodeSettings` is what the shared loop reads for every body; each body adds its own
 (so101.bodies.registry names which). A bad value is a ValueError in one line, which the
 node prints and exits 2 on (so101.runtime.node_events.cannot_start).

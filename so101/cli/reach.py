@@ -23,7 +23,7 @@ Then, for each target:
 One simulator serves every target: before each, its joints are reset to home, at rest, with
 home as the goal: the state a freshly loaded SO101Sim starts in, and a target reached after a
 reset ends exactly where a fresh simulator's does (tests/test_kinematics.py checks it).
-The goal the README states: every target within GOAL_MM after settling. The exit code is 1
+The goal the docs state (docs/jog.md): every target within GOAL_MM after settling. The exit code is 1
 when a target is not, or when IK finds one out of reach.
 """
 

@@ -1,5 +1,5 @@
 """The leader node's settings (nodes/leader_node.py, dataflow_leader.yml's `env:`), declared as
-so101/runtime/settings.py says; the README's table of the node is held to them."""
+so101/runtime/settings.py says; the docs' table of the node is made from them."""
 
 from __future__ import annotations
 

@@ -1,7 +1,7 @@
 """A node's settings as a frozen dataclass whose every field is an environment variable,
 declared once: its name, the value an unset variable has, one line of meaning, how it is read.
 
-`from_environ` reads every field in declaration order; the README's tables and `--help` are
+`from_environ` reads every field in declaration order; the docs' tables (docs/hooks.py) and `--help` are
 made from, or held to, the same declarations (`declared`). A bad value is a ValueError in one
 line that names the variable and what is accepted. The bodies' settings are in
 so101/bodies/settings.py, the prompt's in so101/prompt/settings.py.
@@ -23,7 +23,7 @@ class Setting:
 
     env_var: str
     default: str
-    meaning: str  # one line, as the README's table of the node gives it
+    meaning: str  # one line, as the docs' table of the node gives it
     # (environment, this setting) -> the value; ValueError in one line for a bad one.
     read: Callable[[Mapping[str, str], "Setting"], Any]
     # Where to set it, for a variable that may not be empty ("" = empty is allowed). It may
