@@ -112,13 +112,6 @@ NODE_PAGES = {
 }
 
 
-def settings_class(class_path: str) -> type:
-    import importlib
-
-    module, class_name = class_path.split(":")
-    return getattr(importlib.import_module(module), class_name)
-
-
 def test_every_node_file_has_a_reference_page():
     assert sorted(NODE_PAGES) == sorted(path.name for path in (ROOT / "nodes").glob("*.py"))
 
@@ -136,7 +129,7 @@ def test_each_body_page_names_every_setting_of_its_node():
     arm, in the table of what each one does there."""
     for body in BODIES:
         _, class_paths = NODE_PAGES[BODIES[body].node_file.name]
-        covered = {each.env_var for path in class_paths for each in declared(settings_class(path))}
+        covered = {each.env_var for path in class_paths for each in declared(hooks().settings_class(path))}
         if body == "real":
             covered |= set(re.findall(r"`(SO101_\w+)`", page_text("bodies/real-arm.md").split("| On the real arm |")[1]
                                       .split("\n\n")[0]))
@@ -149,7 +142,7 @@ def test_the_made_tables_are_the_declared_settings():
         lines = hooks().settings_table([class_path]).splitlines()
         assert lines[0] == "| Environment variable | Default | Meaning |"
         rows = [[cell.strip() for cell in line.strip("|").split("|")] for line in lines[2:]]
-        settings = declared(settings_class(class_path))
+        settings = declared(hooks().settings_class(class_path))
         assert [row[0] for row in rows] == [f"`{each.env_var}`" for each in settings], class_path
         for (_, default_cell, meaning_cell), each in zip(rows, settings):
             if not each.default:
