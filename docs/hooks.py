@@ -159,9 +159,7 @@ def policy_python() -> str:
     writes the full path."""
     from so101.policy.environment import default_dir, python_in
 
-    python = str(python_in(default_dir()))
-    home = str(Path.home())
-    return "~" + python[len(home):] if python.startswith(home + os.sep) else python
+    return machine_free(str(python_in(default_dir())))
 
 
 def eval_dataflow() -> str:
