@@ -13,6 +13,7 @@ from tests.helpers.docs import docs_text, page_text, pages
 
 README = (ROOT / "README.md").read_text(encoding="utf-8")
 DOCS = docs_text()  # the README and every page of the site
+INDENTED = re.compile(r"^ {4,}(\S.*)$", re.M)  # a quoted block: its output may hold backticks, its commands `#`
 
 # The project's folders (and the set-up's): a path in the docs that starts with one must exist.
 PROJECT_FOLDERS = ("so101", "nodes", "tests", "examples", "bench", "docs", "assets", ".ci", ".venv")
@@ -23,9 +24,8 @@ TOKEN = re.compile(r"[\w.*/-]+(?:::\w+)?")
 def code_spans() -> list[str]:
     """Inline code, indented blocks and the README's links: where the docs name files and commands (the
     pages' own links are relative to the page, and `mkdocs build --strict` checks them: tests/test_docs.py)."""
-    indented = re.compile(r"^ {4,}(\S.*)$", re.M)  # quoted output may hold backticks of its own
     spans = [span for text in (README, *pages().values())
-             for span in re.findall(r"`([^`]+)`", indented.sub("", text)) + indented.findall(text)]
+             for span in re.findall(r"`([^`]+)`", INDENTED.sub("", text)) + INDENTED.findall(text)]
     return spans + re.findall(r"\]\(([^)#]+)\)", README)
 
 
@@ -117,8 +117,8 @@ def test_the_readmes_links_reach_their_pages_and_anchors():
     from markdown.extensions.toc import slugify
 
     def anchors(text: str, slug) -> set[str]:
-        indented = re.compile(r"^ {4,}\S.*$", re.M)  # a `#` comment in a quoted command is no heading
-        return {slug(heading.replace("`", "")) for heading in re.findall(r"^#+ (.*)$", indented.sub("", text), re.M)}
+        # A `#` comment in a quoted command is no heading.
+        return {slug(heading.replace("`", "")) for heading in re.findall(r"^#+ (.*)$", INDENTED.sub("", text), re.M)}
 
     def github_slug(heading: str) -> str:
         return re.sub(r"[^\w\- ]", "", heading.strip().lower()).replace(" ", "-")
