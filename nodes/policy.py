@@ -111,9 +111,18 @@ class LoadedPolicy:
         self.policy.reset()
 
     def act(self, values: dict[str, np.ndarray]) -> np.ndarray:
+        """The next action: the policy's own choice of when to predict a new chunk (select_action)."""
+        return self._run(self.policy.select_action, values)
+
+    def chunk(self, values: dict[str, np.ndarray]) -> np.ndarray:
+        """A whole action chunk for this observation (chunk x 6), the policy's history untouched: for
+        checks against a dataset (tools/grasp_error.py)."""
+        return self._run(self.policy.predict_action_chunk, values)
+
+    def _run(self, predict: Any, values: dict[str, np.ndarray]) -> np.ndarray:
         with self._torch.inference_mode():
             batch = self._prepare(dict(values), self._device, self._instruction, ROBOT_TYPE)
-            action = self.postprocess(self.policy.select_action(self.preprocess(batch)))
+            action = self.postprocess(predict(self.preprocess(batch)))
         return action.squeeze(0).to("cpu").numpy()
 
 

@@ -13,7 +13,7 @@ import pytest
 
 from so101.dataset.features import ACTION_KEY, ENVIRONMENT_KEY, IMAGE_KEY, STATE_KEY, WRIST_IMAGE_KEY, to_lerobot
 from so101.policy.features import (
-    inputs_for, joint_targets_deg, observation, picture_size_of, read_policy_features,
+    inputs_for, joint_targets_deg, observation, picture_size_of, read_policy_features, unscaled_inputs,
 )
 from so101.policy.settings import PolicySettings
 from so101.tasks import CUBE_TO_BOX
@@ -202,9 +202,13 @@ def test_eval_scores_a_policy_in_lockstep_episode_by_episode(policy_python):
                           capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stdout + done.stderr
     lines = done.stdout.strip().splitlines()
-    assert lines[0].startswith(f"eval: cube_to_box on pybullet, the policy in {TINY_POLICY}, seeds 5..6")
+    # It was trained with ACT's default normalization (see test_inputs_a_policy_takes_unscaled_...), and is told so.
+    assert lines[0] == ("so101 eval: note: the policy takes observation.environment_state unscaled (its config.json's "
+                        "normalization_mapping has no ENV), so small differences in it weigh little: train with "
+                        "--policy.normalization_mapping as docs/loop/policy.md does")
+    assert lines[1].startswith(f"eval: cube_to_box on pybullet, the policy in {TINY_POLICY}, seeds 5..6")
     # 20 steps of training: it drives the arm for the whole time limit, and does not do the task.
-    assert lines[1:] == ["episode 0 (seed 5): failed (time limit, 2.0 s), 51 frames",
+    assert lines[2:] == ["episode 0 (seed 5): failed (time limit, 2.0 s), 51 frames",
                          "episode 1 (seed 6): failed (time limit, 2.0 s), 51 frames",
                          "success: 0/2 (0%, 95% CI 0–66%, Wilson), mean time to success none (no success)"]
 
@@ -216,6 +220,25 @@ def test_a_python_without_lerobot_refuses_the_policy_node_in_one_line(tmp_path):
     assert re.search(r"^so101 eval: \[policy\] cannot start: LeRobot does not import in .*: run the node with a policy "
                      r"environment's Python \(so101 policy-env\)$", done.stderr.strip()), done.stderr
 
+
+
+@pytest.mark.parametrize("mapping, unscaled", [
+    (None, (STATE_KEY, ENVIRONMENT_KEY)),
+    ({"VISUAL": "MEAN_STD", "STATE": "MEAN_STD", "ACTION": "MEAN_STD"}, (ENVIRONMENT_KEY,)),  # ACT's default
+    ({"STATE": "MEAN_STD", "ENV": "IDENTITY", "ACTION": "MEAN_STD"}, (ENVIRONMENT_KEY,)),
+    ({"VISUAL": "MEAN_STD", "STATE": "MIN_MAX", "ENV": "MEAN_STD", "ACTION": "MEAN_STD"}, ()),
+])
+def test_inputs_a_policy_takes_unscaled_are_found_in_its_config(tmp_path, mapping, unscaled):
+    config = {"type": "act", "input_features": {STATE_KEY: {"type": "STATE", "shape": [6]},
+                                                ENVIRONMENT_KEY: {"type": "ENV", "shape": [len(NAMES)]},
+                                                IMAGE_KEY: {"type": "VISUAL", "shape": [3, 96, 96]}},
+              "output_features": {ACTION_KEY: {"type": "ACTION", "shape": [6]}}}
+    if mapping is not None:
+        config["normalization_mapping"] = mapping
+    (tmp_path / "config.json").write_text(json.dumps(config))
+    assert unscaled_inputs(tmp_path) == unscaled
+    # The tiny checkpoint kept for the tests was trained with ACT's default, as LeRobot wrote it.
+    assert unscaled_inputs(TINY_POLICY) == (ENVIRONMENT_KEY,)
 
 # -- at the prompt --------------------------------------------------------------------------------------------------
 

@@ -96,6 +96,8 @@ def policy_driver(args: argparse.Namespace) -> tuple[Driver, tuple[int, int] | N
         chosen = choose_policy(args.policy, args.policy_python, args.task, task_named(args.task).object_state_names)
     except ValueError as error:
         return str(error)
+    for line in chosen.notes():
+        print(f"so101 eval: {line}", flush=True)
     driver = Driver("policy", POLICY_NODE_FILE, chosen.inputs, chosen.env(args.task, args.policy_device),
                     python=str(chosen.python))
     return driver, chosen.picture_size

@@ -404,6 +404,8 @@ def add_policy(descriptor: dict, body: BodyKind, args: argparse.Namespace) -> st
     if chosen.picture_size is not None:
         return ("the policy sees the cameras, and at the prompt the body draws no wrist picture: score it with "
                 "so101 eval --policy, where the body draws both for each frame")
+    for line in chosen.notes():
+        print(f"so101 teleop: {line}", flush=True)
     env = {**chosen.env(args.task or "", args.policy_device), "SO101_LANG": args.lang}
     if not args.task:
         del env["SO101_TASK"]

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from so101.dataset.features import ENVIRONMENT_KEY
 from so101.policy.environment import default_dir, python_in
-from so101.policy.features import inputs_for, picture_size_of, read_policy_features
+from so101.policy.features import inputs_for, picture_size_of, read_policy_features, unscaled_inputs
 
 
 @dataclass(frozen=True)
@@ -18,6 +18,13 @@ class ChosenPolicy:
     python: Path
     inputs: tuple[str, ...]  # the body's outputs it reads
     picture_size: tuple[int, int] | None  # (width, height) of the cameras it sees; None: none
+    unscaled: tuple[str, ...] = ()  # input features it was trained to take unscaled (so101.policy.features)
+
+    def notes(self) -> list[str]:
+        """What a user should know before scoring or driving with it, one line each."""
+        return [f"note: the policy takes {name} unscaled (its config.json's normalization_mapping has no "
+                f"{'ENV' if name == ENVIRONMENT_KEY else 'STATE'}), so small differences in it weigh little: train with "
+                f"--policy.normalization_mapping as docs/loop/policy.md does" for name in self.unscaled]
 
     def env(self, task: str, device: str) -> dict[str, str]:
         """The policy node's settings (so101.policy.settings.PolicySettings)."""
@@ -41,4 +48,4 @@ def choose_policy(folder: Path, python: Path | None, task: str | None, names_of_
     if not chosen.exists():
         raise ValueError(f"{chosen} does not exist: make the policy environment with `so101 policy-env`, or give "
                          "--policy-python PY (a Python with LeRobot and dora-rs)")
-    return ChosenPolicy(folder, chosen.absolute(), needed, picture_size)
+    return ChosenPolicy(folder, chosen.absolute(), needed, picture_size, unscaled_inputs(folder))
