@@ -204,8 +204,8 @@ def test_eval_scores_a_policy_in_lockstep_episode_by_episode(policy_python):
     lines = done.stdout.strip().splitlines()
     # It was trained with ACT's default normalization (see test_inputs_a_policy_takes_unscaled_...), and is told so.
     assert lines[0] == ("so101 eval: note: the policy takes observation.environment_state unscaled (its config.json's "
-                        "normalization_mapping has no ENV), so small differences in it weigh little: train with "
-                        "--policy.normalization_mapping as docs/loop/policy.md does")
+                        "normalization_mapping has no ENV, as ACT's default): docs/loop/policy.md says what that costs "
+                        "and how --policy.normalization_mapping scales it")
     assert lines[1].startswith(f"eval: cube_to_box on pybullet, the policy in {TINY_POLICY}, seeds 5..6")
     # 20 steps of training: it drives the arm for the whole time limit, and does not do the task.
     assert lines[2:] == ["episode 0 (seed 5): failed (time limit, 2.0 s), 51 frames",
@@ -223,10 +223,10 @@ def test_a_python_without_lerobot_refuses_the_policy_node_in_one_line(tmp_path):
 
 
 @pytest.mark.parametrize("mapping, unscaled", [
-    (None, (STATE_KEY, ENVIRONMENT_KEY)),
-    ({"VISUAL": "MEAN_STD", "STATE": "MEAN_STD", "ACTION": "MEAN_STD"}, (ENVIRONMENT_KEY,)),  # ACT's default
-    ({"STATE": "MEAN_STD", "ENV": "IDENTITY", "ACTION": "MEAN_STD"}, (ENVIRONMENT_KEY,)),
-    ({"VISUAL": "MEAN_STD", "STATE": "MIN_MAX", "ENV": "MEAN_STD", "ACTION": "MEAN_STD"}, ()),
+    (None, {STATE_KEY: "STATE", ENVIRONMENT_KEY: "ENV"}),
+    ({"VISUAL": "MEAN_STD", "STATE": "MEAN_STD", "ACTION": "MEAN_STD"}, {ENVIRONMENT_KEY: "ENV"}),  # ACT's default
+    ({"STATE": "MEAN_STD", "ENV": "IDENTITY", "ACTION": "MEAN_STD"}, {ENVIRONMENT_KEY: "ENV"}),
+    ({"VISUAL": "MEAN_STD", "STATE": "MIN_MAX", "ENV": "MEAN_STD", "ACTION": "MEAN_STD"}, {}),
 ])
 def test_inputs_a_policy_takes_unscaled_are_found_in_its_config(tmp_path, mapping, unscaled):
     config = {"type": "act", "input_features": {STATE_KEY: {"type": "STATE", "shape": [6]},
@@ -238,7 +238,7 @@ def test_inputs_a_policy_takes_unscaled_are_found_in_its_config(tmp_path, mappin
     (tmp_path / "config.json").write_text(json.dumps(config))
     assert unscaled_inputs(tmp_path) == unscaled
     # The tiny checkpoint kept for the tests was trained with ACT's default, as LeRobot wrote it.
-    assert unscaled_inputs(TINY_POLICY) == (ENVIRONMENT_KEY,)
+    assert unscaled_inputs(TINY_POLICY) == {ENVIRONMENT_KEY: "ENV"}
 
 # -- at the prompt --------------------------------------------------------------------------------------------------
 

@@ -4,8 +4,9 @@ of the pictures it sees, and the Python that runs it."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Mapping
 
 from so101.dataset.features import ENVIRONMENT_KEY
 from so101.policy.environment import default_dir, python_in
@@ -18,13 +19,13 @@ class ChosenPolicy:
     python: Path
     inputs: tuple[str, ...]  # the body's outputs it reads
     picture_size: tuple[int, int] | None  # (width, height) of the cameras it sees; None: none
-    unscaled: tuple[str, ...] = ()  # input features it was trained to take unscaled (so101.policy.features)
+    unscaled: Mapping[str, str] = field(default_factory=dict)  # input feature -> its type, taken unscaled
 
     def notes(self) -> list[str]:
         """What a user should know before scoring or driving with it, one line each."""
-        return [f"note: the policy takes {name} unscaled (its config.json's normalization_mapping has no "
-                f"{'ENV' if name == ENVIRONMENT_KEY else 'STATE'}), so small differences in it weigh little: train with "
-                f"--policy.normalization_mapping as docs/loop/policy.md does" for name in self.unscaled]
+        return [f"note: the policy takes {name} unscaled (its config.json's normalization_mapping has no {kind}, "
+                "as ACT's default): docs/loop/policy.md says what that costs and how --policy.normalization_mapping "
+                "scales it" for name, kind in self.unscaled.items()]
 
     def env(self, task: str, device: str) -> dict[str, str]:
         """The policy node's settings (so101.policy.settings.PolicySettings)."""

@@ -105,13 +105,13 @@ def picture_size_of(input_features: Mapping[str, Sequence[int]]) -> tuple[int, i
     return None
 
 
-def unscaled_inputs(folder: Path) -> tuple[str, ...]:
-    """The numeric input features (state, environment) a policy folder's config.json leaves unscaled:
-    their type has no normalization in its `normalization_mapping`, or IDENTITY. LeRobot 0.4.4's ACT
+def unscaled_inputs(folder: Path) -> dict[str, str]:
+    """The numeric input features (state, environment) a policy folder's config.json leaves unscaled,
+    name -> type: their type has no normalization in its `normalization_mapping`, or IDENTITY. LeRobot 0.4.4's ACT
     maps VISUAL, STATE and ACTION only, so by default `observation.environment_state` (the cube's
     place, in metres: a spread of centimetres) reaches its network as it is, beside joints scaled to a
     spread of 1. Call after read_policy_features has accepted the folder."""
     config = json.loads((folder / "config.json").read_text(encoding="utf-8"))
     mapping = config.get("normalization_mapping") or {}
-    return tuple(name for name, feature in config["input_features"].items()
-                 if feature.get("type") in ("STATE", "ENV") and mapping.get(feature["type"], "IDENTITY") == "IDENTITY")
+    return {name: feature["type"] for name, feature in config["input_features"].items()
+            if feature.get("type") in ("STATE", "ENV") and mapping.get(feature["type"], "IDENTITY") == "IDENTITY"}
