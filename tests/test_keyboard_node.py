@@ -494,6 +494,19 @@ def test_task_shows_the_layout_where_the_cube_is_and_whether_it_is_in_the_box(tm
     assert control.handle_line("task")[0][1] == "  the cube is now at (160, 190, 18) mm: in the box"
 
 
+def test_the_cube_landing_in_the_box_stops_a_policy_as_an_evaluated_episode_ends(tmp_path):
+    control, _, news = task_control(tmp_path)
+    told = []
+    control.tell_policy = told.append
+    control.task.on_status(False, {"task": "cube_to_box", "seed": 3, "reply_to": ""})
+    control.task.on_status(False, {"task": "cube_to_box", "seed": 3, "reply_to": ""})
+    assert told == []
+    control.task.on_status(True, {"task": "cube_to_box", "seed": 3, "reply_to": ""})
+    assert told == ["off"] and news == ["  ★ the cube is in the box (task cube_to_box, seed 3)"]
+    control.task.on_status(False, {"task": "cube_to_box", "seed": 3, "reply_to": ""})  # out again: not told twice
+    assert told == ["off"]
+
+
 def test_expert_asks_the_expert_node_to_run_and_a_reset_stops_it(tmp_path):
     control, sent_cmds, news = task_control(tmp_path)
     told = []

@@ -265,6 +265,10 @@ class KeyboardControl:
         if self.show_news is not None:
             line = self.text["landed_in_box" if status.success else "left_box"]
             self.show_news(line.format(task=status.task, seed=status.seed))
+        if status.success and self.tell_policy is not None:
+            # The episode is over, as so101 eval ends it: the demonstrations show nothing after it, and a
+            # policy left driving nudges the cube in the box (it says `stopped` if it was driving).
+            self.tell_policy("off")
 
     def _layout_text(self, task_name: str, seed: int) -> str:
         from so101.tasks import task_named
