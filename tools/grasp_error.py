@@ -9,7 +9,7 @@ grasp: the first frame whose gripper action crosses halfway from the episode's m
 most closed. Then, frame by frame as the dataset holds them (the policy is never off the
 demonstration's path: no simulator), it asks the policy for an action chunk at every 4th frame
 whose chunk reaches the grasp, and compares the chunk's action for the grasp frame with the
-dataset's. A pan off by 3° puts the jaws about 12 mm aside at 0.23 m, what the cube's grasp
+dataset's. A pan off by 3° puts the jaws about 12 mm aside at 0.23 m, about what the cube's grasp
 tolerates (docs/loop/policy.md). Prints, per episode, the dataset's pan at the grasp and the
 mean signed error of each arm joint (policy minus dataset, degrees); then the median and the 90th
 percentile over episodes of the largest error seen per joint, and a straight line fitted to the pan's
@@ -67,7 +67,12 @@ def main() -> int:
         print(error, file=sys.stderr)
         return 1
     columns = [STATE_KEY, ENVIRONMENT_KEY, ACTION_KEY, "episode_index"]
-    table = pa.concat_tables(pq.read_table(file, columns=columns) for file in files)
+    try:
+        table = pa.concat_tables(pq.read_table(file, columns=columns) for file in files)
+    except (pa.ArrowInvalid, KeyError) as error:
+        reason = str(error).splitlines()[0]
+        print(f"{args.dataset} is not a task's state-only dataset (it needs {', '.join(columns)}): {reason}", file=sys.stderr)
+        return 1
     values = {name: np.stack(table[name].to_numpy(zero_copy_only=False)) for name in columns[:3]}
     episodes = table["episode_index"].to_numpy()
 
