@@ -26,8 +26,6 @@ from pathlib import Path
 os.environ.setdefault("HF_HUB_OFFLINE", "1")  # a local dataset and policy need no network; never fetch
 
 import numpy as np  # noqa: E402
-import pyarrow as pa  # noqa: E402
-import pyarrow.parquet as pq  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT), str(ROOT / "nodes")]
@@ -35,6 +33,8 @@ sys.path[:0] = [str(ROOT), str(ROOT / "nodes")]
 from policy import LoadedPolicy, PolicyFailed  # noqa: E402 (nodes/policy.py: the node's own loading, pre- and post-processors)
 
 from so101.dataset.features import ACTION_KEY, ENVIRONMENT_KEY, MOTOR_NAMES, STATE_KEY  # noqa: E402
+from so101.dataset.layout import DatasetError  # noqa: E402
+from so101.dataset.reader import Dataset  # noqa: E402
 
 ARM = MOTOR_NAMES[:5]
 EVERY = 4  # frames between the chunk starts compared
@@ -57,40 +57,37 @@ def main() -> int:
     parser.add_argument("policy", type=Path, help="a policy folder, .../checkpoints/last/pretrained_model")
     parser.add_argument("dataset", type=Path, help="a state-only dataset of the task the policy learned")
     args = parser.parse_args()
-    files = sorted((args.dataset.expanduser() / "data").glob("*/*.parquet"))
-    if not files:
-        print(f"{args.dataset} holds no data/*/*.parquet: give a dataset folder as so101 demos writes it", file=sys.stderr)
+    try:
+        dataset = Dataset.open(args.dataset.expanduser())
+    except DatasetError as error:
+        print(error, file=sys.stderr)
+        return 1
+    missing = [key for key in (STATE_KEY, ENVIRONMENT_KEY, ACTION_KEY) if key not in dataset.features]
+    if missing or not dataset.episodes:
+        print(f"{args.dataset} is not a task's state-only dataset with episodes (it lacks {', '.join(missing) or 'episodes'})",
+              file=sys.stderr)
         return 1
     try:
         loaded = LoadedPolicy(args.policy.expanduser(), "cpu", "")
     except PolicyFailed as error:
         print(error, file=sys.stderr)
         return 1
-    columns = [STATE_KEY, ENVIRONMENT_KEY, ACTION_KEY, "episode_index"]
-    try:
-        table = pa.concat_tables(pq.read_table(file, columns=columns) for file in files)
-    except (pa.ArrowInvalid, KeyError) as error:
-        reason = str(error).splitlines()[0]
-        print(f"{args.dataset} is not a task's state-only dataset (it needs {', '.join(columns)}): {reason}", file=sys.stderr)
-        return 1
-    values = {name: np.stack(table[name].to_numpy(zero_copy_only=False)) for name in columns[:3]}
-    episodes = table["episode_index"].to_numpy()
 
-    def observe(row: int) -> dict[str, np.ndarray]:
-        return {key: values[key][row].astype(np.float32) for key in (STATE_KEY, ENVIRONMENT_KEY)}
+    def observe(frames: dict[str, np.ndarray], frame: int) -> dict[str, np.ndarray]:
+        return {key: frames[key][frame].astype(np.float32) for key in (STATE_KEY, ENVIRONMENT_KEY)}
 
-    chunk_size = len(loaded.chunk(observe(0)))
-    largest, pans = [], []
-    for episode in np.unique(episodes):
-        rows = np.flatnonzero(episodes == episode)
-        actions = values[ACTION_KEY][rows]
+    largest, pans, chunk_size = [], [], 0
+    for episode in (summary.index for summary in dataset.episodes):
+        frames = dataset.episode_frames(episode)
+        actions = frames[ACTION_KEY]
+        chunk_size = chunk_size or len(loaded.chunk(observe(frames, 0)))
         grasp = grasp_frame(actions[:, len(ARM)])
         if grasp is None:
             print(f"episode {episode}: the jaws never close")
             continue
         errors = []
         for start in range(max(0, grasp - chunk_size + 1), grasp + 1, EVERY):
-            errors.append(loaded.chunk(observe(rows[start]))[grasp - start, :len(ARM)] - actions[grasp, :len(ARM)])
+            errors.append(loaded.chunk(observe(frames, start))[grasp - start, :len(ARM)] - actions[grasp, :len(ARM)])
         signed = np.mean(errors, axis=0)
         pans.append((actions[grasp, 0], signed[0]))
         largest.append(np.abs(errors).max(axis=0))
