@@ -98,10 +98,10 @@ def main() -> int:
     for label, share in (("median", 50), ("90th percentile", 90)):
         print(f"{label} over {len(largest)} episodes of the largest error: "
               + ", ".join(f"{name} {error:.2f}°" for name, error in zip(ARM, np.percentile(largest, share, axis=0))))
-    pan, error = np.array(pans).T
-    slope, offset = np.polyfit(pan, error, 1)
+    pan, pan_error = np.array(pans).T
+    slope, offset = np.polyfit(pan, pan_error, 1)
     print(f"the pan's error against the pan, a straight line through the episodes: {slope:+.3f}° a degree, "
-          f"0 at {-offset / slope:+.1f}°, correlation {np.corrcoef(pan, error)[0, 1]:+.2f}")
+          f"0 at {-offset / slope:+.1f}°, correlation {np.corrcoef(pan, pan_error)[0, 1]:+.2f}")
     return 0
 
 
