@@ -23,6 +23,7 @@ from bench.common import (
     FIRST_STATE_MARK, PACED_PROBE_ENV, WARMUP_S, machine_facts, machine_line, put_prober, realtime_figures, run_dataflow,
     tick_records,
 )
+from so101.bodies.registry import BODIES, DEFAULT_BODY
 from so101.runtime.cluster import BODY_MACHINE, PROMPT_MACHINE, Cluster, cluster_dataflow
 from so101.runtime.dataflow import TICK_PERIOD_S
 
@@ -36,7 +37,8 @@ def _cluster_record(work_dir: Path, duration_s: float) -> dict:
         cluster.start_coordinator()
         cluster.start_daemon(BODY_MACHINE)
         cluster.start_daemon(PROMPT_MACHINE)
-        dataflow = cluster_dataflow(work_dir, {"SO101_MODE": "direct", "SO101_LANG": "en", "SO101_TICK_LOG": str(tick_log)})
+        dataflow = cluster_dataflow(work_dir, {"SO101_MODE": "direct", "SO101_LANG": "en", "SO101_TICK_LOG": str(tick_log)},
+                                    BODIES[DEFAULT_BODY])
         descriptor = yaml.safe_load(dataflow.read_text())
         put_prober(descriptor, {**PACED_PROBE_ENV, "PROBE_LOG": str(probe_log)})  # spawned by daemon `desk`
         dataflow.write_text(yaml.safe_dump(descriptor, sort_keys=False))

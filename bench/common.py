@@ -24,7 +24,7 @@ from so101.bodies.registry import BODIES
 from so101.runtime.dataflow import ROOT, dataflow_copy, write_dataflow
 from so101.runtime.processes import processes_with_env, stop_process
 from so101.runtime.venv import dora_executable, env_with_bin_first
-from so101.gui.viewer import WINDOW_SHOWING
+from so101.bodies.window import WINDOW_SHOWING
 from so101.stats import summary
 
 PROBER = ROOT / "bench" / "nodes" / "prober.py"

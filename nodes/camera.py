@@ -33,7 +33,7 @@ from so101.assets import ModelFilesError  # noqa: E402
 from so101.bodies.camera import WRIST_CAMERA  # noqa: E402
 from so101.dataset.features import DEFAULT_FPS  # noqa: E402
 from so101.dataset.settings import CameraSettings  # noqa: E402
-from so101.gui.display import DisplayError  # noqa: E402
+from so101.runtime.display import DisplayError  # noqa: E402
 from so101.robot import NUM_ARM_JOINTS  # noqa: E402
 from so101.runtime.dataflow import TICK_PERIOD_S, timer_period_s  # noqa: E402
 from so101.runtime.logs import send_diagnostics_to  # noqa: E402

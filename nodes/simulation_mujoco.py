@@ -17,20 +17,22 @@ from so101.assets import ModelFilesError
 from so101.bodies.mujoco_sim import SO101MuJoCo
 from so101.bodies.node_loop import announce, check_pictures, run_body_node
 from so101.bodies.settings import MuJoCoSettings, NodeSettings
-from so101.gui.display import DisplayError
+from so101.runtime.display import DisplayError
 from so101.runtime.logs import send_diagnostics_to
 from so101.runtime.node_events import cannot_start
+from so101.tasks import task_for_setting
 
 
 def main() -> int:
     send_diagnostics_to("stdout")  # dora keeps a node's stdout in its log, beside the loaded line
     try:
         settings = NodeSettings.from_environ(os.environ)
+        task = task_for_setting(settings.task)  # its scene, which it hands to the body
         mujoco = MuJoCoSettings.from_environ(os.environ)
     except ValueError as error:
         return cannot_start(error)
     try:
-        sim = SO101MuJoCo.from_settings(mujoco, settings, log=announce)
+        sim = SO101MuJoCo.from_settings(mujoco, settings, task, log=announce)
         check_pictures(sim, settings)
     except (ModelFilesError, DisplayError, ValueError) as error:
         return cannot_start(error)

@@ -310,8 +310,10 @@ class Kinematics:
         (`seed_deg`, default home, first), until one comes within EXACT_MM and 0.1°; `max_starts` tries
         no more than that many (a seed near the answer finds it from the first: a planner's next waypoint)."""
         import numpy as np
-        # MuJoCo's matrix-to-quaternion (PyBullet has none); mujoco_model first: it chooses MuJoCo's OpenGL back end.
-        import so101.bodies.mujoco_model  # noqa: F401
+        # MuJoCo's matrix-to-quaternion (PyBullet has none), imported as every module here imports it.
+        from so101.runtime.display import choose_mujoco_gl
+
+        choose_mujoco_gl()
         import mujoco
 
         target_m = [coordinate / 1000.0 for coordinate in point_mm(target_mm)]

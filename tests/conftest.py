@@ -194,7 +194,7 @@ def make_sim():
 @pytest.fixture
 def xvfb_display(tmp_path):
     """A fresh Xvfb server, stopped after the test."""
-    from so101.gui.display import DisplayError, virtual_display
+    from so101.runtime.display import DisplayError, virtual_display
 
     try:
         with virtual_display(tmp_path / "xvfb.log") as display:

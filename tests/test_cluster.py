@@ -283,7 +283,7 @@ def test_a_daemon_of_another_dora_version_is_named_in_one_line(tmp_path, other_d
         cluster.start_coordinator()
         for machine_id in (BODY_MACHINE, PROMPT_MACHINE):
             cluster.start_daemon(machine_id, dora=str(other_dora) if machine_id == machine else None)
-        cluster.start_dataflow(cluster_dataflow(tmp_path, {"SO101_MODE": "direct", "SO101_LANG": "en"}))
+        cluster.start_dataflow(cluster_dataflow(tmp_path, {"SO101_MODE": "direct", "SO101_LANG": "en"}, BODIES["pybullet"]))
         prompt = subprocess.Popen(
             PROMPT_COMMAND, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
             env=prompt_env(tmp_path, SO101_DAEMON_PORT=str(cluster.daemon_ports[PROMPT_MACHINE])),

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from so101.gui.display import DisplayError, display_available, resolve_mode
+from so101.runtime.display import DisplayError, display_available, resolve_mode
 from tests.helpers.dataflow import unused_display
 
 

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from so101.gui.display import virtual_display
+from so101.runtime.display import virtual_display
 from tests.helpers.dataflow import SO101
 from tests.helpers.terminal import Terminal, calibrate_in_tmux, send_keys, start_teleop
 

@@ -165,8 +165,12 @@ def test_a_default_inside_the_checkout_is_shown_beside_dataflow_yml():
 def test_a_task_is_read_by_name_and_an_unknown_one_is_refused_in_one_line():
     settings = NodeSettings.from_environ({"SO101_TASK": " cube_to_box ", "SO101_SEED": "12"})
     assert (settings.task, settings.seed) == ("cube_to_box", 12)
+    from so101.tasks import CUBE_TO_BOX, task_for_setting
+
+    # The body node asks the tasks for the one named (nodes/simulation_node.py): bodies know no task.
+    assert task_for_setting(settings.task) is CUBE_TO_BOX and task_for_setting("") is None
     with pytest.raises(ValueError, match=r"^SO101_TASK: unknown task 'cubes'; the tasks are: cube_to_box$"):
-        NodeSettings.from_environ({"SO101_TASK": "cubes"})
+        task_for_setting(NodeSettings.from_environ({"SO101_TASK": "cubes"}).task)
     with pytest.raises(ValueError, match=r"^SO101_SEED='-1' is not a whole number >= 0$"):
         NodeSettings.from_environ({"SO101_SEED": "-1"})
 

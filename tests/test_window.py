@@ -17,7 +17,7 @@ import pytest
 
 from bench.window_bench import window_start
 from so101 import assets
-from so101.gui.viewer import Window
+from so101.bodies.window import Window
 from so101.robot import ACTUATED_JOINTS
 from tests.helpers.screen import GUI_MARKS, MIN_ARM_PIXELS, SAME_FRAME_OVERLAP, arm_pixels, overlap, screenshot, settled_arm
 

@@ -46,3 +46,5 @@ def check_picture(renders: bool, width: int, height: int) -> None:
 DEFAULT_CAMERA = Camera()
 # What a task's episodes see from the gripper (observation.images.wrist).
 WRIST_CAMERA = WristCamera()
+# Its name among a MuJoCo model's cameras (a task's scene adds it to the gripper).
+WRIST_CAMERA_NAME = "wrist"

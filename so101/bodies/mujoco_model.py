@@ -26,14 +26,12 @@ import numpy as np
 import numpy.typing as npt
 
 from so101 import assets
+from so101.bodies.jaw_pads import jaw_pads
+from so101.bodies.protocol import SceneTask
 from so101.bodies.stl import stl_points
-from so101.gui.display import display_available
+from so101.runtime.display import choose_mujoco_gl
 
-# Offscreen drawing without a display needs an OpenGL back end: EGL, with Mesa's
-# software renderer where there is no GPU. MuJoCo reads this when it is imported.
-if not display_available():
-    os.environ.setdefault("MUJOCO_GL", "egl")
-
+choose_mujoco_gl()
 import mujoco  # noqa: E402
 
 # Beside the MJCF, made by `so101 assets` (never committed); valid for one MuJoCo version.
@@ -51,14 +49,14 @@ def hulls_key() -> str:
     return f"mujoco {mujoco.__version__}; model {assets.manifest_digest()}"
 
 
-def scene_model(mjcf: Path, hulls: Hulls | None, visual: bool = True, task: Any = None,
+def scene_model(mjcf: Path, hulls: Hulls | None, visual: bool = True, task: SceneTask | None = None,
                 camera_meshes: dict[str, Path] | None = None) -> Any:
     """The MJCF's arm (a mujoco.MjModel) with what PyBullet's scene has too: a ground plane at z = 0 and a light.
 
     `hulls` None collides the MJCF's full meshes, as MuJoCo compiles the file; otherwise each
     collision geom uses its mesh's hull. `visual` False leaves out the visual geoms and their
-    meshes: a model to step, not to draw. `task` (a so101.tasks task) adds its cube and box and
-    switches the jaw pads on (so101.tasks.mujoco_scene). `camera_meshes` (file name -> file) draws
+    meshes: a model to step, not to draw. `task` adds its objects (its cube and box) and switches the
+    jaw pads on, through its hook (so101.bodies.protocol.SceneTask.add_to_mujoco_spec). `camera_meshes` (file name -> file) draws
     the visual geoms with them (so101.bodies.camera_meshes).
     """
     spec = mujoco.MjSpec.from_file(str(mjcf))
@@ -79,10 +77,7 @@ def scene_model(mjcf: Path, hulls: Hulls | None, visual: bool = True, task: Any 
     )
     spec.worldbody.add_light(pos=[0.3, -0.3, 1.5], dir=[-0.2, 0.2, -1], type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL)
     if task is not None:
-        from so101.bodies.jaw_pads import jaw_pads
-        from so101.tasks.mujoco_scene import add_to_spec
-
-        add_to_spec(spec, task, tuple(pad.grown() for pad in jaw_pads(mjcf)))
+        task.add_to_mujoco_spec(spec, tuple(pad.grown() for pad in jaw_pads(mjcf)))
     return spec.compile()
 
 

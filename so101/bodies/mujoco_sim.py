@@ -18,18 +18,15 @@ import numpy as np
 import numpy.typing as npt
 
 from so101 import assets
-from so101.bodies.camera import DEFAULT_CAMERA, Camera, WristCamera, check_picture
+from so101.bodies.camera import DEFAULT_CAMERA, WRIST_CAMERA_NAME, Camera, WristCamera, check_picture
 from so101.bodies.camera_meshes import camera_meshes
 from so101.bodies.mujoco_model import collision_hulls, scene_model
-from so101.bodies.protocol import BodyName, RgbImage
+from so101.bodies.protocol import BodyName, RgbImage, SceneTask, TaskScene
 from so101.bodies.settings import MuJoCoSettings, NodeSettings
-from so101.gui.display import DisplayError, resolve_mode
+from so101.runtime.display import DisplayError, resolve_mode
 from so101.robot import ACTUATED_JOINTS, HOME_POSE_DEG, goal_deg
 from so101.runtime.dataflow import TICK_PERIOD_S
-from so101.gui.viewer import WINDOW_SHOWING, Window
-from so101.tasks import task_named
-from so101.tasks.cube_to_box import CubeToBox
-from so101.tasks.mujoco_scene import WRIST_CAMERA_NAME, MuJoCoScene
+from so101.bodies.window import WINDOW_SHOWING, Window
 
 import mujoco  # after so101.bodies.mujoco_model, which chooses its OpenGL back end
 
@@ -48,7 +45,7 @@ class SO101MuJoCo:
 
     `mode` is the display mode asked for (auto, gui, direct); `display_mode` the one it got.
     `renders` False: a body that draws no pictures, compiled without the visual meshes.
-    `task` puts that task's scene (so101.tasks) on the floor, laid out from `seed`, and switches
+    `task` puts that task's scene (it makes it: so101.bodies.protocol.SceneTask) on the floor, laid out from `seed`, and switches
     the gripper's jaw pads on (so101.bodies.jaw_pads); None: the arm alone.
     `light_pictures` draws the cameras' meshes (so101.bodies.camera_meshes), without shadows,
     multisampling, reflections and skybox: on Mesa's software renderer these cost far more than
@@ -65,7 +62,7 @@ class SO101MuJoCo:
         log: Callable[[str], None] = print,
         joint_damping_n_m_s: float | None = None,
         renders: bool = True,
-        task: CubeToBox | None = None,
+        task: SceneTask | None = None,
         seed: int = 0,
         light_pictures: bool = False,
     ):
@@ -96,22 +93,22 @@ class SO101MuJoCo:
         self._window: Window | None = None
         if self.display_mode == "gui":
             self._window = Window(["so101.gui.mujoco_viewer", "--mjcf", str(mjcf), *(["--task", task.name] if task else [])],
-                                  on_showing=lambda: log(WINDOW_SHOWING))
+                                  on_showing=lambda: log(WINDOW_SHOWING),
+                                  object_values=len(task.object_state_names) if task else 0)
         self.set_time_step_s(time_step_s)
         self.set_targets_deg(HOME_POSE_DEG)
         mujoco.mj_forward(self.model, self.data)
-        self.scene: MuJoCoScene | None = None
-        if task is not None:
-            self.scene = MuJoCoScene(self.model, self.data, task, task.layout(seed))
+        self.scene: TaskScene | None = None if task is None else task.mujoco_scene(self.model, self.data, seed)
 
     @classmethod
-    def from_settings(cls, settings: MuJoCoSettings, node: NodeSettings, log: Callable[[str], None] = print) -> "SO101MuJoCo":
+    def from_settings(cls, settings: MuJoCoSettings, node: NodeSettings, task: SceneTask | None = None,
+                      log: Callable[[str], None] = print) -> "SO101MuJoCo":
         """The simulation node's body: the joint damping asked for, a window as `node` asks, the
         visual meshes and the offscreen renderer only when the node publishes pictures, and the tick's step."""
         return cls(
             mode=node.display_mode, time_step_s=TICK_PERIOD_S, assets_dir=settings.assets_dir, log=log,
             joint_damping_n_m_s=settings.joint_damping_n_m_s, renders=node.image_hz > 0 or node.lockstep_pictures is not None,
-            task=task_named(node.task) if node.task else None, seed=node.seed,
+            task=task, seed=node.seed,
             light_pictures=node.lockstep_pictures is not None,  # a task's cameras, as the camera node draws them
         )
 
@@ -131,7 +128,7 @@ class SO101MuJoCo:
         self.data.qpos[self._qpos] = np.radians(HOME_POSE_DEG)
         self.data.qvel[self._qvel] = 0.0
         self.set_targets_deg(HOME_POSE_DEG)
-        self.scene.lay_out(self.scene.task.layout(seed))  # also recomputes the kinematics
+        self.scene.lay_out_seed(seed)  # also recomputes the kinematics
 
     def joint_damping_n_m_s(self) -> float:
         """The joints' damping (one value for all, as the MJCF's STS3215 class and this class set it)."""

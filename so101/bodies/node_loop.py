@@ -8,7 +8,7 @@ updates the targets, which the next tick applies; bad ones are logged and ignore
 commands, marked so in their metadata, is not logged command by command). Where the
 dataflow declares a `joint_target` output (`so101 teleop --record` does, for the recorder), the
 targets the body applies go out on it at the first tick, whenever they change, and once a second
-for a node that joined late. A body running a task (so101.tasks) also publishes, where the
+for a node that joined late. A body running a task (handed to it: so101.bodies.protocol.SceneTask) also publishes, where the
 dataflow declares them, `object_state` each tick (float32, the task's object names in its
 metadata) and `task_status` (the success function's answer, a bool, with the task and seed in its
 metadata) at the first tick, whenever it changes, after each reset and once a second; a
@@ -45,7 +45,7 @@ from so101.robot import GRIPPER_COMMAND_INDEX, NUM_ARM_JOINTS
 from so101.runtime.dataflow import TICK_PERIOD_S, TickClock, timer_period_s
 from so101.runtime.lockstep import AGAIN_WORD, FrameTag, answers, frame_tag, steps_per_frame
 from so101.runtime.node_events import STREAM_KEY, Event, cannot_start, inputs_until_stop, until_closed
-from so101.tasks import parse_reset
+from so101.task_cmd import parse_reset
 
 if TYPE_CHECKING:
     from dora import Node

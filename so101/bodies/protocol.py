@@ -4,18 +4,20 @@
 Angles are degrees, six of them in `so101.robot.ACTUATED_JOINTS` order: the five arm
 joints, then the gripper. The real arm differs only where hardware must: it starts
 where it stands, a read can fail (no angles that tick), and it has no camera and no task.
-A simulation started with a task (so101.tasks) has its `scene`: the objects on the floor.
+A simulation started with a task has its `scene`: the objects on the floor. The body knows a
+task only as `SceneTask` says: the task hands the body its scene (its objects in the body's
+engine), so a new task needs no body edited, and nothing here imports so101.tasks.
 """
 
 from __future__ import annotations
 
-from typing import Literal, Protocol, Sequence, Union
+from typing import Any, Iterable, Literal, Protocol, Sequence, Union
 
 import numpy as np
 import numpy.typing as npt
 
 from so101.bodies.camera import DEFAULT_CAMERA, Camera, WristCamera
-from so101.tasks.cube_to_box import CubeToBox, Layout
+from so101.bodies.jaw_pads import JawPad
 
 BodyName = Literal["pybullet", "mujoco", "real"]
 
@@ -29,16 +31,42 @@ class BodyFailed(Exception):
     """A body that cannot start or go on (the real arm's bus, a closed window); str() is one line for the user."""
 
 
+class SceneLayout(Protocol):
+    """Where one episode starts (so101.tasks' layouts): the body needs only its seed."""
+
+    @property
+    def seed(self) -> int: ...
+
+
+class TaskFacts(Protocol):
+    """What the shared loop reads of a task: its name, its object_state names, its success function."""
+
+    @property
+    def name(self) -> str: ...
+
+    @property
+    def object_state_names(self) -> tuple[str, ...]: ...
+
+    def state_succeeded(self, object_state: Iterable[float], cube_speed_m_s: float) -> bool:
+        """The success function on an object_state, as the simulations publish it."""
+
+
 class TaskScene(Protocol):
-    """A task's objects in a simulation (so101.tasks.pybullet_scene, so101.tasks.mujoco_scene)."""
+    """A task's objects in a simulation, made by the task (`SceneTask`) in the body's engine."""
 
     @property
-    def task(self) -> CubeToBox:
-        """The task whose objects these are (its facts, its object_state names, its success function)."""
+    def task(self) -> TaskFacts:
+        """The task whose objects these are (its name, its object_state names, its success function)."""
 
     @property
-    def layout(self) -> Layout:
+    def layout(self) -> SceneLayout:
         """The layout the scene was last laid out from (its seed among it)."""
+
+    def lay_out_seed(self, seed: int) -> None:
+        """The objects where the task's layout of `seed` puts them, still."""
+
+    def show_object_state(self, state: Sequence[float]) -> None:
+        """The objects where an object_state says, without physics: a scene to draw."""
 
     def object_state(self) -> ObjectState:
         """The objects' poses now, float32, in the task's `object_state_names` order (metres, base frame)."""
@@ -48,6 +76,21 @@ class TaskScene(Protocol):
 
     def succeeded(self) -> bool:
         """The task's success function, on the objects as they are now."""
+
+
+class SceneTask(TaskFacts, Protocol):
+    """What a simulated body is handed of a task (so101.tasks' tasks are such): its facts, and its
+    additions to each engine. The body calls these hooks; the task builds its objects."""
+
+    def pybullet_scene(self, client: int, seed: int) -> TaskScene:
+        """The task's objects made in PyBullet client `client`, laid out from `seed`."""
+
+    def add_to_mujoco_spec(self, spec: Any, pads: tuple[JawPad, ...]) -> None:
+        """The task's objects (and what they need of the arm: its jaw pads `pads`) added to a
+        mujoco.MjSpec before it compiles."""
+
+    def mujoco_scene(self, model: Any, data: Any, seed: int) -> TaskScene:
+        """The task's objects in the compiled model `model` (added by `add_to_mujoco_spec`), laid out from `seed`."""
 
 
 class Body(Protocol):

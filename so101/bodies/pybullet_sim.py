@@ -23,9 +23,9 @@ from so101.bodies import pybullet_hulls
 from so101.bodies.camera import DEFAULT_CAMERA, Camera, WristCamera, check_picture
 from so101.bodies.camera_meshes import camera_meshes, urdf_for_cameras
 from so101.bodies.jaw_pads import jaw_pads, urdf_with_pads
-from so101.bodies.protocol import BodyName, RgbImage
+from so101.bodies.protocol import BodyName, RgbImage, SceneTask, TaskScene
 from so101.bodies.settings import NodeSettings, PyBulletSettings, check_control_mode
-from so101.gui.display import resolve_mode
+from so101.runtime.display import resolve_mode
 from so101.runtime.dataflow import TICK_PERIOD_S
 from so101.bodies.pd_servo import (
     DEFAULT_DAMPING_RATIO,
@@ -43,10 +43,7 @@ from so101.robot import (
     HOME_POSE_DEG,
     goal_deg,
 )
-from so101.gui.viewer import WINDOW_SHOWING, Window
-from so101.tasks import task_named
-from so101.tasks.cube_to_box import CubeToBox
-from so101.tasks.pybullet_scene import PyBulletScene
+from so101.bodies.window import WINDOW_SHOWING, Window
 
 JOINT_TYPE_NAMES = {
     p.JOINT_REVOLUTE: "revolute",
@@ -114,7 +111,7 @@ class SO101Sim:
     course does; the arm moves the same (tests/test_course_motion.py). Pictures always
     show the full meshes.
 
-    `task` puts that task's scene (so101.tasks) on the floor, laid out from `seed`, and gives
+    `task` puts that task's scene (it makes it: so101.bodies.protocol.SceneTask) on the floor, laid out from `seed`, and gives
     the gripper its jaw pads (so101.bodies.jaw_pads); None: the arm alone, as in the course.
 
     `mode` is the display mode asked for (auto, gui, direct); `display_mode` the one it got.
@@ -136,7 +133,7 @@ class SO101Sim:
         servo_torque_limit_nm: float = SERVO_TORQUE_LIMIT_NM,
         renders: bool = True,
         hull_collisions: bool = True,
-        task: CubeToBox | None = None,
+        task: SceneTask | None = None,
         seed: int = 0,
         light_pictures: bool = False,  # the cameras' meshes (so101.bodies.camera_meshes); no shadows to leave out here
     ):
@@ -176,10 +173,11 @@ class SO101Sim:
         self.plane_id: int = p.loadURDF("plane.urdf", physicsClientId=cid)
         meshes = camera_meshes(urdf.parent, log) if renders and light_pictures else None
         self.robot_id: int = self._load_arm(physics_urdf, assets_dir, with_pads=task is not None, meshes=meshes)
-        self.scene: PyBulletScene | None = None if task is None else PyBulletScene(cid, task, task.layout(seed))
+        self.scene: TaskScene | None = None if task is None else task.pybullet_scene(cid, seed)
         if self.display_mode == "gui":
             self._window = Window(["so101.gui.viewer", "--urdf", str(urdf), *(["--task", task.name] if task else [])],
-                                  on_showing=lambda: log(WINDOW_SHOWING))
+                                  on_showing=lambda: log(WINDOW_SHOWING),
+                                  object_values=len(task.object_state_names) if task else 0)
         self.joints = [self._joint_info(i) for i in range(p.getNumJoints(self.robot_id, physicsClientId=cid))]
         self._indices = [joint.index for joint in ACTUATED_JOINTS]
         if link_damping is not None:
@@ -257,14 +255,15 @@ class SO101Sim:
         return np.diag(np.asarray(mass_matrix, dtype=np.float64))
 
     @classmethod
-    def from_settings(cls, settings: PyBulletSettings, node: NodeSettings, log: Callable[[str], None] = print) -> "SO101Sim":
+    def from_settings(cls, settings: PyBulletSettings, node: NodeSettings, task: SceneTask | None = None,
+                      log: Callable[[str], None] = print) -> "SO101Sim":
         """The simulation node's body: the course's motor or the servo, a window as `node` asks, the
         CPU renderer only when the node publishes pictures, and the tick's step."""
         return cls(
             mode=node.display_mode, time_step_s=TICK_PERIOD_S, assets_dir=settings.assets_dir, log=log,
             control_mode=settings.control_mode, servo_damping_ratio=settings.servo_damping_ratio,
             renders=node.image_hz > 0 or node.lockstep_pictures is not None,
-            task=task_named(node.task) if node.task else None, seed=node.seed,
+            task=task, seed=node.seed,
             light_pictures=node.lockstep_pictures is not None,  # a task's cameras, as the camera node draws them
         )
 
@@ -292,7 +291,7 @@ class SO101Sim:
         """The task's scene laid out from `seed`, and the arm at home, still, its goal home."""
         if self.scene is None:
             raise ValueError("this simulation runs no task (start it with one: --task)")
-        self.scene.lay_out(self.scene.task.layout(seed))
+        self.scene.lay_out_seed(seed)
         for joint_index, home_rad in zip(self._indices, np.radians(HOME_POSE_DEG).tolist()):
             p.resetJointState(self.robot_id, joint_index, home_rad, 0.0, physicsClientId=self.client)
         self.set_targets_deg(HOME_POSE_DEG)

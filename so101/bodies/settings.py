@@ -17,7 +17,7 @@ from typing import Mapping, Self
 from so101.assets import ASSETS_ENV_VAR
 from so101.bodies.pd_servo import DEFAULT_DAMPING_RATIO
 from so101.feetech.calibration import parse_joint_signs
-from so101.gui.display import MODE_ENV_VAR
+from so101.runtime.display import MODE_ENV_VAR
 from so101.lang import DEFAULT_LANGUAGE, ENV_VAR as LANG_ENV_VAR, language_from_environ
 from so101.runtime.settings import (
     EnvironSettings, Setting, parse_number, read_image_size, read_number, read_optional_number, read_optional_path,
@@ -25,7 +25,6 @@ from so101.runtime.settings import (
 )
 from so101.runtime.lockstep import steps_per_frame
 from so101.runtime.versions import spawning_daemon_version_problem
-from so101.tasks import task_named
 
 # "position": the course's POSITION_CONTROL motor. "servo": a PD torque servo, in
 # which the damping ratio decides whether a step overshoots (exercise 2).
@@ -50,16 +49,6 @@ def check_control_mode(control_mode: str) -> str:
 
 def read_control_mode(environ: Mapping[str, str], declared_setting: Setting) -> str:
     return check_control_mode(declared_setting.raw(environ))
-
-
-def read_task(environ: Mapping[str, str], declared_setting: Setting) -> str:
-    name = read_stripped_text(environ, declared_setting)
-    if name:
-        try:
-            task_named(name)
-        except ValueError as error:  # naming the tasks there are
-            raise ValueError(f"{declared_setting.env_var}: {error}") from None
-    return name
 
 
 def read_lockstep_fps(environ: Mapping[str, str], declared_setting: Setting) -> int:
@@ -103,7 +92,7 @@ class NodeSettings(EnvironSettings):
     lang: str = setting(LANG_ENV_VAR, DEFAULT_LANGUAGE, "log language, `zh` or `en`", read_language)
     task: str = setting(
         "SO101_TASK", "", "a task's scene on the floor (`cube_to_box`; simulations only); empty = the arm alone",
-        read_task)
+        read_stripped_text)  # the node checks the name (so101.tasks.task_for_setting): tasks sit above bodies
     seed: int = setting("SO101_SEED", "0", "the task's first layout (a whole number)", read_whole_number)
     lockstep_fps: int = setting(
         "SO101_LOCKSTEP_FPS", "0",

@@ -22,7 +22,7 @@ from pathlib import Path, PurePosixPath
 
 from so101.bodies.registry import BODIES, DEFAULT_BODY, body_node_env
 from so101.cli.argtypes import add_language_option
-from so101.gui.display import MODES, resolve_mode
+from so101.runtime.display import MODES, resolve_mode
 from so101.runtime.cluster import (
     BODY_MACHINE, DATAFLOW_NAME, PROMPT_MACHINE, Cluster, ClusterError, cluster_dataflow, placed_dataflow,
 )
@@ -109,7 +109,7 @@ def _demo(work_dir: Path, mode: str, lang: str) -> int:
         for machine_id in (BODY_MACHINE, PROMPT_MACHINE):
             cluster.start_daemon(machine_id)
             say(text["daemon"].format(machine=machine_id, port=cluster.daemon_ports[machine_id]))
-        cluster.start_dataflow(cluster_dataflow(work_dir, {"SO101_MODE": mode, "SO101_LANG": lang}))
+        cluster.start_dataflow(cluster_dataflow(work_dir, {"SO101_MODE": mode, "SO101_LANG": lang}, BODIES[DEFAULT_BODY]))
         # The prompt joins at once: daemon `desk` runs no other node, and the dataflow starts once
         # every daemon's nodes are there (`state` says when the first joint_state has arrived).
         say(text["starts"].format(body=BODY_MACHINE, prompt=PROMPT_MACHINE))

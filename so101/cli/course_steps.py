@@ -17,7 +17,7 @@ from pathlib import Path
 from so101.assets import ModelFilesError, urdf_path
 from so101.cli.argtypes import add_language_option
 from so101.robot import ACTUATED_JOINTS, NUM_ARM_JOINTS
-from so101.gui.display import MODE_ENV_VAR, MODES, DisplayError, resolve_mode
+from so101.runtime.display import MODE_ENV_VAR, MODES, DisplayError, resolve_mode
 
 COURSE_STEP_B_TARGETS_RAD = (0.5, -0.5, 0.5, -0.5, 0.5)
 COURSE_STEP_B_STEPS = 500

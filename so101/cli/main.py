@@ -12,7 +12,7 @@ import importlib
 import sys
 
 from so101.assets import ModelFilesError
-from so101.gui.display import DisplayError
+from so101.runtime.display import DisplayError
 
 # name -> (module, one-line help)
 SUBCOMMANDS = {

@@ -42,7 +42,7 @@ from so101.runtime.dataflow import (
     LEADER_READY_MARKS, LOADED_MARKS, POLICY_READY_MARKS, PROMPT_NODE_FILE, ROOT, WEB_VIEW_MARKS, dataflow_copy,
     with_expert, with_leader, with_policy, with_recorder, with_task, with_web_view, write_dataflow,
 )
-from so101.gui.display import MODES, resolve_mode
+from so101.runtime.display import MODES, resolve_mode
 from so101.web.settings import (
     DEFAULT_HOST as DEFAULT_WEB_HOST, DEFAULT_PORT as DEFAULT_WEB_PORT, EVERY_ADDRESS, LOCAL_HOSTS, page_address,
 )

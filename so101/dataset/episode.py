@@ -4,7 +4,7 @@ memory, each video feature encoding as its pictures come; saved whole or dropped
 from __future__ import annotations
 
 import threading
-from typing import TYPE_CHECKING, Any, Mapping
+from typing import Any, Mapping, Protocol
 
 import numpy as np
 
@@ -12,8 +12,17 @@ from so101.dataset import video as videos
 from so101.dataset.commit import CommitIncomplete
 from so101.dataset.layout import DatasetError, EpisodeSummary
 
-if TYPE_CHECKING:
-    from so101.dataset.writer import DatasetWriter
+
+
+class EpisodeSink(Protocol):
+    """Where a recorded episode goes (so101.dataset.writer.DatasetWriter): the recorder knows it by this only."""
+
+    def commit_episode(self, task: str, columns: dict[str, np.ndarray],
+                       encoded: dict[str, videos.EncodedVideo], seed: int | None = None) -> EpisodeSummary:
+        """The episode added to the dataset, its summary returned."""
+
+    def episode_ended(self) -> None:
+        """The episode was saved or dropped."""
 
 
 def _expected(feature: dict[str, Any]) -> str:
@@ -53,7 +62,7 @@ def checked_frame(frame: Mapping[str, Any], features: dict[str, dict[str, Any]])
 class EpisodeRecorder:
     """One episode being recorded (DatasetWriter.start_episode): frames in, then save() or discard()."""
 
-    def __init__(self, writer: DatasetWriter, task: str, features: dict[str, dict[str, Any]],
+    def __init__(self, writer: EpisodeSink, task: str, features: dict[str, dict[str, Any]],
                  encoders: dict[str, videos.StreamingEncoder]):
         self._writer = writer
         self.task = task

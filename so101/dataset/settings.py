@@ -8,7 +8,8 @@ from pathlib import Path
 from typing import Mapping
 
 from so101.assets import ASSETS_ENV_VAR
-from so101.bodies.settings import read_language, read_task
+from so101.bodies.settings import read_language
+from so101.tasks.settings import read_task
 from so101.dataset.features import DEFAULT_FPS
 from so101.lang import DEFAULT_LANGUAGE, ENV_VAR as LANG_ENV_VAR
 from so101.runtime.settings import (

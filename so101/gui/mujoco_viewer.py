@@ -17,7 +17,8 @@ import time
 from pathlib import Path
 
 from so101.robot import ACTUATED_JOINTS
-from so101.gui.viewer import ANGLES, FRAME, OBJECTS, OPEN, SHOWING, STATUS, lowest_priority, shared_array, viewer_main
+from so101.bodies.window import ANGLES, FRAME, OBJECTS, OPEN, SHOWING, STATUS, shared_array
+from so101.gui.viewer import lowest_priority, viewer_main
 
 
 def run_viewer(shared_path: Path, mjcf: Path, fps: float, task_name: str = "") -> int:
@@ -26,7 +27,6 @@ def run_viewer(shared_path: Path, mjcf: Path, fps: float, task_name: str = "") -
 
     from so101.bodies.mujoco_model import collision_hulls, scene_model
     from so101.tasks import task_named
-    from so101.tasks.mujoco_scene import MuJoCoScene
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the process group: the physics closes this
     lowest_priority()
@@ -35,7 +35,7 @@ def run_viewer(shared_path: Path, mjcf: Path, fps: float, task_name: str = "") -
     task = task_named(task_name) if task_name else None
     model = scene_model(mjcf, collision_hulls(mjcf), task=task)  # the node's scene, with the visual meshes
     data = mujoco.MjData(model)
-    scene = MuJoCoScene(model, data, task, task.layout(0)) if task is not None else None
+    scene = task.mujoco_scene(model, data, 0) if task is not None else None
     qpos = [int(model.joint(joint.name).qposadr[0]) for joint in ACTUATED_JOINTS]
     frame_period_s = 1.0 / fps
     shown_frame = -1.0

@@ -9,9 +9,10 @@ same arm, never steps it, and sets its joints to the latest angles at most `fps`
 The window keeps PyBullet's own camera controls (Ctrl + left drag turns, the wheel
 zooms, Ctrl + middle drag pans).
 
-The two processes share one small file, mapped into both: a frame counter, the
-viewer's state, the six joint angles in radians (so101.robot.ACTUATED_JOINTS order) and,
-with a task (`--task NAME`), its objects' poses (so101.tasks' object_state).
+The two processes share one small file, mapped into both (so101/bodies/window.py, the physics'
+side): a frame counter, the viewer's state, the six joint angles in radians
+(so101.robot.ACTUATED_JOINTS order) and, with a task (`--task NAME`), its objects' poses
+(so101.tasks' object_state), which this process shows with the task's own scene.
 
     python -m so101.gui.viewer --shared FILE --urdf URDF [--fps N] [--task NAME]    (started by `Window`, not by hand)
 """
@@ -20,117 +21,25 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import mmap
 import os
 import signal
-import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
-from so101.bodies.protocol import BodyFailed
-from so101.runtime.dataflow import ROOT
-from so101.runtime.processes import stop_process
+from so101.bodies.window import ANGLES, DEFAULT_FPS, FRAME, OBJECTS, OPEN, SHOWING, STATUS, shared_array
 from so101.robot import ACTUATED_JOINTS
-from so101.tasks.cube_to_box import OBJECT_STATE_NAMES
 
-DEFAULT_FPS = 30.0
 # With the arm still and the mouse unused, the window is drawn this seldom; any
 # movement brings back the full frame rate for BUSY_FOR_S.
 IDLE_PERIOD_S = 0.25
 BUSY_FOR_S = 1.0
-# Slots of the shared file, float64 each.
-FRAME, STATUS, ANGLES = 0, 1, 2
-OBJECTS = ANGLES + len(ACTUATED_JOINTS)
-SLOTS = OBJECTS + len(OBJECT_STATE_NAMES)
-STARTING, OPEN, SHOWING = 0.0, 1.0, 2.0  # the window: not yet, open, showing the arm
-# Differences below these are not drawn (a hundredth of a degree; a tenth of a millimetre).
-STILL_RAD = 1.7e-4
-STILL_M = 1e-4
 # The viewer's niceness where SCHED_IDLE is not to be had.
 VIEWER_NICENESS = 19
 # The course's camera: where the window starts.
 CAMERA = {"cameraDistance": 0.6, "cameraYaw": 45, "cameraPitch": -30, "cameraTargetPosition": [0, 0, 0.15]}
-
-
-# Logged once the window shows the arm, posed: a few seconds after the physics starts.
-WINDOW_SHOWING = "window open: it shows the arm as the physics moves it"
-
-
-class WindowClosed(BodyFailed):
-    """The window's process ended: closed by the person, or it could not open."""
-
-
-def shared_array(path: Path) -> tuple[mmap.mmap, np.ndarray]:
-    with open(path, "r+b") as handle:
-        mapping = mmap.mmap(handle.fileno(), SLOTS * 8)
-    return mapping, np.ndarray((SLOTS,), dtype=np.float64, buffer=mapping)
-
-
-class Window:
-    """The physics side: starts a viewer process and hands it the angles, at most `fps` times a second.
-
-    `viewer` is the viewer's module with its model options: this file's PyBullet window
-    (`["so101.gui.viewer", "--urdf", URDF]`) or MuJoCo's (`["so101.gui.mujoco_viewer", "--mjcf", MJCF]`);
-    both take `--shared FILE --fps N` and keep to this file's shared slots.
-    """
-
-    def __init__(self, viewer: list[str], fps: float = DEFAULT_FPS, on_showing=lambda: None):
-        """`on_showing` is called once, from show(), when the window first shows the arm."""
-        self.frame_period_s = 1.0 / fps
-        self.showing = False
-        self._on_showing = on_showing
-        handle, name = tempfile.mkstemp(prefix="so101-window-", suffix=".bin")
-        with os.fdopen(handle, "wb") as shared:
-            shared.write(bytes(SLOTS * 8))
-        self._path = Path(name)
-        self._mapping, self._shared = shared_array(self._path)
-        self._next_frame_s = 0.0
-        self.process = subprocess.Popen(
-            [sys.executable, "-m", *viewer, "--shared", str(self._path), "--fps", f"{fps:g}"],
-            # The GUIs chatter on stdout (GL versions, threads); their errors, such as
-            # "X connection ... broken", stay on stderr, in the node's log.
-            stdout=subprocess.DEVNULL,
-            env=dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))),
-        )
-
-    def due(self) -> bool:
-        """Whether a new frame is due (cheap: the physics asks after every step)."""
-        return time.monotonic() >= self._next_frame_s
-
-    def show(self, angles_rad, object_state=None) -> None:
-        """Hand the viewer the latest angles (and a task's object_state, if any); raises WindowClosed
-        once its process has ended."""
-        self._next_frame_s = time.monotonic() + self.frame_period_s
-        code = self.process.poll()
-        if code is not None:
-            opened = self._shared[STATUS] >= OPEN
-            raise WindowClosed(
-                "the window was closed" if opened
-                else f"the window could not open, or was closed while it opened (its process exited with code {code})"
-            )
-        if not self.showing and self._shared[STATUS] == SHOWING:
-            self.showing = True
-            self._on_showing()
-        # A new frame only when something moved: a still scene costs the viewer nothing.
-        moved = bool(np.any(np.abs(self._shared[ANGLES:OBJECTS] - angles_rad) > STILL_RAD))
-        if object_state is not None and np.any(np.abs(self._shared[OBJECTS:] - object_state) > STILL_M):
-            self._shared[OBJECTS:] = object_state
-            moved = True
-        if moved:
-            self._shared[ANGLES:OBJECTS] = angles_rad
-            self._shared[FRAME] += 1
-
-    def close(self) -> None:
-        """Close the window and its process; safe to call twice."""
-        stop_process(self.process, 5, first_signal=signal.SIGTERM)
-        if not self._mapping.closed:
-            del self._shared  # the view first: a mapping with a view on it cannot close
-            self._mapping.close()
-        self._path.unlink(missing_ok=True)
 
 
 def process_threads() -> list[int]:
@@ -211,10 +120,8 @@ def run_viewer(shared_path: Path, urdf: Path, fps: float, task_name: str = "") -
         scene = None
         if task_name:
             from so101.tasks import task_named
-            from so101.tasks.pybullet_scene import PyBulletScene
 
-            task = task_named(task_name)
-            scene = PyBulletScene(client, task, task.layout(0))
+            scene = task_named(task_name).pybullet_scene(client, 0)
 
         def pose(slots: np.ndarray) -> float:
             """The arm (and the task's objects) as the shared `slots` have them; returns the frame they belong to."""

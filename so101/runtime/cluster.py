@@ -18,9 +18,8 @@ import socket
 import subprocess
 import time
 from pathlib import Path, PurePath
-from typing import IO
+from typing import IO, Protocol
 
-from so101.bodies.registry import BODIES, DEFAULT_BODY, BodyKind
 from so101.runtime.dataflow import ROOT, dataflow_copy, write_dataflow
 from so101.runtime.processes import kill_with_env, running_with_env, stop_process
 from so101.runtime.venv import dora_executable, env_with_bin_first
@@ -30,6 +29,16 @@ DATAFLOW_NAME = "so101"
 BODY_MACHINE, PROMPT_MACHINE = "arm", "desk"
 START_TIMEOUT_S = 60.0
 STOP_TIMEOUT_S = 15.0
+
+
+class PlacedBody(Protocol):
+    """What placing a body needs to know of it (so101.bodies.registry.BodyKind has it)."""
+
+    @property
+    def dataflow_file(self) -> Path: ...
+
+    @property
+    def node_id(self) -> str: ...
 
 
 class ClusterError(RuntimeError):
@@ -192,7 +201,7 @@ class Cluster:
         self.stop()
 
 
-def placed_dataflow(body: BodyKind, node_env: dict[str, str], root: PurePath = ROOT) -> dict:
+def placed_dataflow(body: PlacedBody, node_env: dict[str, str], root: PurePath = ROOT) -> dict:
     """The body's dataflow (dataflow.yml for PyBullet) placed as dataflow_cluster.yml places it:
     the body's node on machine `arm`, the prompt on `desk`, with `node_env` over the body
     node's env. Node paths are made absolute under `root`, the project's folder on the arm's
@@ -207,6 +216,6 @@ def placed_dataflow(body: BodyKind, node_env: dict[str, str], root: PurePath = R
     return descriptor
 
 
-def cluster_dataflow(work_dir: Path, node_env: dict[str, str]) -> Path:
-    """The PyBullet dataflow placed on daemons `arm` and `desk` of this machine, written under `work_dir`."""
-    return write_dataflow(placed_dataflow(BODIES[DEFAULT_BODY], node_env), work_dir / "dataflow_cluster.yml")
+def cluster_dataflow(work_dir: Path, node_env: dict[str, str], body: PlacedBody) -> Path:
+    """`body`'s dataflow placed on daemons `arm` and `desk` of this machine, written under `work_dir`."""
+    return write_dataflow(placed_dataflow(body, node_env), work_dir / "dataflow_cluster.yml")

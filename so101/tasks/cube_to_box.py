@@ -1,7 +1,9 @@
 """`cube_to_box`: a cube on the floor to be put into an open box. Its facts, layouts and success.
 
 One description for every simulator: PyBullet (so101.tasks.pybullet_scene) and MuJoCo
-(so101.tasks.mujoco_scene) build the scene from these numbers, and nothing else. Frame: the
+(so101.tasks.mujoco_scene) build the scene from these numbers, and nothing else. A simulated body
+asks the task for its scene through the hooks of so101.bodies.protocol.SceneTask (`pybullet_scene`,
+`add_to_mujoco_spec`, `mujoco_scene`): the bodies know no task. Frame: the
 arm's base frame, which both simulators put at their world origin: x forward (where the arm
 reaches at home), y to its left, z up, the floor at z = 0. Metres, kilograms, radians.
 
@@ -22,15 +24,16 @@ from __future__ import annotations
 import math
 import random
 from dataclasses import dataclass
-from typing import Iterable, Sequence
+from typing import TYPE_CHECKING, Any, Iterable, Sequence
+
+from so101.tasks.objects import OBJECT_STATE_NAMES, Box, Cube, Layout, SpawnSector
+
+if TYPE_CHECKING:
+    from so101.bodies.jaw_pads import JawPad
+    from so101.tasks.mujoco_scene import MuJoCoScene
+    from so101.tasks.pybullet_scene import PyBulletScene
 
 NAME = "cube_to_box"
-
-# The names of `object_state` (so101/bodies/node_loop.py), in its order: the cube's centre and
-# orientation (a quaternion, x y z w), the box's position (its footprint's centre, on the floor).
-OBJECT_STATE_NAMES: tuple[str, ...] = (
-    "cube.x", "cube.y", "cube.z", "cube.qx", "cube.qy", "cube.qz", "cube.qw", "box.x", "box.y", "box.z",
-)
 
 # Slower than this, the cube is at rest (a cube that lands bounces for a few tenths of a second faster).
 REST_SPEED_M_S = 0.01
@@ -38,77 +41,6 @@ REST_SPEED_M_S = 0.01
 # against a wall it is up to 5.2 mm higher (a 25 mm cube on an edge); held still 15 mm above the floor,
 # where the jaws could let it go, it is not in the box yet.
 ON_FLOOR_SLACK_M = 0.008
-
-
-@dataclass(frozen=True)
-class Cube:
-    half_size_m: float = 0.0125  # a 25 mm cube: the jaws open to 40 mm between their pads
-    mass_kg: float = 0.03
-    friction: float = 1.0  # sliding friction coefficient, both simulators
-    rgba: tuple[float, float, float, float] = (0.85, 0.25, 0.2, 1.0)
-
-
-@dataclass(frozen=True)
-class Box:
-    """An open box with low walls, fixed to the floor: a floor plate and four walls."""
-
-    xy_m: tuple[float, float] = (0.16, 0.19)  # its footprint's centre, to the arm's left
-    outer_half_m: float = 0.06  # 120 mm square outside
-    wall_height_m: float = 0.04  # from the floor to the walls' top
-    wall_thickness_m: float = 0.005
-    floor_thickness_m: float = 0.005
-    friction: float = 0.8
-    rgba: tuple[float, float, float, float] = (0.25, 0.45, 0.8, 1.0)
-
-    @property
-    def inner_half_m(self) -> float:
-        return self.outer_half_m - self.wall_thickness_m
-
-    def plates(self) -> list[tuple[tuple[float, float, float], tuple[float, float, float]]]:
-        """The box as five solid plates, each (centre, half extents), in the box's own frame (its
-        footprint's centre on the floor): the floor plate, then the walls at -x, +x, -y, +y."""
-        outer, thick, height, floor = self.outer_half_m, self.wall_thickness_m, self.wall_height_m, self.floor_thickness_m
-        wall_centre = outer - thick / 2
-        half_height = height / 2
-        return [
-            ((0.0, 0.0, floor / 2), (outer, outer, floor / 2)),
-            ((-wall_centre, 0.0, half_height), (thick / 2, outer, half_height)),
-            ((wall_centre, 0.0, half_height), (thick / 2, outer, half_height)),
-            ((0.0, -wall_centre, half_height), (outer - thick, thick / 2, half_height)),
-            ((0.0, wall_centre, half_height), (outer - thick, thick / 2, half_height)),
-        ]
-
-
-@dataclass(frozen=True)
-class SpawnSector:
-    """Where a cube's centre may be drawn: radius from the base's axis, bearing from +x toward +y."""
-
-    radius_m: tuple[float, float] = (0.16, 0.26)
-    bearing_rad: tuple[float, float] = (math.radians(-55.0), math.radians(10.0))
-    yaw_rad: tuple[float, float] = (math.radians(-45.0), math.radians(45.0))
-
-    def corners_xy_m(self) -> list[tuple[float, float]]:
-        """The sector's four corners and the middles of its arcs: the points farthest out, nearest in,
-        and at each edge, for the reach and overlap checks."""
-        points = []
-        for radius in self.radius_m:
-            for bearing in (*self.bearing_rad, sum(self.bearing_rad) / 2):
-                points.append((radius * math.cos(bearing), radius * math.sin(bearing)))
-        return points
-
-
-@dataclass(frozen=True)
-class Layout:
-    """Where one episode starts: the seed it was drawn from, the cube's centre and yaw, the box's position."""
-
-    seed: int
-    cube_xyz_m: tuple[float, float, float]
-    cube_yaw_rad: float
-    box_xyz_m: tuple[float, float, float]
-
-    def cube_quat_xyzw(self) -> tuple[float, float, float, float]:
-        half = self.cube_yaw_rad / 2
-        return (0.0, 0.0, math.sin(half), math.cos(half))
 
 
 @dataclass(frozen=True)
@@ -152,6 +84,23 @@ class CubeToBox:
         """`next.reward` of a frame: 1 where the cube is in the box, else 0 (a sparse reward, as
         LeRobot's simulation datasets carry it)."""
         return 1.0 if success else 0.0
+
+    # -- the scene, made for a body (so101.bodies.protocol.SceneTask); each engine imported on first use
+
+    def pybullet_scene(self, client: int, seed: int) -> PyBulletScene:
+        from so101.tasks.pybullet_scene import PyBulletScene
+
+        return PyBulletScene(client, self, self.layout(seed))
+
+    def add_to_mujoco_spec(self, spec: Any, pads: tuple[JawPad, ...]) -> None:
+        from so101.tasks.mujoco_scene import add_to_spec
+
+        add_to_spec(spec, self, pads)
+
+    def mujoco_scene(self, model: Any, data: Any, seed: int) -> MuJoCoScene:
+        from so101.tasks.mujoco_scene import MuJoCoScene
+
+        return MuJoCoScene(model, data, self, self.layout(seed))
 
 
 CUBE_TO_BOX = CubeToBox()

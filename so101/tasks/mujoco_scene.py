@@ -12,22 +12,21 @@ import numpy as np
 import numpy.typing as npt
 
 from so101.bodies import mujoco_model  # noqa: F401  (first: it chooses MuJoCo's OpenGL back end)
-from so101.bodies.camera import WRIST_CAMERA, WristCamera
+from so101.bodies.camera import WRIST_CAMERA, WRIST_CAMERA_NAME, WristCamera
 from so101.bodies.jaw_pads import JawPad
-from so101.tasks.cube_to_box import CubeToBox, Layout
+from so101.tasks.objects import Layout, SceneFacts
 
 import mujoco  # noqa: E402
 
 CUBE_BODY = "cube"
 BOX_BODY = "box"
-WRIST_CAMERA_NAME = "wrist"
 GRIPPER_BODY = "gripper"  # the MJCF's; its frame is the URDF's gripper_link
 # MuJoCo's rolling and torsional friction coefficients beside the sliding one (its defaults).
 SPIN_ROLL_FRICTION = (0.005, 0.0001)
 NOSLIP_ITERATIONS = 3
 
 
-def add_to_spec(spec: Any, task: CubeToBox, pads: tuple[JawPad, ...]) -> None:
+def add_to_spec(spec: Any, task: SceneFacts, pads: tuple[JawPad, ...]) -> None:
     """The cube (a free body) and the box (a fixed body of five plates) into `spec`, and the jaw pads
     on, as `pads` has them (so101.bodies.jaw_pads: the MJCF's, grown)."""
     # MuJoCo's soft contacts let a held cube slide down the pads (measured: 6 mm in 5 s, and out of
@@ -70,13 +69,16 @@ def add_wrist_camera(spec: Any, camera: WristCamera) -> None:
 class MuJoCoScene:
     """The compiled scene's cube and box, for `task`, laid out as `layout`."""
 
-    def __init__(self, model: Any, data: Any, task: CubeToBox, layout: Layout):
+    def __init__(self, model: Any, data: Any, task: SceneFacts, layout: Layout):
         self.model, self.data, self.task = model, data, task
         joint = model.joint(CUBE_BODY)
         self._cube_qpos = int(joint.qposadr[0])
         self._cube_qvel = int(joint.dofadr[0])
         self._box_body = int(model.body(BOX_BODY).id)
         self.lay_out(layout)
+
+    def lay_out_seed(self, seed: int) -> None:
+        self.lay_out(self.task.layout(seed))
 
     def lay_out(self, layout: Layout) -> None:
         """The cube and the box where `layout` puts them, the cube still (kinematics recomputed)."""

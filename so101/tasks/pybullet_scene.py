@@ -12,13 +12,13 @@ import numpy as np
 import numpy.typing as npt
 import pybullet as p
 
-from so101.tasks.cube_to_box import CubeToBox, Layout
+from so101.tasks.objects import Layout, SceneFacts
 
 
 class PyBulletScene:
     """The cube (a free body) and the box (fixed, five plates) of `task`, laid out as `layout`."""
 
-    def __init__(self, client: int, task: CubeToBox, layout: Layout):
+    def __init__(self, client: int, task: SceneFacts, layout: Layout):
         self.client = client
         self.task = task
         cube = task.cube
@@ -46,6 +46,9 @@ class PyBulletScene:
         )
         p.changeDynamics(self.box_id, -1, lateralFriction=task.box.friction, physicsClientId=client)
         self.lay_out(layout)
+
+    def lay_out_seed(self, seed: int) -> None:
+        self.lay_out(self.task.layout(seed))
 
     def lay_out(self, layout: Layout) -> None:
         """The cube and the box where `layout` puts them, the cube still."""

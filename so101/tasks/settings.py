@@ -7,14 +7,22 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Mapping
 
-from so101.bodies.settings import read_language, read_lockstep_fps, read_task
+from so101.bodies.settings import read_language, read_lockstep_fps
 from so101.lang import DEFAULT_LANGUAGE, ENV_VAR as LANG_ENV_VAR
 from so101.runtime.settings import (
-    EnvironSettings, Setting, parse_number, read_choice, read_image_size, read_number, read_optional_path, read_text,
-    read_whole_number, setting,
+    EnvironSettings, Setting, parse_number, read_choice, read_image_size, read_number, read_optional_path,
+    read_stripped_text, read_text, read_whole_number, setting,
 )
+from so101.tasks import task_for_setting
 
 KEEP_CHOICES = ("success", "all")
+
+
+def read_task(environ: Mapping[str, str], declared_setting: Setting) -> str:
+    """A task's name (empty: none), refused in one line where no task has it."""
+    name = read_stripped_text(environ, declared_setting)
+    task_for_setting(name, declared_setting.env_var)
+    return name
 
 
 def read_required_task(environ: Mapping[str, str], declared_setting: Setting) -> str:

@@ -7,7 +7,7 @@ from pathlib import Path
 from typing import Mapping
 
 from so101.assets import ASSETS_ENV_VAR
-from so101.bodies.settings import read_task
+from so101.tasks.settings import read_task
 from so101.runtime.settings import EnvironSettings, Setting, read_optional_path, read_stripped_text, setting
 
 DEFAULT_HOST = "127.0.0.1"  # this machine only: anyone who can reach the port sees the arm

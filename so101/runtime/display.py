@@ -34,6 +34,14 @@ def display_available(environ=os.environ, platform: str = sys.platform) -> bool:
     return True
 
 
+def choose_mujoco_gl(environ=os.environ) -> None:
+    """Offscreen drawing without a display needs an OpenGL back end: EGL, with Mesa's software
+    renderer where there is no GPU. MuJoCo reads MUJOCO_GL when it is imported, so whoever imports
+    mujoco calls this first."""
+    if not display_available(environ):
+        environ.setdefault("MUJOCO_GL", "egl")
+
+
 def resolve_mode(requested: str, environ=os.environ, platform: str = sys.platform) -> tuple[str, str | None]:
     """'auto' | 'gui' | 'direct' -> ('gui' | 'direct', notice or None)."""
     if requested not in MODES:
