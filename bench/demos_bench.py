@@ -104,8 +104,8 @@ ECHO_NODE = Path(__file__).resolve().parent / "nodes" / "echo_frames.py"
 def dora_alone_ms(work_dir: Path, frames: int) -> float:
     """Milliseconds a frame of the lockstep loop's messages takes with no work between them: the body's
     four outputs to a driver and a watcher, the driver's answer to both (bench/nodes/echo_frames.py),
-    wired as so101/cli/lockstep_run.py wires them. The floor dora puts under a frame on this machine."""
-    from so101.cli.lockstep_run import queued
+    wired as so101/launch/lockstep.py wires them. The floor dora puts under a frame on this machine."""
+    from so101.launch.lockstep import queued
     from so101.runtime.dataflow import write_dataflow
     from so101.runtime.venv import dora_executable, env_with_bin_first
 

@@ -49,7 +49,7 @@ from bench.common import (  # noqa: E402
     target_lines, target_row, tick_figures, tick_records,
 )
 from so101.bodies.registry import BODIES  # noqa: E402
-from so101.cli.argtypes import image_size, number  # noqa: E402
+from so101.runtime.argtypes import image_size, number  # noqa: E402
 from so101.dataset.settings import DEFAULT_IMAGE_SIZE  # noqa: E402
 from so101.runtime.display import DisplayError, display_available, virtual_display  # noqa: E402
 from so101.runtime.dataflow import ROOT, TICK_PERIOD_S  # noqa: E402

@@ -29,7 +29,7 @@ if __package__ in (None, ""):  # run as a script: the checkout holds `bench`
 
 from bench.common import PACED_PROBE_ENV, WARMUP_S, run_dataflow, tick_figures  # noqa: E402
 from so101.bodies.registry import SIMULATED_BODIES  # noqa: E402
-from so101.cli.argtypes import whole_number  # noqa: E402
+from so101.runtime.argtypes import whole_number  # noqa: E402
 from so101.runtime.display import display_available, virtual_display  # noqa: E402
 from so101.runtime.dataflow import TICK_PERIOD_S  # noqa: E402
 from so101.runtime.processes import stop_process  # noqa: E402

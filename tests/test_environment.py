@@ -148,10 +148,10 @@ def test_no_dora_on_path_is_reported(tmp_path, monkeypatch):
 
 def test_teleop_with_mismatched_dora_stops_before_starting_anything(tmp_path, monkeypatch, capsys):
     from so101.cli import main as cli
-    from so101.cli import teleop
+    from so101.launch import beside_prompt
 
     bin_dir = fake_dora(tmp_path, 'echo "dora-cli 1.0.4"')
-    monkeypatch.setattr(teleop, "dora_executable", lambda: str(bin_dir / "dora"))
+    monkeypatch.setattr(beside_prompt, "dora_executable", lambda: str(bin_dir / "dora"))
     log_file = tmp_path / "dora.log"
     assert cli.main(["teleop", "--mode", "direct", "--lang", "en", "--log", str(log_file)]) == 2
     error = capsys.readouterr().err.strip()

@@ -521,7 +521,7 @@ def test_a_tasks_frames_with_video_wait_for_both_cameras():
 def test_a_picture_size_is_width_x_height_in_even_pixels():
     import argparse
 
-    from so101.cli.argtypes import image_size
+    from so101.runtime.argtypes import image_size
 
     assert image_size("640x480") == (640, 480) and image_size(" 320X240 ") == (320, 240)
     for bad in ("641x480", "640", "x", "", "8x8", "640x480x3"):

@@ -20,7 +20,7 @@ import shutil
 import sys
 from pathlib import Path
 
-from so101.cli.argtypes import add_language_option
+from so101.runtime.argtypes import add_language_option
 from so101.feetech.calibration import (
     MIN_RANGE_STEPS,
     MOTOR_IDS,

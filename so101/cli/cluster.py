@@ -21,7 +21,7 @@ import tempfile
 from pathlib import Path, PurePosixPath
 
 from so101.bodies.registry import BODIES, DEFAULT_BODY, body_node_env
-from so101.cli.argtypes import add_language_option
+from so101.runtime.argtypes import add_language_option
 from so101.runtime.display import MODES, resolve_mode
 from so101.runtime.cluster import (
     BODY_MACHINE, DATAFLOW_NAME, PROMPT_MACHINE, Cluster, ClusterError, cluster_dataflow, placed_dataflow,

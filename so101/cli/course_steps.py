@@ -15,7 +15,7 @@ import time
 from pathlib import Path
 
 from so101.assets import ModelFilesError, urdf_path
-from so101.cli.argtypes import add_language_option
+from so101.runtime.argtypes import add_language_option
 from so101.robot import ACTUATED_JOINTS, NUM_ARM_JOINTS
 from so101.runtime.display import MODE_ENV_VAR, MODES, DisplayError, resolve_mode
 

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from so101.cli import argtypes
+from so101.runtime import argtypes
 from so101.dataset.features import ACTION_KEY, GRIPPER_RANGE, STATE_KEY
 from so101.dataset.layout import DatasetError
 from so101.dataset.reader import Dataset

@@ -17,8 +17,8 @@ import argparse
 import time
 from pathlib import Path
 
-from so101.cli.argtypes import image_size
-from so101.cli.lockstep_run import add_common_arguments, cluster_place, expert_driver, fail, flows_for, log_place, refuse_real, run_flows, work_folder
+from so101.runtime.argtypes import image_size
+from so101.launch.lockstep import add_common_arguments, cluster_place, expert_driver, fail, flows_for, log_place, refuse_real, run_flows, work_folder
 from so101.dataset.settings import DEFAULT_IMAGE_SIZE
 from so101.runtime.lockstep import DEFAULT_LOCKSTEP_FPS
 from so101.tasks.episodes import Outcome

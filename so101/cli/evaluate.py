@@ -17,8 +17,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from so101.cli.argtypes import image_size, torch_device
-from so101.cli.lockstep_run import (
+from so101.policy.settings import torch_device
+from so101.runtime.argtypes import image_size
+from so101.launch.lockstep import (
     Driver, add_common_arguments, cluster_place, expert_driver, fail, flows_for, log_place, refuse_real, run_flows,
     work_folder,
 )

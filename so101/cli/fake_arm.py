@@ -13,7 +13,7 @@ import time
 import unicodedata
 from typing import Any
 
-from so101.cli.argtypes import add_language_option, number
+from so101.runtime.argtypes import add_language_option, number
 from so101.feetech import sts3215
 from so101.feetech.fake_arm import ALL_IDS, DEFAULT_SPEED_STEPS_S, MECHANICS, FakeArm
 from so101.feetech.fake_arm.process import raise_priority

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from so101.cli import argtypes
+from so101.runtime import argtypes
 from so101.bodies.registry import DEFAULT_BODY, SIMULATED_BODIES
 from so101.runtime.dataflow import TICK_PERIOD_S
 from so101.robot import ACTUATED_JOINTS, HOME_POSE_DEG

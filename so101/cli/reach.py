@@ -37,7 +37,7 @@ import time
 from pathlib import Path
 from typing import Any, NamedTuple
 
-from so101.cli.argtypes import number
+from so101.runtime.argtypes import number
 
 MIN_TIP_HEIGHT_MM = 30.0
 GOAL_MM = 5.0

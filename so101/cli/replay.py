@@ -13,8 +13,8 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
-from so101.cli.argtypes import add_language_option, whole_number
-from so101.cli.teleop import (
+from so101.runtime.argtypes import add_language_option, whole_number
+from so101.launch.beside_prompt import (
     TEXT as TELEOP_TEXT, add_body_arguments, add_log_option, add_web_arguments, add_web_view, prepare, run_beside,
 )
 from so101.runtime.dataflow import LOADED_MARKS, REPLAY_NODE_FILE, WEB_VIEW_MARKS, dataflow_copy, with_replay

@@ -76,7 +76,7 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
     parser.add_argument(
         "--distance", type=float, default=DEFAULT_CAMERA.distance_m, help="camera distance in metres (default %(default)s)",
     )
-    from so101.cli.teleop import add_task_arguments
+    from so101.launch.beside_prompt import add_task_arguments
 
     add_task_arguments(parser)
     parser.add_argument(

@@ -4,6 +4,7 @@ library and this project's plain modules, as the policy's own Python imports the
 
 from __future__ import annotations
 
+import argparse
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Mapping
@@ -59,3 +60,11 @@ class PolicySettings(EnvironSettings):
         "empty = none", read_image_size)
     lang: str = setting(LANG_ENV_VAR, DEFAULT_LANGUAGE, "log language, `zh` or `en`",
                         lambda environ, declared_setting: language_from_environ(environ))
+
+
+def torch_device(text: str) -> str:
+    """An argparse `type` for a torch device (`checked_device`'s rule)."""
+    try:
+        return checked_device(text)
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None

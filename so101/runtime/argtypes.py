@@ -67,12 +67,3 @@ def image_size(text: str) -> tuple[int, int]:
         raise argparse.ArgumentTypeError(f"{text!r} is not WIDTHxHEIGHT in even pixels from 16 to 4096, e.g. 640x480")
     return size
 
-
-def torch_device(text: str) -> str:
-    """An argparse `type` for a torch device (so101.policy.settings.checked_device's rule)."""
-    from so101.policy.settings import checked_device
-
-    try:
-        return checked_device(text)
-    except ValueError as error:
-        raise argparse.ArgumentTypeError(str(error)) from None

@@ -26,8 +26,9 @@ from pathlib import Path, PurePath
 from typing import Callable
 
 from so101.bodies.registry import BODIES, SIMULATED_BODIES, BodyKind
-from so101.cli.argtypes import add_language_option, number, whole_number
+from so101.runtime.argtypes import add_language_option, number, whole_number
 from so101.runtime.dataflow import EXPERT_NODE_FILE, ROOT, node_launch, write_dataflow
+from so101.runtime.dora_run import Dataflow, port_held_problem, refusal
 from so101.runtime.lockstep import DEFAULT_LOCKSTEP_FPS
 from so101.tasks import TASKS
 from so101.tasks.episodes import EpisodeClock, Outcome, read_outcomes, seeds_for, split_seeds
@@ -213,19 +214,15 @@ class _OneRun:
     """One dataflow under `dora run` (its own coordinator and daemon, dynamic-node port included)."""
 
     def __init__(self, dataflow_file: Path, log_file: Path, env: dict[str, str]):
-        from so101.cli.teleop import Dataflow
-
         self.log_file = log_file
         self.dataflow = Dataflow(dataflow_file, log_file, env, ())
 
     def problem(self) -> str | None:
         """None while it runs; once dora exited, why."""
-        from so101.cli.teleop import _refusal
-
         code = self.dataflow.process.poll()
         if code is None:
             return None
-        return _refusal(self.log_file) or f"the dataflow ended (exit code {code}) before its episodes did: see {self.log_file}"
+        return refusal(self.log_file) or f"the dataflow ended (exit code {code}) before its episodes did: see {self.log_file}"
 
     def wait(self, timeout_s: float) -> None:
         deadline = time.monotonic() + timeout_s
@@ -302,15 +299,13 @@ class _Workers:
 
     def problem(self) -> str | None:
         """None while every dataflow runs or finished; else the first refusal or failure."""
-        from so101.cli.teleop import _refusal
-
         failed = [name for name, state in self._states().items() if state.startswith("fail")]
         if not failed:
             return None
         for node_log in sorted(self.logs.glob("_work/*/out/*/log_*.jsonl")):
-            refusal = _refusal(node_log)
-            if refusal:
-                return refusal
+            said = refusal(node_log)
+            if said:
+                return said
         where = self.logs if self.logs.is_dir() else f"`dora logs {failed[0]} NODE` on the cluster"
         return f"dataflow {failed[0]} failed: see the node logs ({where})"
 
@@ -335,7 +330,7 @@ def run_flows(command: str, flows: list[Flow], work: Path, log: Path | None,
     """Run `flows` (one or more workers, each on its run of the seeds) to their end, here or on the
     cluster at `place`; show each outcome, with its worker's number, in seed order as soon as the
     ones before it are in. (outcomes, None), or what went wrong in one line."""
-    from so101.cli.teleop import TEXT as TELEOP_TEXT, port_held_problem
+    from so101.launch.beside_prompt import TEXT as TELEOP_TEXT
     from so101.runtime.cluster import ClusterError
     from so101.runtime.venv import dora_executable, env_with_bin_first
     from so101.runtime.versions import dora_version_problem
