@@ -9,7 +9,7 @@ A page asks for them with one HTML comment on a line of its own:
   (so101/cli/main.py, `build_parser`).
 - `<!-- dataflow-node: dataflow.yml simulation -->`: that node's entry, as the dataflow file has it.
 - `<!-- dataflow-made: recorder -->`: a node as the `so101` commands add it to a dataflow, made by
-  the code they run (so101/runtime/dataflow.py; so101/cli/lockstep_run.py for `so101 eval`'s).
+  the code they run (so101/runtime/dataflow.py; so101/launch/lockstep.py for `so101 eval`'s).
 
 tests/test_docs.py builds the site with `mkdocs build --strict` and holds the pages to these markers.
 """
@@ -168,7 +168,7 @@ def eval_dataflow() -> str:
 
     import yaml
 
-    from so101.cli.lockstep_run import expert_driver, flows_for, lockstep_dataflow
+    from so101.launch.lockstep import expert_driver, flows_for, lockstep_dataflow
     from so101.cli.main import build_parser
 
     args = build_parser().parse_args(["eval", "--task", "cube_to_box", "--expert", "--lang", "en"])
@@ -177,7 +177,7 @@ def eval_dataflow() -> str:
                             lambda folder: {"SO101_VIDEO_DIR": ""})
         text = yaml.safe_dump(lockstep_dataflow(flow, root=PurePath(".")), sort_keys=False, allow_unicode=True)
         text = text.replace(work, "out/eval-DATE-PID")
-    return (f"```yaml\n# as so101 eval --task cube_to_box --expert --lang en writes it (so101/cli/lockstep_run.py)\n"
+    return (f"```yaml\n# as so101 eval --task cube_to_box --expert --lang en writes it (so101/launch/lockstep.py)\n"
             f"{text.rstrip()}\n```")
 
 
