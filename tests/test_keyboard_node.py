@@ -498,13 +498,16 @@ def test_the_cube_landing_in_the_box_stops_a_policy_as_an_evaluated_episode_ends
     control, _, news = task_control(tmp_path)
     told = []
     control.tell_policy = told.append
+    control.task.on_objects(pa.array([0.2123, -0.0456, 0.0126, 0, 0, 0, 1, 0.16, 0.19, 0], type=pa.float32()))
     control.task.on_status(False, {"task": "cube_to_box", "seed": 3, "reply_to": ""})
     control.task.on_status(False, {"task": "cube_to_box", "seed": 3, "reply_to": ""})
     assert told == []
+    control.task.on_objects(pa.array([0.16, 0.19, 0.0175, 0, 0, 0, 1, 0.16, 0.19, 0], type=pa.float32()))
     control.task.on_status(True, {"task": "cube_to_box", "seed": 3, "reply_to": ""})
     assert told == ["off"] and news == ["  ★ the cube is in the box (task cube_to_box, seed 3)"]
-    control.task.on_status(False, {"task": "cube_to_box", "seed": 3, "reply_to": ""})  # out again: not told twice
-    assert told == ["off"]
+    control.task.on_status(False, {"task": "cube_to_box", "seed": 3, "reply_to": ""})  # jolted where it lies
+    control.task.on_status(True, {"task": "cube_to_box", "seed": 3, "reply_to": ""})
+    assert told == ["off"] and len(news) == 1
 
 
 def test_expert_asks_the_expert_node_to_run_and_a_reset_stops_it(tmp_path):

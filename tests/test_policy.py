@@ -16,8 +16,11 @@ from so101.policy.features import (
     inputs_for, joint_targets_deg, observation, picture_size_of, read_policy_features, unscaled_inputs,
 )
 from so101.policy.settings import PolicySettings
+from so101.runtime.versions import library_version
 from so101.tasks import CUBE_TO_BOX
 from tests.helpers.dataflow import ROOT, SO101
+
+LIBRARY_VERSION = library_version()  # the dataflow's dora-rs: this environment's
 
 NAMES = CUBE_TO_BOX.object_state_names
 STATE_ONLY = {STATE_KEY: (6,), ENVIRONMENT_KEY: (len(NAMES),)}
@@ -130,6 +133,60 @@ def test_a_python_without_lerobot_is_not_a_policy_environment_and_says_what_to_d
     assert "so101 policy-env" in str(refused.value) and "\n" not in str(refused.value)
     with pytest.raises(PolicyEnvError, match="does not exist: make a policy environment"):
         check(tmp_path / "bin" / "python")
+
+
+def python_with(folder, dora_version):
+    """A Python environment made in `folder` with a stand-in `lerobot` package and, where `dora_version` is
+    given, a stand-in dora-rs of that version (its distribution's metadata and a `dora` package)."""
+    from so101.policy.environment import python_in
+
+    subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(folder)], check=True, timeout=60)
+    (site,) = folder.glob("lib/python3*/site-packages")
+    packages = {"lerobot": None} if dora_version is None else {"lerobot": None, "dora": dora_version}
+    for package, version in packages.items():
+        (site / package).mkdir()
+        (site / package / "__init__.py").write_text("")
+        if version is not None:
+            (site / f"dora_rs-{version}.dist-info").mkdir()
+            (site / f"dora_rs-{version}.dist-info" / "METADATA").write_text(f"Name: dora-rs\nVersion: {version}\n")
+    return python_in(folder)
+
+
+DORA_FIX = f"-m pip install 'dora-rs=={LIBRARY_VERSION}' (or make a policy environment with `so101 policy-env`)"
+
+
+@pytest.mark.parametrize("dora_version, problem", [
+    (None, "{python} has no dora-rs, which the policy node needs to join the dataflow: {python} " + DORA_FIX),
+    ("1.0.0", f"{{python}} has dora-rs 1.0.0, but the dataflow runs dora-rs {LIBRARY_VERSION} and they must match: "
+              "{python} " + DORA_FIX),
+    (LIBRARY_VERSION, None),
+])
+def test_a_python_without_the_dataflows_dora_rs_is_named_with_the_command_that_fixes_it(tmp_path, dora_version, problem):
+    from so101.policy.environment import dora_problem
+
+    python = python_with(tmp_path / "env", dora_version)
+    assert dora_problem(python) == (problem and problem.format(python=python))
+
+
+@pytest.mark.parametrize("dora_version", [None, "1.0.0"])
+@pytest.mark.parametrize("command, code", [("eval", 1), ("teleop", 2), ("policy-env", 1)])
+def test_each_command_refuses_a_policy_python_without_the_dataflows_dora_rs_before_starting(tmp_path, dora_version,
+                                                                                          command, code):
+    from so101.policy.environment import REQUIREMENTS, STAMP_NAME, dora_problem
+
+    folder = tmp_path / "env"
+    python = python_with(folder, dora_version)
+    log = tmp_path / "dora.log"
+    policy = ["--task", "cube_to_box", "--policy", str(TINY_POLICY), "--policy-python", str(python), "--log", str(log)]
+    arguments = {"eval": [*policy, "--episodes", "1", "--lang", "en"], "teleop": ["--mode", "direct", *policy, "--lang", "en"],
+                 "policy-env": [str(folder)]}[command]
+    (folder / STAMP_NAME).write_text(json.dumps({"requirements": list(REQUIREMENTS)}))  # built: policy-env only checks
+    done = subprocess.run([str(SO101), command, *arguments], capture_output=True, text=True, timeout=60,
+                          stdin=subprocess.DEVNULL)
+    # so101 policy-env names only the pip command: making a policy environment is what it does itself.
+    problem = dora_problem(python, or_policy_env=command != "policy-env")
+    assert done.returncode == code and done.stderr == f"so101 {command}: {problem}\n", done.stderr
+    assert not log.exists()  # no dataflow was started
 
 
 def test_policy_env_leaves_a_folder_of_other_files_alone(tmp_path):

@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Mapping
 
 from so101.dataset.features import ENVIRONMENT_KEY
-from so101.policy.environment import default_dir, python_in
+from so101.policy.environment import default_dir, dora_problem, python_in
 from so101.policy.features import inputs_for, picture_size_of, read_policy_features, unscaled_inputs
 
 
@@ -37,7 +37,8 @@ class ChosenPolicy:
 def choose_policy(folder: Path, python: Path | None, task: str | None, names_of_objects: tuple[str, ...]) -> ChosenPolicy:
     """The policy in `folder`, run by `python` (default: so101 policy-env's), on a body that runs `task`
     (None: none) whose object_state has `names_of_objects`; ValueError in one line for a folder that is
-    not a policy's, features the dataflow cannot give, or no Python to run it."""
+    not a policy's, features the dataflow cannot give, or no Python to run it (none there, or one without the
+    dataflow's dora-rs: the node could not even say what is wrong)."""
     folder = folder.expanduser().resolve()
     inputs, outputs = read_policy_features(folder)
     if task is None and ENVIRONMENT_KEY in inputs:
@@ -49,4 +50,7 @@ def choose_policy(folder: Path, python: Path | None, task: str | None, names_of_
     if not chosen.exists():
         raise ValueError(f"{chosen} does not exist: make the policy environment with `so101 policy-env`, or give "
                          "--policy-python PY (a Python with LeRobot and dora-rs)")
+    problem = dora_problem(chosen)
+    if problem:
+        raise ValueError(problem)
     return ChosenPolicy(folder, chosen.absolute(), needed, picture_size, unscaled_inputs(folder))

@@ -16,11 +16,21 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
+from so101.runtime.versions import LIBRARY_DISTRIBUTION, library_version
+
 # LeRobot 0.4.4 is the last release for Python 3.11 (0.5 and later need 3.12); its pins take
 # torch < 2.11. dora-rs is this project's own version: the daemon and the node library must match.
 LEROBOT_REQUIREMENT = "lerobot==0.4.4"
-DORA_REQUIREMENT = "dora-rs==1.1.0"
+DORA_REQUIREMENT = f"{LIBRARY_DISTRIBUTION}=={library_version()}"
 REQUIREMENTS = (LEROBOT_REQUIREMENT, DORA_REQUIREMENT)
+# The dora-rs a Python holds, from its metadata (importing nothing: quick, before a dataflow starts).
+DORA_PROBE = f"""
+from importlib.metadata import PackageNotFoundError, version
+try:
+    print(version({LIBRARY_DISTRIBUTION!r}))
+except PackageNotFoundError:
+    print()
+"""
 STAMP_NAME = "so101-policy-env.json"
 # What nodes/policy.py imports, and the versions it reports; run offline, as the node runs.
 CHECK_SCRIPT = """
@@ -62,11 +72,39 @@ class PolicyEnv:
         return f"{self.python} ({held})"
 
 
+def dora_problem(python: Path, timeout_s: float = 60.0, or_policy_env: bool = True) -> str | None:
+    """Why interpreter `python` cannot run a node of this project's dataflows, in one line naming the fix: no
+    dora-rs, or another version than the daemon's (this environment's); None when it has that one.
+    `or_policy_env`: the fix also names `so101 policy-env` (not where that command itself asks)."""
+    wanted = library_version()
+    if wanted is None:  # this environment has no dora-rs to compare with: `so101 teleop` says so itself
+        return None
+    try:
+        done = subprocess.run([str(python), "-c", DORA_PROBE], capture_output=True, text=True, timeout=timeout_s)
+    except (OSError, subprocess.TimeoutExpired) as error:
+        return f"{python} could not be run: {error}"
+    if done.returncode != 0:
+        last = (done.stderr.strip().splitlines() or ["no message"])[-1]
+        return f"{python} could not say its dora-rs version ({last})"
+    held = done.stdout.strip()
+    fix = f"{python} -m pip install '{LIBRARY_DISTRIBUTION}=={wanted}'"
+    if or_policy_env:
+        fix += " (or make a policy environment with `so101 policy-env`)"
+    if not held:
+        return f"{python} has no dora-rs, which the policy node needs to join the dataflow: {fix}"
+    if held != wanted:
+        return f"{python} has dora-rs {held}, but the dataflow runs dora-rs {wanted} and they must match: {fix}"
+    return None
+
+
 def check(python: Path, timeout_s: float = 300.0) -> PolicyEnv:
-    """The environment of interpreter `python`, if it imports what the policy node needs (offline);
-    PolicyEnvError in one line otherwise."""
+    """The environment of interpreter `python`, if it has this project's dora-rs and imports what the policy
+    node needs (offline); PolicyEnvError in one line otherwise."""
     if not python.exists():
         raise PolicyEnvError(f"{python} does not exist: make a policy environment with `so101 policy-env`")
+    problem = dora_problem(python, or_policy_env=False)
+    if problem:
+        raise PolicyEnvError(problem)
     try:
         done = subprocess.run([str(python), "-c", CHECK_SCRIPT], capture_output=True, text=True, timeout=timeout_s,
                               env={**os.environ, **OFFLINE})

@@ -234,7 +234,7 @@ TEXT = {
         "in_box": "在盒中",
         "not_in_box": "不在盒中",
         "landed_in_box": "  ★ 方块进了盒子(任务 {task},种子 {seed})",
-        "left_box": "  方块不再静止在盒中(任务 {task},种子 {seed})",
+        "left_box": "  方块已离开它在盒中停放的位置(任务 {task},种子 {seed})",
         "no_task_state": "  还没有收到 object_state(仿真节点在运行吗?)",
         "help": [
             "  命令格式:",
@@ -335,7 +335,7 @@ TEXT = {
         "in_box": "in the box",
         "not_in_box": "not in the box",
         "landed_in_box": "  ★ the cube is in the box (task {task}, seed {seed})",
-        "left_box": "  the cube is no longer at rest in the box (task {task}, seed {seed})",
+        "left_box": "  the cube is no longer where it lay in the box (task {task}, seed {seed})",
         "no_task_state": "  no object_state received yet (is the simulation running?)",
         "help": [
             "  commands:",

@@ -26,6 +26,7 @@ from so101.prompt import task_link
 from so101.prompt.task_link import TaskLink, TaskStatus
 from so101.robot import ACTUATED_JOINTS, NUM_ARM_JOINTS
 from so101.runtime.dataflow import ROOT
+from so101.tasks.news import LANDED
 
 # How long `save` (and `task`) wait for a first joint_state (task_status) (a piped script may start
 # before one arrives; the body sends task_status once a second).
@@ -260,12 +261,12 @@ class KeyboardControl:
             return [self.text["recorder_silent"].format(seconds=REPLY_WAIT_S)]
         return [f"  {line}" for line in answer]
 
-    def task_news(self, status: TaskStatus) -> None:
-        """The cube landed in the box, or left it (the task link's on_change, on the pump thread)."""
+    def task_news(self, status: TaskStatus, news: str) -> None:
+        """The cube came to rest in the box, or was taken from there: so101.tasks.news' LANDED or LEFT
+        (the task link's on_news, on the pump thread)."""
         if self.show_news is not None:
-            line = self.text["landed_in_box" if status.success else "left_box"]
-            self.show_news(line.format(task=status.task, seed=status.seed))
-        if status.success and self.tell_policy is not None:
+            self.show_news(self.text[news].format(task=status.task, seed=status.seed))
+        if news == LANDED and self.tell_policy is not None:
             # The episode is over, as so101 eval ends it: the demonstrations show nothing after it, and a
             # policy left driving nudges the cube in the box (it says `stopped` if it was driving).
             self.tell_policy("off")

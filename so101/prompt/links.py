@@ -74,10 +74,10 @@ def recorder_link(node, show: Callable[[str], None]) -> RecorderLink | None:
     return RecorderLink(send, show) if send is not None else None
 
 
-def task_link(node, on_change: Callable[[TaskStatus], None]) -> TaskLink | None:
+def task_link(node, on_news: Callable[[TaskStatus, str], None]) -> TaskLink | None:
     """The line to a body running a task, where the dataflow has one (`so101 teleop --task`)."""
     send = request_sender(node, "task_cmd")
-    return TaskLink(send, on_change) if send is not None else None
+    return TaskLink(send, on_news) if send is not None else None
 
 
 def word_sender(node, output_id: str) -> Callable[[str], None] | None:
