@@ -51,17 +51,18 @@ def run_demos(work_dir: Path, body: str, episodes: int, workers: int, image_size
 def stage_times(work_dir: Path, body: str, image_size: tuple[int, int], frames: int) -> dict:
     """Milliseconds per frame of each stage, in this process: an episode of the expert from seed SEED
     (its two videos encoded into `work_dir`, then removed)."""
-    from so101.bodies.camera import DEFAULT_CAMERA, WRIST_CAMERA
     from so101.bodies.registry import BODIES
+    from so101.bodies.task_cameras import TaskCameras
     from so101.dataset.stats import image_histogram
     from so101.dataset.video import StreamingEncoder
     from so101.runtime.lockstep import steps_per_frame
     from so101.tasks import CUBE_TO_BOX
     from so101.tasks.expert import Expert, planner_for
 
-    # Drawn as the lockstep body draws them: the cameras' meshes, no shadows.
-    sim = BODIES[body].body_class()(mode="direct", time_step_s=0.004, renders=True, light_pictures=True,
+    # Drawn as the lockstep body draws them: by the one renderer of every body (so101.bodies.task_cameras).
+    sim = BODIES[body].body_class()(mode="direct", time_step_s=0.004, renders=False,
                                     log=lambda line: None, task=CUBE_TO_BOX, seed=SEED)
+    cameras = TaskCameras(CUBE_TO_BOX, log=lambda line: None)
     planner = planner_for(CUBE_TO_BOX)
     import so101.bodies.mujoco_model  # noqa: F401 (the expert's first plan imports it: once a run, as nodes/expert.py does at its start)
     expert = Expert(planner, seed=SEED)
@@ -79,13 +80,14 @@ def stage_times(work_dir: Path, body: str, image_size: tuple[int, int], frames: 
             sim.set_targets_deg(targets)
             sim.step(steps)
             after_step = time.perf_counter()
-            pictures.extend(sim.render_rgb(*image_size, camera) for camera in (DEFAULT_CAMERA, WRIST_CAMERA))
+            pictures.extend(cameras.draw(sim.joint_angles_deg(), sim.scene.object_state(), *image_size))
             after_pictures = time.perf_counter()
             spent["physics"] += (after_state - started) + (after_step - after_expert)
             spent["expert"] += after_expert - after_state
             spent["pictures"] += after_pictures - after_step
     finally:
         sim.close()
+        cameras.close()
         planner.close()
     encoders = [StreamingEncoder(work_dir / f"stages-{camera}.mp4", DEFAULT_LOCKSTEP_FPS, *image_size,
                                  inspect=image_histogram) for camera in range(2)]

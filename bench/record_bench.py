@@ -24,13 +24,18 @@ from bench.common import PACED_PROBE_ENV, WARMUP_S, run_dataflow, realtime_figur
 from so101.bodies.node_loop import IMAGE_SIZE
 from so101.bodies.registry import BODIES
 from so101.dataset.features import ACTION_KEY, DEFAULT_FPS, IMAGE_KEY, STATE_KEY, to_lerobot
-from so101.dataset.video import new_pictures
+from so101.dataset.features import STATE_KEY
+from so101.dataset.video import new_while_moving, picture_changes
 from so101.runtime.dataflow import TICK_PERIOD_S, with_recorder, with_task
 from so101.stats import summary
 
 SAVED_EPISODE_S = 60.0
 RECORD_AT_STATE = 250  # bench/nodes/prober.py's: when it sends `record`
-NEW_PICTURE_LEVELS = 1.0  # mean difference, in 0-255 levels, between two decoded frames of different pictures
+# Two decoded frames differing by more than this mean, in 0-255 levels, hold different pictures: a picture
+# repeated (a camera that fell behind) decodes the same to the level, and the task's cameras' pictures of
+# an arm moved half a degree differ by 0.86 and more (tests/test_task_cameras.py). 1.0, used before,
+# counted a third of the wrist's new pictures as repeats.
+NEW_PICTURE_LEVELS = 0.05
 PICTURES = 20  # the in-process picture timing, and the distinct poses of the saved episode
 
 
@@ -74,7 +79,7 @@ def record_run(run_dir: Path, duration_s: float, body: str, image_size: tuple[in
         with_recorder(descriptor, node_id,
                       {"SO101_RECORD_DIR": str(dataset_dir), "SO101_RECORD_FPS": str(DEFAULT_FPS),
                        "SO101_RECORD_IMAGE_SIZE": size, "SO101_LANG": "en"},
-                      {"SO101_CAMERA_BODY": body, "SO101_RECORD_IMAGE_SIZE": size}, picture_hz=DEFAULT_FPS)
+                      {"SO101_RECORD_IMAGE_SIZE": size}, picture_hz=DEFAULT_FPS)
 
     record = run_dataflow(run_dir, duration_s + WARMUP_S, {"SO101_FAST_STEPS": "0"},
                           {**PACED_PROBE_ENV, "PROBE_RECORD_TASK": "so101 bench"}, body=body, extend=add_recorder,
@@ -88,10 +93,14 @@ def record_run(run_dir: Path, duration_s: float, body: str, image_size: tuple[in
         raise RuntimeError(f"the recorder saved no episode (see {run_dir / 'dora.log'})")
     episode = dataset.episodes[-1]
     recorded_s = episode.length / dataset.fps
-    new_per_s = {key: new_pictures(dataset.episode_images(episode.index, key), NEW_PICTURE_LEVELS) / recorded_s
-                 if recorded_s else 0.0 for key in dataset.video_keys}
+    changes = {key: picture_changes(dataset.episode_images(episode.index, key), NEW_PICTURE_LEVELS)
+               for key in dataset.video_keys}
+    states = dataset.episode_frames(episode.index)[STATE_KEY]
     return flow, {"frames": episode.length, "recorded_s": recorded_s, "wall_s": episode_wall_s,
-                  "new_pictures_per_s": new_per_s}
+                  "new_pictures_per_s": {key: sum(changed) / recorded_s if recorded_s else 0.0
+                                         for key, changed in changes.items()},
+                  # The share of the frames in which the arm moved that hold a new picture.
+                  "new_while_moving": {key: new_while_moving(changed, states) for key, changed in changes.items()}}
 
 
 def measure_recording(run_dir: Path, duration_s: float, body: str) -> dict:

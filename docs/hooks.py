@@ -124,7 +124,7 @@ def made_node(node_id: str) -> str:
 
     recorder_env = {"SO101_RECORD_DIR": "out/demos", "SO101_RECORD_FPS": "30", "SO101_RECORD_IMAGE_SIZE": "320x240",
                     "SO101_LANG": "en"}
-    camera_env = {"SO101_CAMERA_BODY": "pybullet", "SO101_RECORD_IMAGE_SIZE": "320x240"}
+    camera_env = {"SO101_RECORD_IMAGE_SIZE": "320x240"}
     recipes = {
         "recorder": ("so101 teleop --record out/demos --lang en",
                      lambda: dataflow.with_recorder(fresh(), body, recorder_env, camera_env, 30, root=root)),

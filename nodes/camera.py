@@ -1,10 +1,10 @@
 """camera: pictures of a simulated arm, drawn in a process of its own.
 
 Each `tick` (the picture rate's timer) draws the latest `joint_state` + `gripper_state` (and, with a
-task, its objects where the latest `object_state` puts them) with the body's own renderer (PyBullet's
-or MuJoCo's, SO101_CAMERA_BODY) and publishes it on `image` (uint8 RGB, metadata width, height,
-encoding "rgb8"), when something moved since the last one; with a task, the wrist camera's
-picture too, on `wrist_image`.
+task, its objects where the latest `object_state` puts them) with the one renderer every simulated
+body's pictures come from (so101.bodies.task_cameras: MuJoCo's, whichever body simulates) and
+publishes it on `image` (uint8 RGB, metadata width, height, encoding "rgb8"), when something moved
+since the last one; with a task, the wrist camera's picture too, on `wrist_image`.
 A picture of this arm takes a CPU renderer tens of milliseconds (`so101 bench` measures it):
 drawn inside the body's physics loop it would hold the loop back, so it is drawn here, below the
 body's priority. The recorder takes the latest picture at each of its frames.
@@ -30,12 +30,12 @@ import pyarrow as pa  # noqa: E402
 from dora import Node  # noqa: E402
 
 from so101.assets import ModelFilesError  # noqa: E402
-from so101.bodies.camera import WRIST_CAMERA  # noqa: E402
+from so101.bodies.task_cameras import TaskCameras  # noqa: E402
 from so101.dataset.features import DEFAULT_FPS  # noqa: E402
 from so101.dataset.settings import CameraSettings  # noqa: E402
 from so101.runtime.display import DisplayError  # noqa: E402
-from so101.robot import NUM_ARM_JOINTS  # noqa: E402
-from so101.runtime.dataflow import TICK_PERIOD_S, timer_period_s  # noqa: E402
+from so101.robot import HOME_POSE_DEG, NUM_ARM_JOINTS  # noqa: E402
+from so101.runtime.dataflow import timer_period_s  # noqa: E402
 from so101.runtime.logs import send_diagnostics_to  # noqa: E402
 from so101.runtime.node_events import cannot_start, inputs_until_stop  # noqa: E402
 from so101.runtime.processes import yield_cpu_to_the_body  # noqa: E402
@@ -65,15 +65,10 @@ def main() -> int:
     send_diagnostics_to("stdout")
     try:
         settings = CameraSettings.from_environ(os.environ)
-        if settings.simulator == "mujoco":
-            from so101.bodies.mujoco_sim import SO101MuJoCo as Simulator
-        else:
-            from so101.bodies.pybullet_sim import SO101Sim as Simulator  # type: ignore[assignment]
-        sim = Simulator(mode="direct", time_step_s=TICK_PERIOD_S, assets_dir=settings.assets_dir,
-                        log=lambda line: None, task=task_named(settings.task) if settings.task else None,
-                        light_pictures=bool(settings.task))  # a task's: two cameras to keep up; without, as before
+        cameras = TaskCameras(task_named(settings.task) if settings.task else None, settings.assets_dir,
+                              log=lambda line: None)
         width, height = settings.image_size or (0, 0)
-        sim.render_rgb(width, height)  # a renderer that cannot work says so now, in one line
+        cameras.draw(HOME_POSE_DEG, [], width, height)  # a renderer that cannot work says so now, in one line
     except (ValueError, ModelFilesError, DisplayError, RuntimeError) as error:
         return cannot_start(error, NODE_ID)
     yield_cpu_to_the_body()
@@ -84,7 +79,7 @@ def main() -> int:
     drawn_objects: list[float] = []
     node = Node()
     period_s = timer_period_s(node.node_config()) or 1.0 / DEFAULT_FPS  # a tick that is no timer: the usual rate
-    with inputs_until_stop(node, close=sim.close) as inputs:
+    with inputs_until_stop(node, close=cameras.close) as inputs:
         for event in inputs:
             if event["id"] == "joint_state":
                 values = event["value"].to_pylist()
@@ -104,14 +99,10 @@ def main() -> int:
                 if (drawn_deg is not None and np.all(np.abs(pose_deg - drawn_deg) < REDRAW_DEG)
                         and not objects_moved(objects, drawn_objects)):
                     continue
-                sim.show_pose_deg(pose_deg.tolist())
-                if sim.scene is not None and objects:
-                    sim.scene.show_object_state(objects)
-                rgb = sim.render_rgb(width, height)
+                rgb, wrist = cameras.draw(pose_deg.tolist(), objects, width, height)
                 drawn_deg, drawn_objects = pose_deg, objects
                 node.send_output("image", pa.array(rgb.ravel()), {"width": width, "height": height, "encoding": "rgb8"})
-                if sim.scene is not None:
-                    wrist = sim.render_rgb(width, height, WRIST_CAMERA)
+                if wrist is not None:
                     node.send_output("wrist_image", pa.array(wrist.ravel()),
                                      {"width": width, "height": height, "encoding": "rgb8"})
     return 0

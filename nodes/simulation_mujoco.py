@@ -16,6 +16,7 @@ from dora import Node
 from so101.assets import ModelFilesError
 from so101.bodies.mujoco_sim import SO101MuJoCo
 from so101.bodies.node_loop import announce, check_pictures, run_body_node
+from so101.bodies.task_cameras import lockstep_cameras
 from so101.bodies.settings import MuJoCoSettings, NodeSettings
 from so101.runtime.display import DisplayError
 from so101.runtime.logs import send_diagnostics_to
@@ -34,11 +35,12 @@ def main() -> int:
     try:
         sim = SO101MuJoCo.from_settings(mujoco, settings, task, log=announce)
         check_pictures(sim, settings)
+        cameras = lockstep_cameras(task, settings, mujoco.assets_dir, log=announce)
     except (ModelFilesError, DisplayError, ValueError) as error:
         return cannot_start(error)
     damping_n_m_s = sim.joint_damping_n_m_s()
     return run_body_node(
-        sim, Node(), settings, identity="MuJoCo so101_new_calib.xml",
+        sim, Node(), settings, cameras=cameras, identity="MuJoCo so101_new_calib.xml",
         detail={"zh": f"关节阻尼 {damping_n_m_s:g} N·m·s/rad", "en": f"joint damping {damping_n_m_s:g} N·m·s/rad"},
     )
 

@@ -397,19 +397,25 @@ def test_the_saved_camera_results_show_each_cameras_rates_and_the_targets(name, 
         alone = result["cameras"]["alone"][key]
         beside = result["cameras"]["beside_physics"]["new_pictures_per_s"][key]
         assert f"{alone['pictures_per_s']:.1f} | {beside:.1f}" in shown, camera
-        assert f"camera: new pictures per s while recording" in shown
+        share = result["cameras"]["beside_physics"]["new_while_moving"][key]
+        assert re.search(rf"new pictures while the arm moves \(share of frames\) +{share:.0%}$", shown, re.M), camera
+        assert f"{camera} camera: new pictures while the arm moves" in shown
+    assert re.search(rf"^pictures drawn by +{re.escape(result['cameras']['alone']['drawn_by'])}$", shown, re.M)
     assert f"{result['cameras']['beside_physics']['joint_state_per_s']:.2f}" in shown
     # Each renderer option with its time and its picture's difference from the camera's own, the first's being 0.
     renderers = result["cameras"]["renderers"]
     assert list(renderers) == list(camera_bench.RENDERERS[result["body"]])
     for option, figures in renderers.items():
+        if "skipped" in figures:  # an option this machine lacks (OSMesa) is named, with why
+            assert re.search(rf"^  {re.escape(option)} +not measured: {re.escape(figures['skipped'])}$", shown, re.M)
+            continue
         assert re.search(rf"^  {re.escape(option)} +{figures['ms']['p50']:.1f} \| {figures['ms']['p99']:.1f} +"
                          rf"{figures['differs_from_camera']:.1f}$", shown, re.M), option
     assert renderers[list(renderers)[0]]["differs_from_camera"] == 0
     # Where the CPU went while recording: each process of the dataflow, in cores.
     cores = result["cameras"]["beside_physics"]["cpu_cores"]
     assert {"camera", "recorder", "dora run"} <= set(cores)
-    assert 0.5 * result["machine"]["cores"] < sum(cores.values()) <= 1.02 * result["machine"]["cores"]
+    assert 0 < cores["camera"] and sum(cores.values()) <= 1.02 * result["machine"]["cores"]
     assert re.search(rf"^    camera +{cores['camera']:.2f}$", shown, re.M)
 
 

@@ -370,7 +370,7 @@ def test_tracking_error_line():
 # -- the dataflows ----------------------------------------------------------------------------------
 
 def test_record_adds_the_recorder_and_the_camera_and_wires_the_prompt():
-    descriptor = with_recorder(dataflow_copy({}), "simulation", {"SO101_RECORD_DIR": "/d"}, {"SO101_CAMERA_BODY": "pybullet"}, 30)
+    descriptor = with_recorder(dataflow_copy({}), "simulation", {"SO101_RECORD_DIR": "/d"}, {"SO101_RECORD_IMAGE_SIZE": "320x240"}, 30)
     nodes = {node["id"]: node for node in descriptor["nodes"]}
     assert "joint_target" in nodes["simulation"]["outputs"]
     assert nodes["keyboard_control"]["outputs"] == ["joint_cmd", "record_cmd"]
@@ -384,7 +384,7 @@ def test_record_adds_the_recorder_and_the_camera_and_wires_the_prompt():
 def test_the_web_view_reads_the_camera_and_the_recorders_status_where_there_are_some():
     bare = {node["id"]: node for node in with_web_view(dataflow_copy({}), "simulation", {})["nodes"]}
     assert set(bare["web_view"]["inputs"]) == {"joint_state", "gripper_state"}
-    recording = with_recorder(dataflow_copy({}), "simulation", {}, {"SO101_CAMERA_BODY": "pybullet"}, 30)
+    recording = with_recorder(dataflow_copy({}), "simulation", {}, {"SO101_RECORD_IMAGE_SIZE": "320x240"}, 30)
     nodes = {node["id"]: node for node in with_web_view(recording, "simulation", {"SO101_WEB_PORT": "8200"})["nodes"]}
     inputs = nodes["web_view"]["inputs"]
     assert {name: spec["source"] for name, spec in inputs.items()} == {
@@ -488,14 +488,14 @@ def test_record_with_a_task_gives_the_recorder_the_bodys_objects_and_success():
     from so101.runtime.dataflow import with_task
 
     descriptor = with_recorder(with_task(dataflow_copy({}), "simulation", "cube_to_box", 0), "simulation",
-                               {"SO101_RECORD_DIR": "/d"}, {"SO101_CAMERA_BODY": "mujoco"}, 30)
+                               {"SO101_RECORD_DIR": "/d"}, {"SO101_RECORD_IMAGE_SIZE": "96x72"}, 30)
     nodes = {node["id"]: node for node in descriptor["nodes"]}
     recorder, camera = nodes["recorder"], nodes["camera"]
     assert recorder["inputs"]["object_state"]["source"] == "simulation/object_state"
     assert recorder["inputs"]["task_status"]["source"] == "simulation/task_status"
     assert recorder["env"] == {"SO101_RECORD_DIR": "/d", "SO101_TASK": "cube_to_box"}
     assert camera["inputs"]["object_state"]["source"] == "simulation/object_state"
-    assert camera["env"] == {"SO101_CAMERA_BODY": "mujoco", "SO101_TASK": "cube_to_box"}
+    assert camera["env"] == {"SO101_RECORD_IMAGE_SIZE": "96x72", "SO101_TASK": "cube_to_box"}
     assert camera["outputs"] == ["image", "wrist_image"]
     assert recorder["inputs"]["wrist_image"]["source"] == "camera/wrist_image"
 

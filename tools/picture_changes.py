@@ -26,8 +26,9 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="tools/picture_changes.py", description=__doc__.splitlines()[0])
     parser.add_argument("dataset", type=Path, help="a LeRobot v3.0 dataset's folder")
     parser.add_argument("--episode", type=int, default=0, help="the episode (default 0)")
-    parser.add_argument("--threshold", type=float, default=0.5,
-                        help="mean absolute difference, in grey levels, that makes a picture new (default 0.5)")
+    parser.add_argument("--threshold", type=float, default=0.05,
+                        help="mean absolute difference, in grey levels, that makes a picture new (default 0.05: a "
+                             "repeated picture decodes the same to the level; bench/record_bench.py says why)")
     args = parser.parse_args(argv)
     try:
         dataset = Dataset.open(args.dataset)

@@ -107,9 +107,8 @@ class SO101MuJoCo:
         visual meshes and the offscreen renderer only when the node publishes pictures, and the tick's step."""
         return cls(
             mode=node.display_mode, time_step_s=TICK_PERIOD_S, assets_dir=settings.assets_dir, log=log,
-            joint_damping_n_m_s=settings.joint_damping_n_m_s, renders=node.image_hz > 0 or node.lockstep_pictures is not None,
+            joint_damping_n_m_s=settings.joint_damping_n_m_s, renders=node.image_hz > 0,
             task=task, seed=node.seed,
-            light_pictures=node.lockstep_pictures is not None,  # a task's cameras, as the camera node draws them
         )
 
     # -- control ---------------------------------------------------------------------
@@ -204,6 +203,10 @@ class SO101MuJoCo:
         view.elevation = camera.pitch_deg
         self._renderer.update_scene(self.data, view)
         return np.array(self._renderer.render(), dtype=np.uint8)
+
+    def has_drawn(self) -> bool:
+        """Whether render_rgb has drawn (its OpenGL context is then the one current in this thread)."""
+        return self._renderer is not None
 
     # -- life cycle ------------------------------------------------------------------
     def drawn_scene(self) -> Any:

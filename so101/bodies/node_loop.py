@@ -37,7 +37,6 @@ from typing import TYPE_CHECKING, Iterable, Iterator, Mapping, Protocol, cast
 import numpy as np
 import pyarrow as pa
 
-from so101.bodies.camera import DEFAULT_CAMERA, WRIST_CAMERA
 from so101.bodies.protocol import Body, BodyFailed, TaskScene
 from so101.bodies.settings import NodeSettings
 from so101.joint_cmd import decode_joint_cmd
@@ -49,6 +48,8 @@ from so101.task_cmd import parse_reset
 
 if TYPE_CHECKING:
     from dora import Node
+
+    from so101.bodies.task_cameras import TaskCameras
 
 IMAGE_SIZE = (320, 240)
 # `joint_target` goes out again this often even when unchanged, for a node that joined late.
@@ -170,9 +171,10 @@ class TaskReport:
 
 
 def run_body_node(body: Body, node: Node, settings: NodeSettings, identity: str, detail: Mapping[str, str],
-                  node_id: str = "simulation") -> int:
-    """The event loop, until STOP; closes `body`. `identity` and `detail[lang]` go into the
-    "loaded" log line (`so101 teleop` waits for it). Returns the node's exit code."""
+                  node_id: str = "simulation", cameras: TaskCameras | None = None) -> int:
+    """The event loop, until STOP; closes `body` (and `cameras`). `identity` and `detail[lang]` go into the
+    "loaded" log line (`so101 teleop` waits for it). `cameras` draw a lockstep frame's pictures
+    (SO101_LOCKSTEP_PICTURES: so101.bodies.task_cameras.lockstep_cameras). Returns the node's exit code."""
     tag = TAGS[node_id][settings.lang]
     text = {key: line.replace("{tag}", tag) for key, line in TEXT[settings.lang].items()}
     fast_steps = settings.fast_steps
@@ -221,8 +223,6 @@ def run_body_node(body: Body, node: Node, settings: NodeSettings, identity: str,
     # In lockstep, an episode over (success, or its last frame) holds still until a reset: every
     # episode then ends at the same frame, however late the runner's reset comes.
     episode_over = False
-    pictures = [(output, camera) for output, camera in (("image", DEFAULT_CAMERA), ("wrist_image", WRIST_CAMERA))
-                if settings.lockstep_pictures and output in outputs]
 
     def publish(tag: FrameTag | None = None) -> None:
         """joint_state and gripper_state, the task's outputs, and in lockstep the frame's pictures."""
@@ -236,15 +236,18 @@ def run_body_node(body: Body, node: Node, settings: NodeSettings, identity: str,
         success = report.tick(node, body.steps, tag) if report is not None else False
         if tag is not None and settings.lockstep_episode_frames:
             episode_over = success or tag.frame >= settings.lockstep_episode_frames
-        if tag is not None and settings.lockstep_pictures:
+        if tag is not None and settings.lockstep_pictures and cameras is not None and angles_deg is not None:
             width, height = settings.lockstep_pictures
-            for output, camera in pictures:
-                rgb = body.render_rgb(width, height, camera)
-                node.send_output(output, pa.array(rgb.ravel()),
-                                 {"width": width, "height": height, "encoding": "rgb8", **tags})
+            front, wrist = cameras.draw(angles_deg, scene.object_state() if scene is not None else [], width, height)
+            for output, rgb in (("image", front), ("wrist_image", wrist)):
+                if rgb is not None and output in outputs:
+                    node.send_output(output, pa.array(rgb.ravel()),
+                                     {"width": width, "height": height, "encoding": "rgb8", **tags})
 
     def finish() -> None:  # however the loop ends: the window, the bus let go; the tick log kept
         body.close()
+        if cameras is not None:
+            cameras.close()
         if tick_log is not None:
             with open(settings.tick_log_path, "wb") as tick_log_file:
                 tick_log.tofile(tick_log_file)

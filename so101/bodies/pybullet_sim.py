@@ -262,9 +262,8 @@ class SO101Sim:
         return cls(
             mode=node.display_mode, time_step_s=TICK_PERIOD_S, assets_dir=settings.assets_dir, log=log,
             control_mode=settings.control_mode, servo_damping_ratio=settings.servo_damping_ratio,
-            renders=node.image_hz > 0 or node.lockstep_pictures is not None,
+            renders=node.image_hz > 0,  # a lockstep frame's pictures are so101.bodies.task_cameras'
             task=task, seed=node.seed,
-            light_pictures=node.lockstep_pictures is not None,  # a task's cameras, as the camera node draws them
         )
 
     # -- control ---------------------------------------------------------------------

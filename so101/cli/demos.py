@@ -17,7 +17,7 @@ import argparse
 import time
 from pathlib import Path
 
-from so101.runtime.argtypes import image_size
+from so101.runtime.argtypes import add_camera_size_option
 from so101.launch.lockstep import add_common_arguments, cluster_place, expert_driver, fail, flows_for, log_place, refuse_real, run_flows, work_folder
 from so101.dataset.settings import DEFAULT_IMAGE_SIZE
 from so101.runtime.lockstep import DEFAULT_LOCKSTEP_FPS
@@ -34,8 +34,7 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
     parser.add_argument("--keep", choices=("success", "all"), default="success",
                         help="which episodes are written (default success: failed ones are counted, not written)")
     parser.add_argument("--no-video", action="store_true", help="leave the cameras out (a state-only dataset)")
-    parser.add_argument("--image-size", type=image_size, default=DEFAULT_IMAGE_SIZE, metavar="WxH",
-                        help=f"the cameras' picture size (default {DEFAULT_IMAGE_SIZE})")
+    add_camera_size_option(parser, DEFAULT_IMAGE_SIZE, "the cameras' picture size")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -18,7 +18,7 @@ import argparse
 from pathlib import Path
 
 from so101.policy.settings import torch_device
-from so101.runtime.argtypes import image_size
+from so101.runtime.argtypes import add_camera_size_option
 from so101.launch.lockstep import (
     Driver, add_common_arguments, cluster_place, expert_driver, fail, flows_for, log_place, refuse_real, run_flows,
     work_folder,
@@ -44,8 +44,8 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
     add_common_arguments(parser)
     parser.add_argument("--video", type=Path, default=None, metavar="DIR",
                         help="keep each episode's front camera as an mp4 in DIR (drawn every frame: slower)")
-    parser.add_argument("--image-size", type=image_size, default=DEFAULT_IMAGE_SIZE, metavar="WxH",
-                        help=f"--video's picture size (default {DEFAULT_IMAGE_SIZE})")
+    add_camera_size_option(parser, DEFAULT_IMAGE_SIZE, "--video's picture size, and a policy that sees gets its cameras' "
+                                                       "pictures at its own size")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -37,7 +37,7 @@ from so101.launch.beside_prompt import (
     task_problem,
 )
 from so101.policy.settings import torch_device
-from so101.runtime.argtypes import add_language_option, image_size, whole_number
+from so101.runtime.argtypes import add_camera_size_option, add_language_option, whole_number
 from so101.runtime.dataflow import (
     LEADER_READY_MARKS, LOADED_MARKS, POLICY_READY_MARKS, PROMPT_NODE_FILE, WEB_VIEW_MARKS, dataflow_copy,
     with_expert, with_leader, with_policy, with_recorder, with_task,
@@ -58,11 +58,8 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
         "--fps", type=whole_number(1, 1000), default=DEFAULT_FPS, metavar="N",
         help=f"--record: frames per second (default {DEFAULT_FPS}, LeRobot's)",
     )
-    parser.add_argument(
-        "--image-size", type=image_size, default=DEFAULT_IMAGE_SIZE, metavar="WxH",
-        help=f"--record on a simulation: each camera's pictures, stored as video (default {DEFAULT_IMAGE_SIZE}; "
-        "640x480 draws each picture about twice as long: `so101 bench --cameras --image-size 640x480`)",
-    )
+    add_camera_size_option(parser, DEFAULT_IMAGE_SIZE, "--record on a simulation: each camera's pictures, stored as "
+                                                       "video; `so101 bench --cameras --camera-size WxH` says what a size costs")
     parser.add_argument(
         "--leader", metavar="PORT", default=None,
         help="an SO-101 leader arm on PORT drives the body (with --leader-calibration; `so101 fake-arm` emulates one); "
@@ -188,6 +185,6 @@ def add_recorder(descriptor: dict, body: BodyKind, dataset_dir: Path, fps: int, 
     size_text = f"{pictures[0]}x{pictures[1]}" if pictures else ""
     recorder_env = {"SO101_RECORD_DIR": str(dataset_dir), "SO101_RECORD_FPS": str(fps),
                     "SO101_RECORD_IMAGE_SIZE": size_text, "SO101_LANG": lang}
-    camera_env = {"SO101_CAMERA_BODY": body.name, "SO101_RECORD_IMAGE_SIZE": size_text} if pictures else None
+    camera_env = {"SO101_RECORD_IMAGE_SIZE": size_text} if pictures else None
     with_recorder(descriptor, body.node_id, recorder_env, camera_env, picture_hz=fps)
     return None

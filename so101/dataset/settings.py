@@ -13,10 +13,9 @@ from so101.tasks.settings import read_task
 from so101.dataset.features import DEFAULT_FPS
 from so101.lang import DEFAULT_LANGUAGE, ENV_VAR as LANG_ENV_VAR
 from so101.runtime.settings import (
-    EnvironSettings, Setting, read_choice, read_file_path, read_image_size, read_optional_path, read_whole_number, setting,
+    EnvironSettings, Setting, read_file_path, read_image_size, read_optional_path, read_whole_number, setting,
 )
 
-SIMULATORS = ("pybullet", "mujoco")
 DEFAULT_IMAGE_SIZE = "320x240"
 
 
@@ -49,8 +48,6 @@ class RecorderSettings(EnvironSettings):
 class CameraSettings(EnvironSettings):
     """nodes/camera.py."""
 
-    simulator: str = setting("SO101_CAMERA_BODY", "pybullet", "whose renderer draws the arm: `pybullet` or `mujoco`",
-                             read_choice(SIMULATORS))
     image_size: tuple[int, int] | None = setting(
         "SO101_RECORD_IMAGE_SIZE", DEFAULT_IMAGE_SIZE, "WIDTHxHEIGHT of the pictures", read_image_size,
         required="to WIDTHxHEIGHT (e.g. 320x240)")

@@ -282,14 +282,26 @@ def decode(path: Path, from_s: float, to_s: float, fps: int) -> Iterator[Image]:
             yield cast(Image, frame.to_ndarray(format="rgb24"))
 
 
-def new_pictures(pictures: Iterable[Image], threshold_levels: float) -> int:
-    """How many of a video's decoded `pictures` differ from the one before by more than
-    `threshold_levels` grey levels on average: a camera that fell behind repeats its last picture,
-    and a repeat decodes a little differently each time (lossy video), a new picture by more."""
-    count, before = 0, None
+def picture_changes(pictures: Iterable[Image], threshold_levels: float) -> list[bool]:
+    """For each of a video's decoded `pictures`, whether it differs from the one before by more than
+    `threshold_levels` grey levels on average (the first: False): a camera that fell behind repeats its
+    last picture, and a repeat decodes a little differently each time (lossy video), a new picture by more."""
+    changes, before = [], None
     for picture in pictures:
         now = picture.astype(np.int16)
-        if before is not None and float(np.abs(now - before).mean()) > threshold_levels:
-            count += 1
+        changes.append(before is not None and float(np.abs(now - before).mean()) > threshold_levels)
         before = now
-    return count
+    return changes
+
+
+def new_pictures(pictures: Iterable[Image], threshold_levels: float) -> int:
+    """How many of a video's decoded `pictures` are new (`picture_changes`)."""
+    return sum(picture_changes(pictures, threshold_levels))
+
+
+def new_while_moving(changes: list[bool], states: np.ndarray, still_deg: float = 0.01) -> float:
+    """The share of the frames in which the arm moved (a joint of `states`, one row a frame, changed by
+    more than `still_deg` since the frame before) whose picture is new (`changes`); 0 where it never moved."""
+    moved = np.any(np.abs(np.diff(states, axis=0)) > still_deg, axis=1)
+    new = np.asarray(changes[1:len(moved) + 1], dtype=bool)
+    return float(np.sum(new & moved[:len(new)]) / np.sum(moved)) if np.any(moved) else 0.0

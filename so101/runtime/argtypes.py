@@ -67,3 +67,9 @@ def image_size(text: str) -> tuple[int, int]:
         raise argparse.ArgumentTypeError(f"{text!r} is not WIDTHxHEIGHT in even pixels from 16 to 4096, e.g. 640x480")
     return size
 
+
+def add_camera_size_option(parser: argparse.ArgumentParser, default: str, purpose: str) -> None:
+    """--camera-size WxH (and its older name --image-size): the cameras' picture size, as `image_size`."""
+    parser.add_argument("--camera-size", "--image-size", dest="image_size", type=image_size, default=default,
+                        metavar="WxH", help=f"{purpose} (default {default}; 96x72 and up: small pictures train a "
+                                            "policy that sees on a CPU)")

@@ -1,0 +1,90 @@
+"""One renderer for every simulated body (so101.bodies.task_cameras): the same state, the same picture,
+whichever body simulated it."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from so101.bodies.registry import BODIES
+from so101.tasks import CUBE_TO_BOX
+
+pytestmark = pytest.mark.slow
+
+SIZE = (160, 120)
+
+
+@pytest.fixture(scope="module")
+def cameras():
+    from so101.bodies.task_cameras import TaskCameras
+
+    with TaskCameras(CUBE_TO_BOX, log=lambda line: None) as made:
+        yield made
+
+
+def first_frame(body_name: str, seed: int, cameras) -> tuple[np.ndarray, np.ndarray]:
+    """The pictures of an episode's first frame, as a body running `seed` publishes its state."""
+    with BODIES[body_name].body_class()(mode="direct", renders=False, log=lambda line: None, task=CUBE_TO_BOX,
+                                        seed=seed) as body:
+        body.step()
+        front, wrist = cameras.draw(body.joint_angles_deg(), body.scene.object_state(), *SIZE)
+    assert front.shape == wrist.shape == (SIZE[1], SIZE[0], 3) and front.dtype == np.uint8
+    return front, wrist
+
+
+def mean_difference(first: np.ndarray, second: np.ndarray) -> float:
+    return float(np.mean(np.abs(first.astype(np.int16) - second.astype(np.int16))))
+
+
+@pytest.mark.parametrize("seed", [0, 7, 12])
+def test_an_episodes_first_frame_looks_the_same_on_both_simulators(cameras, seed):
+    pybullet, mujoco = first_frame("pybullet", seed, cameras), first_frame("mujoco", seed, cameras)
+    for pybullet_picture, mujoco_picture in zip(pybullet, mujoco):
+        assert mean_difference(pybullet_picture, mujoco_picture) <= 3.0
+    # Not the same picture whatever the state: the next seed's cube lies elsewhere in the front picture
+    # (the wrist camera, at home, looks past the floor's cube).
+    elsewhere = first_frame("mujoco", seed + 1, cameras)
+    assert mean_difference(mujoco[0], elsewhere[0]) > 0.2
+
+
+def test_the_pictures_follow_the_pose_and_the_objects(cameras):
+    from so101.robot import HOME_POSE_DEG
+
+    objects = [0.2, -0.05, 0.0125, 0.0, 0.0, 0.0, 1.0, 0.16, 0.19, 0.0]
+    home_front, home_wrist = cameras.draw(HOME_POSE_DEG, objects, *SIZE)
+    turned_front, turned_wrist = cameras.draw([40.0, -30.0, 30.0, 60.0, 0.0, 30.0], objects, *SIZE)
+    assert mean_difference(home_front, turned_front) > 2.0 and mean_difference(home_wrist, turned_wrist) > 2.0
+    again_front, _ = cameras.draw(HOME_POSE_DEG, objects, *SIZE)
+    assert np.array_equal(again_front, home_front)  # drawn from the state alone, nothing left over
+
+
+def test_without_a_task_there_is_no_wrist_picture():
+    from so101.bodies.task_cameras import TaskCameras
+    from so101.robot import HOME_POSE_DEG
+
+    with TaskCameras(None, log=lambda line: None) as arm_alone:
+        front, wrist = arm_alone.draw(HOME_POSE_DEG, [], *SIZE)
+    assert front.shape == (SIZE[1], SIZE[0], 3) and wrist is None
+
+
+def test_a_repeated_picture_decodes_the_same_and_a_half_degree_move_does_not(cameras, tmp_path):
+    """What `so101 bench --cameras` counts as a new picture (bench/record_bench.py's NEW_PICTURE_LEVELS):
+    a repeat decodes the same to the level; the arm moved half a degree, by well over the threshold."""
+    import av
+
+    from bench.record_bench import NEW_PICTURE_LEVELS
+    from so101.dataset.video import StreamingEncoder, picture_changes
+
+    objects = [0.2, -0.05, 0.0125, 0.0, 0.0, 0.0, 1.0, 0.16, 0.19, 0.0]
+    drawn = [cameras.draw([0.5 * step, -0.4 * step, 0.3 * step, 10.0, 1.0 * step, 30.0], objects, *SIZE)
+             for step in range(10)]
+    for camera in (0, 1):
+        path = tmp_path / f"camera{camera}.mp4"
+        encoder = StreamingEncoder(path, 30, *SIZE)
+        for pictures in drawn:
+            encoder.add(pictures[camera])
+            encoder.add(pictures[camera])  # the camera fell behind: the recorder repeats its last picture
+        encoder.finish()
+        with av.open(str(path)) as video:
+            decoded = [frame.to_ndarray(format="rgb24") for frame in video.decode(video=0)]
+        assert picture_changes(decoded, NEW_PICTURE_LEVELS) == [False, False] + [True, False] * 9
