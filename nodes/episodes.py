@@ -52,6 +52,7 @@ from so101.dataset.writer import DatasetWriter  # noqa: E402
 from so101.robot import HOME_POSE_DEG  # noqa: E402
 from so101.runtime.lockstep import AGAIN_WORD, NOT_WRITTEN_KEY, FrameParts, FrameTag, frame_tag  # noqa: E402
 from so101.runtime.logs import send_diagnostics_to  # noqa: E402
+from so101.bodies.looks import looks_metadata  # noqa: E402
 from so101.tasks import task_named  # noqa: E402
 from so101.tasks.episodes import EpisodeClock, Outcome, seeds_for  # noqa: E402
 from so101.tasks.settings import EpisodeSettings  # noqa: E402
@@ -118,6 +119,8 @@ def main() -> int:
         recorder = writer.start_episode(task.instruction) if writer is not None else None
         if recorder is not None:
             recorder.seed = seeds[index]
+            if settings.image_size:  # the pictures' looks, by episode: a dataset says what it showed
+                recorder.looks = looks_metadata(settings.looks, seeds[index])
         if settings.video_dir is not None and settings.image_size:
             width, height = settings.image_size
             video = StreamingEncoder(settings.video_dir / f"seed_{seeds[index]}.mp4",

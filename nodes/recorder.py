@@ -73,7 +73,7 @@ def main() -> int:
                                        "(empty it to record without video)"), NODE_ID)
     reports: queue.Queue[str] = queue.Queue()  # lines from the save thread, sent from this one
     recording = Recording(writer, str(settings.root), settings.fps, settings.lang,
-                          needs_image=settings.image_size is not None, say=reports.put, task=task)
+                          needs_image=settings.image_size is not None, say=reports.put, task=task, looks=settings.looks)
 
     def send_status(lines: list[str], reply_to: str | None = None) -> None:
         for line in lines:
@@ -100,7 +100,8 @@ def main() -> int:
                 elif name == "task_status":
                     values = event["value"].to_pylist()
                     if len(values) == 1:
-                        recording.on_task_status(bool(values[0]))
+                        seed = (event["metadata"] or {}).get("seed")
+                        recording.on_task_status(bool(values[0]), seed if isinstance(seed, int) else None)
                 elif name == "image" and settings.image_size:
                     rgb = picture(event, settings.image_size)
                     if rgb is not None:

@@ -106,13 +106,18 @@ def test_eval_scores_the_expert_and_an_idle_arm_scores_nothing(tmp_path):
 
 
 def test_demos_with_video_append_to_the_folder_and_every_episode_reads(tmp_path):
+    from so101.bodies.looks import looks_metadata
+    from so101.dataset.layout import LOOKS_KEY
+
     root = tmp_path / "demos"
-    for seed in ("0", "1"):
+    for seed, looks in (("0", "fixed"), ("1", "varied")):  # --image-size is --camera-size's older name
         result = so101("demos", str(root), "--task", "cube_to_box", "--episodes", "1", "--seed", seed,
-                       "--image-size", "160x120")
+                       "--camera-size" if looks == "varied" else "--image-size", "160x120", "--looks", looks)
         assert result.returncode == 0, result.stdout + result.stderr
     dataset = Dataset.open(root)
     assert len(dataset.episodes) == 2
+    # A dataset says what its pictures showed, by episode.
+    assert dataset.info[LOOKS_KEY] == {"0": {"looks": "fixed"}, "1": looks_metadata("varied", 1)}
     for index in range(2):
         frames = dataset.episode_frames(index)
         front = list(dataset.episode_images(index, "observation.images.front"))
@@ -127,7 +132,7 @@ def test_two_workers_write_the_dataset_one_worker_writes_byte_for_byte(tmp_path)
     for workers in ("1", "2"):  # two workers: seeds 30 and 31, then 32
         result = so101("demos", str(tmp_path / workers), "--task", "cube_to_box", "--episodes", "3", "--seed", "30",
                        "--body", "mujoco", "--noise", "1", "--image-size", "64x48", "--workers", workers,
-                       "--keep", "all", "--time-limit", "12")
+                       "--keep", "all", "--time-limit", "12", "--looks", "varied")
         assert result.returncode == 0, result.stdout + result.stderr
         outputs[workers] = result.stdout
     assert episode_lines(outputs["2"]) == episode_lines(outputs["1"])
@@ -137,7 +142,12 @@ def test_two_workers_write_the_dataset_one_worker_writes_byte_for_byte(tmp_path)
     assert files["2"] == files["1"] and Path("videos/observation.images.wrist/chunk-000/file-000.mp4") in files["1"]
     for name in files["1"]:
         assert (tmp_path / "2" / name).read_bytes() == (tmp_path / "1" / name).read_bytes(), name
-    assert len(Dataset.open(tmp_path / "2").episodes) == 3
+    merged = Dataset.open(tmp_path / "2")
+    assert len(merged.episodes) == 3
+    # Each worker's episodes keep their looks through the merge: seeds 30, 31, 32 in episode order.
+    from so101.dataset.layout import LOOKS_KEY
+
+    assert [merged.info[LOOKS_KEY][str(index)]["seed"] for index in range(3)] == [30, 31, 32]
 
 
 def test_on_a_cluster_the_workers_spread_over_its_machines_and_the_dataset_is_the_same(tmp_path):

@@ -495,6 +495,7 @@ def test_record_with_a_task_gives_the_recorder_the_bodys_objects_and_success():
     assert recorder["inputs"]["task_status"]["source"] == "simulation/task_status"
     assert recorder["env"] == {"SO101_RECORD_DIR": "/d", "SO101_TASK": "cube_to_box"}
     assert camera["inputs"]["object_state"]["source"] == "simulation/object_state"
+    assert camera["inputs"]["task_status"]["source"] == "simulation/task_status"  # its seed: the looks'
     assert camera["env"] == {"SO101_RECORD_IMAGE_SIZE": "96x72", "SO101_TASK": "cube_to_box"}
     assert camera["outputs"] == ["image", "wrist_image"]
     assert recorder["inputs"]["wrist_image"]["source"] == "camera/wrist_image"

@@ -51,7 +51,7 @@ def test_the_dataflow_file_sets_only_declared_settings(body):
 def test_an_empty_environment_gives_the_declared_defaults():
     assert NodeSettings.from_environ({}) == NodeSettings(
         display_mode="auto", image_hz=0.0, fast_steps=0, tick_log_path="", lang="zh", task="", seed=0,
-        lockstep_fps=0, lockstep_pictures=None, lockstep_episode_frames=0)
+        lockstep_fps=0, lockstep_pictures=None, looks="fixed", lockstep_episode_frames=0)
     assert PyBulletSettings.from_environ({}) == PyBulletSettings(
         assets_dir=None, control_mode="position", servo_damping_ratio=0.7)
     assert MuJoCoSettings.from_environ({}) == MuJoCoSettings(assets_dir=None, joint_damping_n_m_s=None)
@@ -74,6 +74,7 @@ def test_the_arm_settings_read_every_variable():
 @pytest.mark.parametrize("settings_class, environ, message", [
     (NodeSettings, {"SO101_IMAGE_HZ": "-1"}, "SO101_IMAGE_HZ='-1' is not a number >= 0"),
     (NodeSettings, {"SO101_FAST_STEPS": "2.5"}, "SO101_FAST_STEPS='2.5' is not a whole number >= 0"),
+    (NodeSettings, {"SO101_LOOKS": "random"}, "SO101_LOOKS='random' is not one of: fixed, varied"),
     (NodeSettings, {"SO101_LANG": "fr"}, "unknown language 'fr' (from --lang or $SO101_LANG); use zh or en"),
     (PyBulletSettings, {"SO101_CONTROL": "torque"}, "unknown control mode 'torque'; use one of: position, servo"),
     (PyBulletSettings, {"SO101_SERVO_ZETA": "nan"}, "SO101_SERVO_ZETA='nan' is not a number >= 0"),

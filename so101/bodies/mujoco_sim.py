@@ -204,10 +204,6 @@ class SO101MuJoCo:
         self._renderer.update_scene(self.data, view)
         return np.array(self._renderer.render(), dtype=np.uint8)
 
-    def has_drawn(self) -> bool:
-        """Whether render_rgb has drawn (its OpenGL context is then the one current in this thread)."""
-        return self._renderer is not None
-
     # -- life cycle ------------------------------------------------------------------
     def drawn_scene(self) -> Any:
         """The scene (a mujoco.MjvScene) of the picture render_rgb drew last (its camera), to project points onto it."""

@@ -289,6 +289,8 @@ def run_body_node(body: Body, node: Node, settings: NodeSettings, identity: str,
                             raise ValueError("this body runs no task")
                         seed = report.seed_asked(event["value"].to_pylist())
                         body.reset_task(seed)
+                        if cameras is not None:
+                            cameras.show_seed(seed)  # the episode's looks, where they vary
                     except ValueError as error:
                         logger.warning(text["bad_task_cmd"].format(error=error))
                         continue

@@ -15,12 +15,13 @@ from pathlib import Path
 from typing import Mapping, Self
 
 from so101.assets import ASSETS_ENV_VAR
+from so101.bodies.looks import DEFAULT_LOOKS, LOOKS_CHOICES
 from so101.bodies.pd_servo import DEFAULT_DAMPING_RATIO
 from so101.feetech.calibration import parse_joint_signs
 from so101.runtime.display import MODE_ENV_VAR
 from so101.lang import DEFAULT_LANGUAGE, ENV_VAR as LANG_ENV_VAR, language_from_environ
 from so101.runtime.settings import (
-    EnvironSettings, Setting, parse_number, read_image_size, read_number, read_optional_number, read_optional_path,
+    EnvironSettings, Setting, parse_number, read_choice, read_image_size, read_number, read_optional_number, read_optional_path,
     read_file_path, read_stripped_text, read_text, read_whole_number, setting,
 )
 from so101.runtime.lockstep import steps_per_frame
@@ -102,6 +103,9 @@ class NodeSettings(EnvironSettings):
         "SO101_LOCKSTEP_PICTURES", "",
         "WIDTHxHEIGHT: in lockstep, each frame carries the task's front and wrist pictures on `image` and "
         "`wrist_image`, drawn for that frame; empty = none", read_image_size)
+    looks: str = setting(
+        "SO101_LOOKS", DEFAULT_LOOKS, "in lockstep with pictures: `fixed` (the pictures as always) or `varied` (each "
+        "episode's seed draws its light, colours and camera placement: so101/bodies/looks.py)", read_choice(LOOKS_CHOICES))
     lockstep_episode_frames: int = setting(
         "SO101_EPISODE_FRAMES", "0",
         "N > 0: in lockstep, an episode's last frame is at most N; after it, or after a frame whose `task_status` "

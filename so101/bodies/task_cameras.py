@@ -14,12 +14,15 @@ from __future__ import annotations
 
 import ctypes
 import os
+from dataclasses import replace
 from pathlib import Path
 from typing import Callable, Sequence
 
-from so101.bodies.camera import DEFAULT_CAMERA, WRIST_CAMERA
+from so101.bodies.camera import DEFAULT_CAMERA, WRIST_CAMERA, WRIST_CAMERA_NAME, Camera
+from so101.bodies.looks import DEFAULT_LOOKS, Looks, looks_for
 from so101.bodies.protocol import AnglesDeg, ObjectState, RgbImage, SceneTask
 from so101.bodies.settings import NodeSettings
+from so101.robot import ACTUATED_JOINTS
 
 
 def opengl_renderer() -> str | None:
@@ -44,18 +47,63 @@ def mujoco_drawn_by() -> str:
 
 
 class TaskCameras:
-    """`draw(angles_deg, object_state, width, height)`: the front picture, and with a task the wrist's."""
+    """`draw(angles_deg, object_state, width, height)`: the front picture, and with a task the wrist's.
 
-    renderer = "MuJoCo"
+    `looks` "varied": `show_seed(seed)` gives the pictures that episode's looks (so101.bodies.looks);
+    "fixed": the pictures as they always were, whatever the seed."""
 
     def __init__(self, task: SceneTask | None, assets_dir: Path | str | None = None,
-                 log: Callable[[str], None] = print):
+                 log: Callable[[str], None] = print, looks: str = DEFAULT_LOOKS):
         # MuJoCo's body as a model to draw: posed by hand, never stepped.
         from so101.bodies.mujoco_sim import SO101MuJoCo
 
+        looks_for(looks, 0)  # an unknown mode is refused here, in one line
         self.task = task
+        self.looks_mode = looks
+        self.looks: Looks | None = None
         self._model = SO101MuJoCo(mode="direct", assets_dir=assets_dir, log=log, renders=True, task=task,
                                   light_pictures=task is not None)
+        model = self._model.model
+        # What the looks change, as the model has it: the fixed looks put these back.
+        arm_root = int(model.body_rootid[model.joint(ACTUATED_JOINTS[0].name).bodyid[0]])
+        roots = sorted({int(root) for root in model.body_rootid[1:]} - {arm_root})
+        self._object_geoms = [[geom for geom in range(model.ngeom) if int(model.body_rootid[model.geom_bodyid[geom]]) == root]
+                              for root in roots]
+        self._floor_geom = int(model.geom("floor").id)
+        self._wrist = int(model.camera(WRIST_CAMERA_NAME).id) if task is not None else None
+        self._fixed = (model.light_dir.copy(), model.light_diffuse.copy(), model.geom_rgba.copy(),
+                       float(model.vis.global_.fovy), model.cam_pos.copy(), model.cam_fovy.copy())
+
+    def show_seed(self, seed: int) -> None:
+        """The looks of episode seed `seed` from now on (varied looks; fixed ones stay as they are)."""
+        looks = looks_for(self.looks_mode, seed, len(self._object_geoms))
+        if looks == self.looks:
+            return
+        model = self._model.model
+        light_dir, light_diffuse, geom_rgba, fovy, cam_pos, cam_fovy = self._fixed
+        model.light_dir[:], model.light_diffuse[:], model.geom_rgba[:] = light_dir, light_diffuse, geom_rgba
+        model.vis.global_.fovy, model.cam_pos[:], model.cam_fovy[:] = fovy, cam_pos, cam_fovy
+        if looks is not None:
+            model.light_dir[:] = looks.light_dir
+            model.light_diffuse[:] = looks.light_diffuse
+            model.geom_rgba[self._floor_geom] = looks.floor_rgba
+            for geoms, rgba in zip(self._object_geoms, looks.object_rgbas):
+                model.geom_rgba[geoms] = rgba
+            model.vis.global_.fovy = fovy + looks.front_fov_deg
+            if self._wrist is not None:
+                model.cam_pos[self._wrist] = cam_pos[self._wrist] + looks.wrist_shift_m
+                model.cam_fovy[self._wrist] = cam_fovy[self._wrist] + looks.wrist_fov_deg
+        self.looks = looks
+
+    def front_camera(self) -> Camera:
+        """The front camera as this episode's looks place it."""
+        looks = self.looks
+        if looks is None:
+            return DEFAULT_CAMERA
+        target = tuple(float(a + b) for a, b in zip(DEFAULT_CAMERA.target_xyz_m, looks.front_shift_m))
+        return replace(DEFAULT_CAMERA, target_xyz_m=(target[0], target[1], target[2]),
+                       yaw_deg=DEFAULT_CAMERA.yaw_deg + looks.front_turn_deg[0],
+                       pitch_deg=DEFAULT_CAMERA.pitch_deg + looks.front_turn_deg[1])
 
     def draw(self, angles_deg: AnglesDeg | Sequence[float], object_state: ObjectState | Sequence[float], width: int,
              height: int) -> tuple[RgbImage, RgbImage | None]:
@@ -64,15 +112,11 @@ class TaskCameras:
         scene = self._model.scene
         if scene is not None and len(object_state):
             scene.show_object_state([float(value) for value in object_state])
-        self._model.show_pose_deg([float(angle) for angle in angles_deg])  # after the objects: it recomputes the kinematics of both
-        front = self._model.render_rgb(width, height, DEFAULT_CAMERA)
+        # After the objects: posing recomputes the kinematics of both.
+        self._model.show_pose_deg([float(angle) for angle in angles_deg])
+        front = self._model.render_rgb(width, height, self.front_camera())
         wrist = self._model.render_rgb(width, height, WRIST_CAMERA) if scene is not None else None
         return front, wrist
-
-    def drawn_by(self) -> str:
-        """Who draws, in words: MuJoCo's version, its OpenGL back end and the device OpenGL names (a GPU,
-        or Mesa's llvmpipe in software), read after a picture was drawn; "" before."""
-        return mujoco_drawn_by() if self._model.has_drawn() else ""
 
     def close(self) -> None:
         self._model.close()
@@ -90,7 +134,8 @@ def lockstep_cameras(task: SceneTask | None, settings: NodeSettings, assets_dir:
     one picture is drawn now, so a renderer that cannot work stops the node in one line before it joins."""
     if settings.lockstep_pictures is None:
         return None
-    cameras = TaskCameras(task, assets_dir, log)
+    cameras = TaskCameras(task, assets_dir, log, settings.looks)
+    cameras.show_seed(settings.seed)
     from so101.robot import HOME_POSE_DEG
 
     cameras.draw(HOME_POSE_DEG, [], *settings.lockstep_pictures)

@@ -85,6 +85,12 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
         "task's episodes record (needs --task)",
     )
     parser.add_argument(
+        "--looks", choices=("fixed", "varied"), default="fixed",
+        help="--task: varied draws the task's cameras as an episode of --seed records them with `--looks varied` "
+        "(that seed's light, colours and camera placement; --yaw, --pitch and --distance do not apply); "
+        "fixed (default): as always",
+    )
+    parser.add_argument(
         "--axes", action="store_true",
         help=f"draw the arm's base frame (the URDF's base_link, the frame of the prompt's xyz and where) from its "
         f"origin on the floor under the base: x forward (red), y to the arm's left (green), z up (blue), "
@@ -243,6 +249,10 @@ def run(args: argparse.Namespace) -> int:
         error = "--camera wrist is a task's camera: add --task cube_to_box"
     elif args.camera == "wrist" and args.axes:
         error = "--axes is drawn for the front camera only"
+    elif args.looks == "varied" and args.task is None:
+        error = "--looks varied is a task's cameras': add --task cube_to_box"
+    elif args.looks == "varied" and args.axes:
+        error = "--axes is drawn on the orbiting camera's picture, not with --looks varied"
     if error:
         print(f"so101 snapshot: {error}", file=sys.stderr)
         return 2
@@ -267,7 +277,15 @@ def run(args: argparse.Namespace) -> int:
             ):
                 break
         reached_deg = sim.joint_angles_deg()
-        rgb = sim.render_rgb(args.width, args.height, WRIST_CAMERA if args.camera == "wrist" else camera)
+        if args.looks == "varied":  # drawn as an episode's cameras draw it (so101.bodies.task_cameras)
+            from so101.bodies.task_cameras import TaskCameras
+
+            with TaskCameras(task, log=lambda message: None, looks=args.looks) as cameras:
+                cameras.show_seed(args.seed or 0)
+                front, wrist = cameras.draw(reached_deg, sim.scene.object_state(), args.width, args.height)
+            rgb = wrist if args.camera == "wrist" and wrist is not None else front
+        else:
+            rgb = sim.render_rgb(args.width, args.height, WRIST_CAMERA if args.camera == "wrist" else camera)
         image = Image.fromarray(rgb)
         if args.axes:
             if args.body == "mujoco":

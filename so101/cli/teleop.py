@@ -29,6 +29,7 @@ import os
 import sys
 from pathlib import Path
 
+from so101.bodies.looks import DEFAULT_LOOKS, LOOKS_CHOICES
 from so101.bodies.registry import BODIES, BodyKind
 from so101.dataset.features import DEFAULT_FPS, video_keys_and_sizes
 from so101.dataset.settings import DEFAULT_IMAGE_SIZE
@@ -58,6 +59,9 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
         "--fps", type=whole_number(1, 1000), default=DEFAULT_FPS, metavar="N",
         help=f"--record: frames per second (default {DEFAULT_FPS}, LeRobot's)",
     )
+    parser.add_argument("--looks", choices=LOOKS_CHOICES, default=DEFAULT_LOOKS,
+                        help="--task --record: the cameras' pictures, fixed (default) or varied (each layout's seed draws "
+                             "its light, floor and object colours and camera placement; the dataset keeps them)")
     add_camera_size_option(parser, DEFAULT_IMAGE_SIZE, "--record on a simulation: each camera's pictures, stored as "
                                                        "video; `so101 bench --cameras --camera-size WxH` says what a size costs")
     parser.add_argument(
@@ -112,9 +116,13 @@ def run(args: argparse.Namespace) -> int:
     elif args.policy_python is not None:
         print("so101 teleop: --policy-python goes with --policy DIR", file=sys.stderr)
         return 2
+    if args.looks != DEFAULT_LOOKS and (args.task is None or args.record is None or not launch.body.simulated):
+        print(f"so101 teleop: --looks {args.looks} goes with --task NAME and --record DIR on a simulated body: "
+              "the task's cameras draw only while recording", file=sys.stderr)
+        return 2
     if args.record is not None:
         problem = add_recorder(descriptor, launch.body, args.record.expanduser().resolve(), args.fps, args.lang,
-                               args.task, args.image_size)
+                               args.task, args.image_size, args.looks)
         if problem:
             print(f"so101 teleop: {problem}", file=sys.stderr)
             return 2
@@ -170,7 +178,7 @@ def add_leader(descriptor: dict, body: BodyKind, port: str | None, calibration_f
 
 
 def add_recorder(descriptor: dict, body: BodyKind, dataset_dir: Path, fps: int, lang: str,
-                 task: str | None, image_size: tuple[int, int]) -> str | None:
+                 task: str | None, image_size: tuple[int, int], looks: str = DEFAULT_LOOKS) -> str | None:
     """The recorder (and a simulation's camera) added to `descriptor`; or why DIR cannot take
     these episodes, in one line, before anything starts."""
     from so101.dataset.layout import DatasetError
@@ -186,5 +194,7 @@ def add_recorder(descriptor: dict, body: BodyKind, dataset_dir: Path, fps: int, 
     recorder_env = {"SO101_RECORD_DIR": str(dataset_dir), "SO101_RECORD_FPS": str(fps),
                     "SO101_RECORD_IMAGE_SIZE": size_text, "SO101_LANG": lang}
     camera_env = {"SO101_RECORD_IMAGE_SIZE": size_text} if pictures else None
+    if camera_env is not None and looks != DEFAULT_LOOKS:  # the camera draws them, the recorder keeps them
+        camera_env["SO101_LOOKS"] = recorder_env["SO101_LOOKS"] = looks
     with_recorder(descriptor, body.node_id, recorder_env, camera_env, picture_hz=fps)
     return None

@@ -73,6 +73,8 @@ class EpisodeSummary:
 # In info.json, beside LeRobot's keys: {episode index: the seed its task's layout was made from}, for
 # the episodes made from a seed (`so101 demos`, `so101 eval`'s runner); LeRobot ignores it.
 SEEDS_KEY = "so101_episode_seeds"
+# Each episode's pictures' looks (so101.bodies.looks: "fixed", or the varied ones drawn), by episode index.
+LOOKS_KEY = "so101_episode_looks"
 
 
 def recorder_features(video_sizes: Mapping[str, tuple[int, int]],

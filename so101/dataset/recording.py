@@ -19,6 +19,7 @@ from typing import Any, Callable, Mapping, Protocol, Sequence
 import numpy as np
 import numpy.typing as npt
 
+from so101.bodies.looks import DEFAULT_LOOKS, looks_metadata
 from so101.dataset.features import (
     ACTION_KEY, ENVIRONMENT_KEY, IMAGE_KEY, REWARD_KEY, STATE_KEY, SUCCESS_KEY, WRIST_IMAGE_KEY, to_lerobot,
 )
@@ -76,6 +77,8 @@ class Episode(Protocol):
     """An episode being written (so101.dataset.episode.EpisodeRecorder)."""
 
     frames: int
+    seed: int | None  # the task's layout, and its pictures' looks, kept by episode in info.json
+    looks: dict[str, object] | None
 
     def add_frame(self, frame: Mapping[str, Any]) -> None: ...  # feature key -> value
 
@@ -122,7 +125,8 @@ class Recording:
     """
 
     def __init__(self, writer: Writer, root: str, fps: int, lang: str, needs_image: bool,
-                 say: Callable[[str], None], clock: Callable[[], float] = time.monotonic, task: CubeToBox | None = None):
+                 say: Callable[[str], None], clock: Callable[[], float] = time.monotonic, task: CubeToBox | None = None,
+                 looks: str = DEFAULT_LOOKS):
         self.writer, self.root, self.fps = writer, root, fps
         self.text = TEXT[lang]
         self.needs_image = needs_image
@@ -137,6 +141,8 @@ class Recording:
         self.wrist_image: npt.NDArray[np.uint8] | None = None
         self.needs_wrist_image = needs_image and task is not None
         self.success = False
+        self.looks = looks  # the pictures' looks (so101.bodies.looks), drawn from the layout's seed
+        self.seed: int | None = None  # the layout's, from task_status
         self.episode: Episode | None = None
         self.episode_index = 0  # the index of the episode recording (or of the next one)
         self._frame_clock: FrameClock | None = None
@@ -168,8 +174,10 @@ class Recording:
         if self.task is not None and len(values) == len(self.task.object_state_names):
             self.object_state = np.array(values, dtype=np.float32)
 
-    def on_task_status(self, success: bool) -> None:
+    def on_task_status(self, success: bool, seed: int | None = None) -> None:
         self.success = bool(success)
+        if seed is not None:
+            self.seed = seed
 
     def state_deg(self) -> tuple[float, ...] | None:
         if self.arm_deg is None or self.gripper_deg is None:
@@ -234,6 +242,10 @@ class Recording:
         # save that fails gives its number back).
         self.episode_index = len(self.writer.episodes) + len(self._pending)
         self.episode = self.writer.start_episode(task)
+        if self.task is not None and self.seed is not None:  # the layout it starts from, and how it looks
+            self.episode.seed = self.seed
+            if self.needs_image:
+                self.episode.looks = looks_metadata(self.looks, self.seed)
         self._frame_clock = None
         self.last_task = task
         line = self.text["started"].format(episode=self.episode_index, task=task)

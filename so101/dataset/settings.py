@@ -8,12 +8,14 @@ from pathlib import Path
 from typing import Mapping
 
 from so101.assets import ASSETS_ENV_VAR
+from so101.bodies.looks import DEFAULT_LOOKS, LOOKS_CHOICES
 from so101.bodies.settings import read_language
 from so101.tasks.settings import read_task
 from so101.dataset.features import DEFAULT_FPS
 from so101.lang import DEFAULT_LANGUAGE, ENV_VAR as LANG_ENV_VAR
 from so101.runtime.settings import (
-    EnvironSettings, Setting, read_file_path, read_image_size, read_optional_path, read_whole_number, setting,
+    EnvironSettings, Setting, read_choice, read_file_path, read_image_size, read_optional_path, read_whole_number,
+    setting,
 )
 
 DEFAULT_IMAGE_SIZE = "320x240"
@@ -42,6 +44,9 @@ class RecorderSettings(EnvironSettings):
     task: str = setting(
         "SO101_TASK", "", "the body's task: frames also hold its `object_state`, reward and success; empty = none",
         read_task)
+    looks: str = setting(
+        "SO101_LOOKS", DEFAULT_LOOKS, "the pictures' looks, as the camera draws them (`fixed` or `varied`): each "
+        "episode's, from the seed its layout starts from, is kept in info.json", read_choice(LOOKS_CHOICES))
 
 
 @dataclass(frozen=True)
@@ -55,6 +60,9 @@ class CameraSettings(EnvironSettings):
         ASSETS_ENV_VAR, "", "where the model is; empty = where `so101 assets` puts it", read_optional_path)
     task: str = setting("SO101_TASK", "", "the task whose objects the pictures show, posed by `object_state`; empty = none",
                         read_task)
+    looks: str = setting(
+        "SO101_LOOKS", DEFAULT_LOOKS, "`fixed`, or `varied`: each layout's seed (from `task_status`) draws the pictures' "
+        "light, colours and camera placement (so101/bodies/looks.py)", read_choice(LOOKS_CHOICES))
 
 
 @dataclass(frozen=True)

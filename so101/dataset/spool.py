@@ -62,13 +62,14 @@ class EpisodeSpool:
         """The recorder's call when an episode with video is saved or dropped: nothing to tidy here."""
 
     def commit_episode(self, task: str, columns: dict[str, np.ndarray],
-                       encoded: dict[str, videos.EncodedVideo], seed: int | None = None) -> EpisodeSummary:
+                       encoded: dict[str, videos.EncodedVideo], seed: int | None = None,
+                       looks: dict[str, object] | None = None) -> EpisodeSummary:
         number = self._count
         staging = self.folder / f".{PREFIX}{number:06d}"
         shutil.rmtree(staging, ignore_errors=True)
         staging.mkdir()
         np.savez(staging / COLUMNS_FILE, **columns)  # type: ignore[arg-type]
-        meta: dict[str, Any] = {"task": task, "seed": seed, "videos": {}}
+        meta: dict[str, Any] = {"task": task, "seed": seed, "looks": looks, "videos": {}}
         for key, video in encoded.items():
             os.replace(video.path, staging / f"{key}.mp4")
             np.save(staging / _histograms_file(key), np.stack(video.inspected))
@@ -106,7 +107,7 @@ def pop(episode: Path, writer: DatasetWriter) -> EpisodeSummary:
         encoded[key] = videos.EncodedVideo(moved, int(info["frames"]), float(info["duration_s"]),
                                            list(np.load(episode / _histograms_file(key))))
     try:
-        summary = writer.commit_episode(meta["task"], columns, encoded, meta.get("seed"))
+        summary = writer.commit_episode(meta["task"], columns, encoded, meta.get("seed"), meta.get("looks"))
     except CommitIncomplete:
         raise  # its videos stay where its journal names them, for the next open
     except BaseException:

@@ -25,6 +25,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path, PurePath
 from typing import Callable
 
+from so101.bodies.looks import DEFAULT_LOOKS, LOOKS_CHOICES
 from so101.bodies.registry import BODIES, SIMULATED_BODIES, BodyKind
 from so101.runtime.argtypes import add_language_option, number, whole_number
 from so101.runtime.dataflow import EXPERT_NODE_FILE, ROOT, node_launch, write_dataflow
@@ -59,6 +60,9 @@ def add_common_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--misses", type=number(lambda value: 0 <= value <= 1, "a share from 0 to 1"), default=0.0,
                         metavar="SHARE", help="the share of episodes whose first grasp the expert puts 30-45 mm beside "
                              "the cube on purpose, so that they show its recovery (default 0)")
+    parser.add_argument("--looks", choices=LOOKS_CHOICES, default=DEFAULT_LOOKS,
+                        help="the cameras' pictures: fixed (default, one look) or varied (each episode's seed draws "
+                             "its light, floor and object colours and camera placement; a dataset keeps them by episode)")
     parser.add_argument("--workers", type=whole_number(1, MAX_WORKERS), default=1, metavar="K",
                         help="dataflows run at once, each on its share of the seeds; the results are merged in seed "
                              "order (default 1)")
@@ -127,6 +131,8 @@ def flows_for(args: argparse.Namespace, work: Path, driver: Driver | None, pictu
         env = {"SO101_TASK": args.task, "SO101_SEED": str(seeds[0]), "SO101_EPISODES": str(len(seeds)),
                "SO101_TIME_LIMIT_S": repr(args.time_limit), "SO101_EPISODES_OUT": str(folder / "episodes.jsonl"),
                "SO101_LOCKSTEP_PICTURES": size, **runner_env(folder)}
+        if size and args.looks != DEFAULT_LOOKS:  # the body draws them, the runner keeps them in the dataset
+            env["SO101_LOOKS"] = args.looks
         flows.append(Flow(BODIES[args.body], driver=driver, runner_env=env, lang=args.lang,
                           pictures=pictures if size else (), picture_size=size))
     return flows
@@ -150,7 +156,8 @@ def lockstep_dataflow(flow: Flow, placement: tuple[str, str] | None = None, root
         "outputs": frame_outputs,
         "env": {"SO101_MODE": "direct", "SO101_LANG": flow.lang, "SO101_TASK": flow.runner_env["SO101_TASK"],
                 "SO101_SEED": flow.runner_env["SO101_SEED"], "SO101_LOCKSTEP_FPS": str(fps),
-                "SO101_EPISODE_FRAMES": str(last_frame), "SO101_LOCKSTEP_PICTURES": flow.picture_size},
+                "SO101_EPISODE_FRAMES": str(last_frame), "SO101_LOCKSTEP_PICTURES": flow.picture_size,
+                **{key: value for key, value in flow.runner_env.items() if key == "SO101_LOOKS"}},
     }]
     if driver is not None:
         runner_inputs["action"] = queued(f"{driver.node_id}/joint_cmd")

@@ -188,8 +188,9 @@ def with_recorder(descriptor: dict, body_node_id: str, recorder_env: dict[str, s
             "gripper_state": _queued(f"{body_node_id}/gripper_state", STATE_QUEUE),
         }
         camera_outputs = ["image"]
-        if task:  # its objects are in the pictures, and the wrist camera's too
+        if task:  # its objects are in the pictures, and the wrist camera's too; the seed, for varied looks
             camera_inputs["object_state"] = _queued(f"{body_node_id}/object_state", STATE_QUEUE)
+            camera_inputs["task_status"] = {"source": f"{body_node_id}/task_status", "queue_size": 10}
             camera_env = {**camera_env, "SO101_TASK": task}
             camera_outputs.append("wrist_image")
             recorder_inputs["wrist_image"] = _queued("camera/wrist_image", TICK_QUEUE)

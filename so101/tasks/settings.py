@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Mapping
 
+from so101.bodies.looks import DEFAULT_LOOKS, LOOKS_CHOICES
 from so101.bodies.settings import read_language, read_lockstep_fps
 from so101.lang import DEFAULT_LANGUAGE, ENV_VAR as LANG_ENV_VAR
 from so101.runtime.settings import (
@@ -91,4 +92,7 @@ class EpisodeSettings(EnvironSettings):
         read_image_size)
     video_dir: Path | None = setting(
         "SO101_VIDEO_DIR", "", "a folder for each episode's front picture as an mp4; empty = none", read_optional_path)
+    looks: str = setting(
+        "SO101_LOOKS", DEFAULT_LOOKS, "the pictures' looks, as the body draws them (`fixed` or `varied`): a dataset "
+        "keeps each episode's in info.json", read_choice(LOOKS_CHOICES))
     lang: str = setting(LANG_ENV_VAR, DEFAULT_LANGUAGE, "log language, `zh` or `en`", read_language)

@@ -1,0 +1,56 @@
+"""Looks that vary by seed (so101.bodies.looks): drawn the same for the same seed, within their bounds."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import pytest
+
+from so101.bodies.looks import (
+    FLOOR_PALETTE, FOV_DEG, FRONT_SHIFT_M, FRONT_TURN_DEG, LIGHT_DIFFUSE, LIGHT_ELEVATION_DEG, OBJECT_PALETTE,
+    WRIST_SHIFT_M, looks_for, looks_metadata, varied_looks,
+)
+
+
+def test_the_same_seed_draws_the_same_looks_and_other_seeds_other_ones():
+    assert varied_looks(7) == varied_looks(7)
+    drawn = [varied_looks(seed) for seed in range(50)]
+    assert len({looks.light_dir for looks in drawn}) == 50
+    assert len({looks.floor_rgba for looks in drawn}) == len(FLOOR_PALETTE)  # every floor comes up in 50
+    assert len({looks.object_rgbas for looks in drawn}) > 30
+
+
+@pytest.mark.parametrize("seed", range(0, 1000, 37))
+def test_looks_stay_within_their_bounds(seed):
+    looks = varied_looks(seed)
+    assert looks.seed == seed
+    assert math.isclose(math.dist(looks.light_dir, (0, 0, 0)), 1.0, abs_tol=1e-5)
+    elevation = math.degrees(math.asin(-looks.light_dir[2]))  # the light shines down, from above the floor
+    assert LIGHT_ELEVATION_DEG[0] - 1e-3 <= elevation <= LIGHT_ELEVATION_DEG[1] + 1e-3
+    assert LIGHT_DIFFUSE[0] <= looks.light_diffuse <= LIGHT_DIFFUSE[1]
+    assert looks.floor_rgba in FLOOR_PALETTE
+    assert len(looks.object_rgbas) == 2 and looks.object_rgbas[0] != looks.object_rgbas[1]
+    assert all(rgba in OBJECT_PALETTE for rgba in looks.object_rgbas)
+    assert all(abs(shift) <= FRONT_SHIFT_M for shift in looks.front_shift_m)
+    assert all(abs(turn) <= FRONT_TURN_DEG for turn in looks.front_turn_deg)
+    assert all(abs(shift) <= WRIST_SHIFT_M for shift in looks.wrist_shift_m)
+    assert abs(looks.front_fov_deg) <= FOV_DEG and abs(looks.wrist_fov_deg) <= FOV_DEG
+
+
+def test_fixed_looks_change_nothing_and_a_dataset_keeps_either_as_json():
+    assert looks_for("fixed", 3) is None
+    assert looks_metadata("fixed", 3) == {"looks": "fixed"}
+    kept = looks_metadata("varied", 3)
+    assert json.loads(json.dumps(kept)) == kept
+    assert kept["looks"] == "varied" and kept["seed"] == 3
+    assert kept["floor_rgba"] == list(varied_looks(3).floor_rgba)
+
+
+@pytest.mark.parametrize("mode, seed, message", [
+    ("random", 3, r"^unknown looks 'random'; use one of: fixed, varied$"),
+    ("varied", -1, r"^a seed is a whole number >= 0, got -1$"),
+])
+def test_a_bad_mode_or_seed_is_refused_in_one_line(mode, seed, message):
+    with pytest.raises(ValueError, match=message):
+        looks_for(mode, seed)
