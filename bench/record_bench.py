@@ -24,7 +24,6 @@ from bench.common import PACED_PROBE_ENV, WARMUP_S, run_dataflow, realtime_figur
 from so101.bodies.node_loop import IMAGE_SIZE
 from so101.bodies.registry import BODIES
 from so101.dataset.features import ACTION_KEY, DEFAULT_FPS, IMAGE_KEY, STATE_KEY, to_lerobot
-from so101.dataset.features import STATE_KEY
 from so101.dataset.video import new_while_moving, picture_changes
 from so101.runtime.dataflow import TICK_PERIOD_S, with_recorder, with_task
 from so101.stats import summary

@@ -18,11 +18,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from so101.bodies.registry import BODIES, DEFAULT_BODY, BodyKind, body_node_env
+from so101.runtime.argtypes import whole_number
 from so101.runtime.dataflow import LEADER_READY_MARKS, LOADED_MARKS, PROMPT_NODE_FILE, ROOT, with_web_view, write_dataflow
 from so101.runtime.display import MODES, resolve_mode
 from so101.runtime.dora_run import Dataflow, log_tail, port_held_problem, refusal as refusal_in
 from so101.runtime.processes import DAEMON_PORT_TAKEN_MARK
-from so101.runtime.argtypes import whole_number
 from so101.runtime.venv import dora_executable, env_with_bin_first
 from so101.runtime.versions import dora_version_problem
 from so101.tasks import TASKS, parse_seed, task_named
