@@ -28,7 +28,7 @@ import numpy as np
 
 from bench.record_bench import record_run
 from so101.bodies.camera import WRIST_CAMERA
-from so101.bodies.node_loop import IMAGE_SIZE
+from so101.bodies.task_cameras import IMAGE_SIZE
 from so101.bodies.registry import BODIES
 from so101.dataset.features import IMAGE_KEY, WRIST_IMAGE_KEY
 from so101.runtime.dataflow import TICK_PERIOD_S

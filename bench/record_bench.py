@@ -1,6 +1,6 @@
 """Recording's cost to the body (issue 20): `so101 bench` runs these for a simulated body.
 
-  1. a picture of the arm (320x240, the body's own CPU renderer), ms: what drawing it inside the
+  1. a picture of the arm (320x240, as the node draws it: so101.bodies.task_cameras), ms: what drawing it inside the
      physics loop would cost each time;
   2. the body drawing its pictures inside its loop at 30 Hz (SO101_IMAGE_HZ=30): joint_state/s and
      simulated/wall time, measured, not assumed;
@@ -21,7 +21,7 @@ from typing import Callable
 import numpy as np
 
 from bench.common import PACED_PROBE_ENV, WARMUP_S, run_dataflow, realtime_figures
-from so101.bodies.node_loop import IMAGE_SIZE
+from so101.bodies.task_cameras import IMAGE_SIZE, TaskCameras
 from so101.bodies.registry import BODIES
 from so101.dataset.features import ACTION_KEY, DEFAULT_FPS, IMAGE_KEY, STATE_KEY, to_lerobot
 from so101.dataset.video import new_while_moving, picture_changes
@@ -39,14 +39,14 @@ PICTURES = 20  # the in-process picture timing, and the distinct poses of the sa
 
 
 def measure_picture_ms(body: str) -> dict:
-    """Pictures of the arm at IMAGE_SIZE, drawn by `body`'s renderer, ms each."""
-    with BODIES[body].body_class()(mode="direct", time_step_s=TICK_PERIOD_S, log=lambda message: None) as sim:
-        sim.render_rgb(*IMAGE_SIZE)
+    """Pictures of the arm at IMAGE_SIZE, drawn as `body`'s node draws its `image` output (by the one
+    renderer of every body, so101.bodies.task_cameras), ms each."""
+    with TaskCameras(None, log=lambda message: None) as cameras:
+        cameras.draw([0.0] * 6, [], *IMAGE_SIZE)
         each_ms = []
         for index in range(PICTURES):
-            sim.show_pose_deg([3.0 * index, -2.0 * index, 2.0 * index, 0, 4.0 * index, 10])
             start = time.perf_counter()
-            sim.render_rgb(*IMAGE_SIZE)
+            cameras.draw([3.0 * index, -2.0 * index, 2.0 * index, 0, 4.0 * index, 10], [], *IMAGE_SIZE)
             each_ms.append((time.perf_counter() - start) * 1e3)
     return summary(each_ms)
 
@@ -115,13 +115,10 @@ def measure_saving(body: str, seconds: float = SAVED_EPISODE_S) -> dict:
     """A `seconds` episode at 30 fps with video, frames added as the recorder adds them, then saved."""
     from so101.dataset.writer import DatasetWriter
 
-    with BODIES[body].body_class()(mode="direct", time_step_s=TICK_PERIOD_S, log=lambda message: None) as sim:
+    with TaskCameras(None, log=lambda message: None) as cameras:
         poses = [[40 * np.sin(index / 3), -20 + index, 30 - 2 * index, 10, 5 * index, 20 + 3 * index]
                  for index in range(PICTURES)]
-        pictures = []
-        for pose in poses:
-            sim.show_pose_deg(pose)
-            pictures.append(sim.render_rgb(*IMAGE_SIZE))
+        pictures = [cameras.draw(pose, [], *IMAGE_SIZE)[0] for pose in poses]
     work = Path(tempfile.mkdtemp(prefix="so101-bench-save-"))
     try:
         writer = DatasetWriter.open(work / "dataset", DEFAULT_FPS, {IMAGE_KEY: IMAGE_SIZE})

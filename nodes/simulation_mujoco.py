@@ -15,8 +15,8 @@ from dora import Node
 
 from so101.assets import ModelFilesError
 from so101.bodies.mujoco_sim import SO101MuJoCo
-from so101.bodies.node_loop import announce, check_pictures, run_body_node
-from so101.bodies.task_cameras import lockstep_cameras
+from so101.bodies.node_loop import announce, run_body_node
+from so101.bodies.task_cameras import node_cameras
 from so101.bodies.settings import MuJoCoSettings, NodeSettings
 from so101.runtime.display import DisplayError
 from so101.runtime.logs import send_diagnostics_to
@@ -34,8 +34,7 @@ def main() -> int:
         return cannot_start(error)
     try:
         sim = SO101MuJoCo.from_settings(mujoco, settings, task, log=announce)
-        check_pictures(sim, settings)
-        cameras = lockstep_cameras(task, settings, mujoco.assets_dir, log=announce)
+        cameras = node_cameras(task, settings, mujoco.assets_dir, log=announce)
     except (ModelFilesError, DisplayError, ValueError) as error:
         return cannot_start(error)
     damping_n_m_s = sim.joint_damping_n_m_s()

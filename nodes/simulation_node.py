@@ -15,8 +15,8 @@ import sys
 from dora import Node
 
 from so101.assets import ModelFilesError
-from so101.bodies.node_loop import announce, check_pictures, run_body_node
-from so101.bodies.task_cameras import lockstep_cameras
+from so101.bodies.node_loop import announce, run_body_node
+from so101.bodies.task_cameras import node_cameras
 from so101.bodies.pybullet_sim import SO101Sim, release_freed_memory
 from so101.bodies.settings import NodeSettings, PyBulletSettings
 from so101.runtime.display import DisplayError
@@ -38,8 +38,7 @@ def main() -> int:
     release_freed_memory()
     try:
         sim = SO101Sim.from_settings(pybullet, settings, task, log=announce)
-        check_pictures(sim, settings)
-        cameras = lockstep_cameras(task, settings, pybullet.assets_dir, log=announce)
+        cameras = node_cameras(task, settings, pybullet.assets_dir, log=announce)
     except (ModelFilesError, DisplayError, ValueError) as error:
         return cannot_start(error)
     # Course step C's `for event in node:` loop, shared with every body.

@@ -152,7 +152,7 @@ def test_every_body_is_shown_posed_by_its_joint_state(tmp_path, body):
 def test_teleop_web_shows_the_camera_and_marks_an_episode_while_it_records(tmp_path):
     """`so101 teleop --record DIR --web` as a person runs it in a terminal: the page shows the camera's
     picture, and the marker from `record` to `stop`."""
-    from so101.bodies.node_loop import IMAGE_SIZE
+    from so101.bodies.task_cameras import IMAGE_SIZE
     from tests.helpers.terminal import start_teleop
 
     web_port = free_port()

@@ -6,7 +6,8 @@ picture. So each visual mesh is decimated by vertex clustering: the corners in o
 grid of `CELL_M` become their mean, and a triangle left without three distinct corners goes.
 A face keeps its corners' order, so it keeps facing out. Derived once (`so101 assets`,
 or on demand), written beside the model with a manifest keyed like the collision hulls';
-used only with `light_pictures` (a task's cameras), so the course's pictures are unchanged.
+used with `light_pictures`: by the pictures a node publishes (so101.bodies.task_cameras), while
+`so101 snapshot`, the window and the web view keep the full meshes.
 `so101 bench --cameras` measures what they save.
 """
 

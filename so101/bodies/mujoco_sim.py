@@ -103,11 +103,12 @@ class SO101MuJoCo:
     @classmethod
     def from_settings(cls, settings: MuJoCoSettings, node: NodeSettings, task: SceneTask | None = None,
                       log: Callable[[str], None] = print) -> "SO101MuJoCo":
-        """The simulation node's body: the joint damping asked for, a window as `node` asks, the
-        visual meshes and the offscreen renderer only when the node publishes pictures, and the tick's step."""
+        """The simulation node's body: the joint damping asked for, a window as `node` asks, no visual meshes
+        (the node's pictures are drawn by so101.bodies.task_cameras), and the tick's step."""
         return cls(
             mode=node.display_mode, time_step_s=TICK_PERIOD_S, assets_dir=settings.assets_dir, log=log,
-            joint_damping_n_m_s=settings.joint_damping_n_m_s, renders=node.image_hz > 0,
+            joint_damping_n_m_s=settings.joint_damping_n_m_s,
+            renders=False,  # the node's pictures are so101.bodies.task_cameras'
             task=task, seed=node.seed,
         )
 

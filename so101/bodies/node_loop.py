@@ -38,6 +38,7 @@ import numpy as np
 import pyarrow as pa
 
 from so101.bodies.protocol import Body, BodyFailed, TaskScene
+from so101.bodies.task_cameras import IMAGE_SIZE
 from so101.bodies.settings import NodeSettings
 from so101.joint_cmd import decode_joint_cmd
 from so101.robot import GRIPPER_COMMAND_INDEX, NUM_ARM_JOINTS
@@ -51,7 +52,6 @@ if TYPE_CHECKING:
 
     from so101.bodies.task_cameras import TaskCameras
 
-IMAGE_SIZE = (320, 240)
 # `joint_target` goes out again this often even when unchanged, for a node that joined late.
 TARGET_REFRESH_S = 1.0
 
@@ -95,13 +95,6 @@ logger = logging.getLogger(__name__)
 def announce(line: str) -> None:
     """A line that tools wait for and parse (the "loaded" line, the window's): stdout, as it is, at once."""
     print(line, flush=True)
-
-
-def check_pictures(body: Body, settings: NodeSettings) -> None:
-    """With the `image` output on, draw one picture before joining: a renderer that cannot
-    work (no OpenGL back end) must stop the node with its one-line reason, not in the loop."""
-    if settings.image_hz > 0:
-        body.render_rgb(*IMAGE_SIZE)
 
 
 # In fast mode a tick is made up whenever no input is waiting.
@@ -173,8 +166,8 @@ class TaskReport:
 def run_body_node(body: Body, node: Node, settings: NodeSettings, identity: str, detail: Mapping[str, str],
                   node_id: str = "simulation", cameras: TaskCameras | None = None) -> int:
     """The event loop, until STOP; closes `body` (and `cameras`). `identity` and `detail[lang]` go into the
-    "loaded" log line (`so101 teleop` waits for it). `cameras` draw a lockstep frame's pictures
-    (SO101_LOCKSTEP_PICTURES: so101.bodies.task_cameras.lockstep_cameras). Returns the node's exit code."""
+    "loaded" log line (`so101 teleop` waits for it). `cameras` draw the `image` output's pictures and a
+    lockstep frame's (so101.bodies.task_cameras.node_cameras). Returns the node's exit code."""
     tag = TAGS[node_id][settings.lang]
     text = {key: line.replace("{tag}", tag) for key, line in TEXT[settings.lang].items()}
     fast_steps = settings.fast_steps
@@ -273,10 +266,13 @@ def run_body_node(body: Body, node: Node, settings: NodeSettings, identity: str,
                     publish()
                     if tick_log is not None:
                         tick_log.extend((time.monotonic_ns(), body.steps))
-                    if steps_per_image and body.steps >= next_image_step:
+                    if steps_per_image and cameras is not None and body.steps >= next_image_step:
                         next_image_step += steps_per_image * ((body.steps - next_image_step) // steps_per_image + 1)
                         width, height = IMAGE_SIZE
-                        rgb = body.render_rgb(width, height)
+                        angles_deg = body.joint_angles_deg()
+                        if angles_deg is None:
+                            continue
+                        rgb, _ = cameras.draw(angles_deg, scene.object_state() if scene is not None else [], width, height)
                         node.send_output(
                             "image", pa.array(rgb.ravel()),
                             {"width": width, "height": height, "encoding": "rgb8"},

@@ -257,12 +257,12 @@ class SO101Sim:
     @classmethod
     def from_settings(cls, settings: PyBulletSettings, node: NodeSettings, task: SceneTask | None = None,
                       log: Callable[[str], None] = print) -> "SO101Sim":
-        """The simulation node's body: the course's motor or the servo, a window as `node` asks, the
-        CPU renderer only when the node publishes pictures, and the tick's step."""
+        """The simulation node's body: the course's motor or the servo, a window as `node` asks, no renderer
+        (the node's pictures are drawn by so101.bodies.task_cameras), and the tick's step."""
         return cls(
             mode=node.display_mode, time_step_s=TICK_PERIOD_S, assets_dir=settings.assets_dir, log=log,
             control_mode=settings.control_mode, servo_damping_ratio=settings.servo_damping_ratio,
-            renders=node.image_hz > 0,  # a lockstep frame's pictures are so101.bodies.task_cameras'
+            renders=False,  # the node's pictures are so101.bodies.task_cameras'
             task=task, seed=node.seed,
         )
 

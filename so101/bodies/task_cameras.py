@@ -24,6 +24,8 @@ from so101.bodies.protocol import AnglesDeg, ObjectState, RgbImage, SceneTask
 from so101.bodies.settings import NodeSettings
 from so101.robot import ACTUATED_JOINTS
 
+IMAGE_SIZE = (320, 240)  # the body node's `image` output (SO101_IMAGE_HZ)
+
 
 def opengl_renderer() -> str | None:
     """GL_RENDERER of the OpenGL context current in this thread (the renderer's, after it drew), or None."""
@@ -61,8 +63,9 @@ class TaskCameras:
         self.task = task
         self.looks_mode = looks
         self.looks: Looks | None = None
+        # Light pictures whatever the task: one look, defined once, and a picture in milliseconds.
         self._model = SO101MuJoCo(mode="direct", assets_dir=assets_dir, log=log, renders=True, task=task,
-                                  light_pictures=task is not None)
+                                  light_pictures=True)
         model = self._model.model
         # What the looks change, as the model has it: the fixed looks put these back.
         arm_root = int(model.body_rootid[model.joint(ACTUATED_JOINTS[0].name).bodyid[0]])
@@ -128,15 +131,16 @@ class TaskCameras:
         self.close()
 
 
-def lockstep_cameras(task: SceneTask | None, settings: NodeSettings, assets_dir: Path | str | None = None,
-                     log: Callable[[str], None] = print) -> TaskCameras | None:
-    """The cameras of a body node whose lockstep frames carry pictures (SO101_LOCKSTEP_PICTURES), else None;
-    one picture is drawn now, so a renderer that cannot work stops the node in one line before it joins."""
-    if settings.lockstep_pictures is None:
+def node_cameras(task: SceneTask | None, settings: NodeSettings, assets_dir: Path | str | None = None,
+                 log: Callable[[str], None] = print) -> TaskCameras | None:
+    """The cameras of a body node that publishes pictures (its `image` output, SO101_IMAGE_HZ, or its
+    lockstep frames', SO101_LOCKSTEP_PICTURES), else None; one picture is drawn now, so a renderer that
+    cannot work stops the node in one line before it joins."""
+    if settings.lockstep_pictures is None and not settings.image_hz > 0:
         return None
     cameras = TaskCameras(task, assets_dir, log, settings.looks)
     cameras.show_seed(settings.seed)
     from so101.robot import HOME_POSE_DEG
 
-    cameras.draw(HOME_POSE_DEG, [], *settings.lockstep_pictures)
+    cameras.draw(HOME_POSE_DEG, [], *(settings.lockstep_pictures or IMAGE_SIZE))
     return cameras
