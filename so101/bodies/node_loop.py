@@ -37,9 +37,9 @@ from typing import TYPE_CHECKING, Iterable, Iterator, Mapping, Protocol, cast
 import numpy as np
 import pyarrow as pa
 
-from so101.bodies.protocol import Body, BodyFailed, TaskScene
-from so101.bodies.task_cameras import IMAGE_SIZE
+from so101.bodies.protocol import AnglesDeg, Body, BodyFailed, RgbImage, TaskScene
 from so101.bodies.settings import NodeSettings
+from so101.bodies.task_cameras import IMAGE_SIZE
 from so101.joint_cmd import decode_joint_cmd
 from so101.robot import GRIPPER_COMMAND_INDEX, NUM_ARM_JOINTS
 from so101.runtime.dataflow import TICK_PERIOD_S, TickClock, timer_period_s
@@ -217,6 +217,11 @@ def run_body_node(body: Body, node: Node, settings: NodeSettings, identity: str,
     # episode then ends at the same frame, however late the runner's reset comes.
     episode_over = False
 
+    def pictures(angles_deg: AnglesDeg, width: int, height: int, wrist: bool) -> tuple[RgbImage, RgbImage | None]:
+        """The body as it stands, drawn by `cameras` (front, and the wrist's where asked and a task has it)."""
+        assert cameras is not None
+        return cameras.draw(angles_deg, scene.object_state() if scene is not None else [], width, height, wrist)
+
     def publish(tag: FrameTag | None = None) -> None:
         """joint_state and gripper_state, the task's outputs, and in lockstep the frame's pictures."""
         nonlocal episode_over
@@ -231,7 +236,7 @@ def run_body_node(body: Body, node: Node, settings: NodeSettings, identity: str,
             episode_over = success or tag.frame >= settings.lockstep_episode_frames
         if tag is not None and settings.lockstep_pictures and cameras is not None and angles_deg is not None:
             width, height = settings.lockstep_pictures
-            front, wrist = cameras.draw(angles_deg, scene.object_state() if scene is not None else [], width, height)
+            front, wrist = pictures(angles_deg, width, height, "wrist_image" in outputs)
             for output, rgb in (("image", front), ("wrist_image", wrist)):
                 if rgb is not None and output in outputs:
                     node.send_output(output, pa.array(rgb.ravel()),
@@ -272,7 +277,7 @@ def run_body_node(body: Body, node: Node, settings: NodeSettings, identity: str,
                         angles_deg = body.joint_angles_deg()
                         if angles_deg is None:
                             continue
-                        rgb, _ = cameras.draw(angles_deg, scene.object_state() if scene is not None else [], width, height)
+                        rgb, _ = pictures(angles_deg, width, height, wrist=False)
                         node.send_output(
                             "image", pa.array(rgb.ravel()),
                             {"width": width, "height": height, "encoding": "rgb8"},

@@ -109,17 +109,16 @@ class TaskCameras:
                        pitch_deg=DEFAULT_CAMERA.pitch_deg + looks.front_turn_deg[1])
 
     def draw(self, angles_deg: AnglesDeg | Sequence[float], object_state: ObjectState | Sequence[float], width: int,
-             height: int) -> tuple[RgbImage, RgbImage | None]:
+             height: int, wrist: bool = True) -> tuple[RgbImage, RgbImage | None]:
         """(front, wrist) of the arm at the six `angles_deg` and the task's objects where `object_state`
-        puts them (none yet: where they were); wrist None without a task."""
+        puts them (none yet: where they were); wrist None without a task, or not asked for."""
         scene = self._model.scene
         if scene is not None and len(object_state):
             scene.show_object_state([float(value) for value in object_state])
         # After the objects: posing recomputes the kinematics of both.
         self._model.show_pose_deg([float(angle) for angle in angles_deg])
         front = self._model.render_rgb(width, height, self.front_camera())
-        wrist = self._model.render_rgb(width, height, WRIST_CAMERA) if scene is not None else None
-        return front, wrist
+        return front, self._model.render_rgb(width, height, WRIST_CAMERA) if wrist and scene is not None else None
 
     def close(self) -> None:
         self._model.close()

@@ -58,6 +58,7 @@ def _image_side(text: str) -> int:
 
 def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
     from so101.bodies.camera import DEFAULT_CAMERA
+    from so101.bodies.looks import DEFAULT_LOOKS, LOOKS_CHOICES
 
     parser.add_argument(
         "--body", choices=SIMULATED_BODIES, default=DEFAULT_BODY,
@@ -85,7 +86,7 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
         "task's episodes record (needs --task)",
     )
     parser.add_argument(
-        "--looks", choices=("fixed", "varied"), default="fixed",
+        "--looks", choices=LOOKS_CHOICES, default=DEFAULT_LOOKS,
         help="--task: varied draws the task's cameras as an episode of --seed records them with `--looks varied` "
         "(that seed's light, colours and camera placement; --yaw, --pitch and --distance do not apply); "
         "fixed (default): as always",
