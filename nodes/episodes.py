@@ -50,7 +50,9 @@ from so101.dataset.spool import EpisodeSpool  # noqa: E402
 from so101.dataset.video import StreamingEncoder  # noqa: E402
 from so101.dataset.writer import DatasetWriter  # noqa: E402
 from so101.robot import HOME_POSE_DEG  # noqa: E402
-from so101.runtime.lockstep import AGAIN_WORD, NOT_WRITTEN_KEY, FrameParts, FrameTag, frame_tag  # noqa: E402
+from so101.runtime.lockstep import (  # noqa: E402
+    AGAIN_WORD, INFERENCE_MS_KEY, NOT_WRITTEN_KEY, FrameParts, FrameTag, frame_tag,
+)
 from so101.runtime.logs import send_diagnostics_to  # noqa: E402
 from so101.bodies.looks import looks_metadata  # noqa: E402
 from so101.tasks import task_named  # noqa: E402
@@ -78,21 +80,25 @@ def main() -> int:
     try:
         settings = EpisodeSettings.from_environ(os.environ)
         task = task_named(settings.task)
-        video_sizes = video_keys_and_sizes(settings.image_size, True)
+        observed = settings.observed
+        video_sizes = video_keys_and_sizes(settings.image_size, True, observed)
         writer: DatasetWriter | EpisodeSpool | None = None
         if settings.record_dir:
             writer = DatasetWriter.open(settings.record_dir, settings.lockstep_fps, video_sizes,
-                                        environment_names=task.object_state_names)
+                                        environment_names=task.object_state_names, environment_state=observed.environment)
         elif settings.spool_dir:
-            writer = EpisodeSpool(settings.spool_dir, settings.lockstep_fps, video_sizes, task.object_state_names)
+            writer = EpisodeSpool(settings.spool_dir, settings.lockstep_fps, video_sizes, task.object_state_names,
+                                  observed.environment)
         if settings.video_dir is not None:
             settings.video_dir.mkdir(parents=True, exist_ok=True)
         results = open(settings.results_path, "a", encoding="utf-8")
     except (ValueError, DatasetError, OSError) as error:
         return cannot_start(error, NODE_ID)
     idle = settings.idle
-    pictures = ("image", "wrist_image") if writer is not None and settings.image_size else (
-        ("image",) if settings.video_dir is not None and settings.image_size else ())
+    # The pictures it waits for: those written, and the front one for --video's mp4s.
+    written = {"image": IMAGE_KEY in video_sizes, "wrist_image": WRIST_IMAGE_KEY in video_sizes}
+    pictures = tuple(input_id for input_id in ("image", "wrist_image") if settings.image_size and (
+        (writer is not None and written[input_id]) or (input_id == "image" and settings.video_dir is not None)))
     observation = ("joint_state", "gripper_state", "object_state", "task_status", *pictures)
     frames = FrameParts(observation if idle else (*observation, "action"))
     clock = EpisodeClock(settings.lockstep_fps, settings.time_limit_s)
@@ -107,6 +113,7 @@ def main() -> int:
     next_frame = 0  # the adopted episode's next frame to record
     whole: dict[int, tuple[FrameTag, dict[str, Any]]] = {}  # frames come whole ahead of next_frame
     not_written: set[int] = set()  # the adopted episode's frames whose action the driver said not to write
+    inferred_ms: dict[int, float] = {}  # the adopted episode's frames a policy took a new chunk at: how long it took
 
     def lay_out() -> None:
         node.send_output("task_cmd", pa.array([f"reset {seeds[index]}"]))
@@ -130,6 +137,7 @@ def main() -> int:
         nonlocal recorder, video
         whole.clear()
         not_written.clear()
+        inferred_ms.clear()
         if recorder is not None:
             recorder.discard()
         if video is not None:
@@ -156,7 +164,9 @@ def main() -> int:
         if video is not None:
             video.finish()
             video = None
-        outcome = Outcome(index, seeds[index], success, tag.frame + 1, clock.seconds(tag.frame), kept=kept)
+        outcome = Outcome(index, seeds[index], success, tag.frame + 1, clock.seconds(tag.frame), kept=kept,
+                          inference_ms=[round(inferred_ms[frame], 2) for frame in sorted(inferred_ms)])
+        inferred_ms.clear()
         results.write(outcome.to_json() + "\n")
         results.flush()
         logger.info("[episodes] %s", outcome.line())
@@ -178,11 +188,12 @@ def main() -> int:
         success = bool(frame["task_status"].to_pylist()[0])
         if recorder is not None and tag.frame not in not_written:
             values = {STATE_KEY: to_lerobot(state_deg), ACTION_KEY: to_lerobot(action_deg),
-                      ENVIRONMENT_KEY: np.asarray(frame["object_state"].to_numpy(zero_copy_only=False), np.float32),
                       SUCCESS_KEY: np.array([success]), REWARD_KEY: np.array([task.reward(success)], dtype=np.float32)}
-            if settings.image_size:
-                values[IMAGE_KEY] = picture(frame["image"], settings.image_size)
-                values[WRIST_IMAGE_KEY] = picture(frame["wrist_image"], settings.image_size)
+            if observed.environment:
+                values[ENVIRONMENT_KEY] = np.asarray(frame["object_state"].to_numpy(zero_copy_only=False), np.float32)
+            for input_id, key in (("image", IMAGE_KEY), ("wrist_image", WRIST_IMAGE_KEY)):
+                if written[input_id] and settings.image_size:
+                    values[key] = picture(frame[input_id], settings.image_size)
             recorder.add_frame(values)
         if video is not None and settings.image_size:
             video.add(picture(frame["image"], settings.image_size))
@@ -226,8 +237,12 @@ def main() -> int:
                 continue
             if tag.frame == 0 and tag.seed == seeds[index] and tag.episode > adopted:
                 begin(tag.episode)  # the body laid it out as asked (the newest such, if asked twice)
-            if event["id"] == "action" and tag.episode == adopted and (event.get("metadata") or {}).get(NOT_WRITTEN_KEY):
-                not_written.add(tag.frame)
+            if event["id"] == "action" and tag.episode == adopted:
+                metadata = event.get("metadata") or {}
+                if metadata.get(NOT_WRITTEN_KEY):
+                    not_written.add(tag.frame)
+                if isinstance(metadata.get(INFERENCE_MS_KEY), float) and tag.frame not in inferred_ms:
+                    inferred_ms[tag.frame] = metadata[INFERENCE_MS_KEY]
             frame = frames.add(event["id"], tag, event["value"])
             if frame is None or tag.episode != adopted or adopted_index != index:
                 continue  # not whole yet; or a frame of the body's start, of an episode before, or of one ended

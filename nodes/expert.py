@@ -69,7 +69,7 @@ def main() -> int:
     text = TEXT[settings.lang]
     frames = FrameParts(OBSERVED)
     expert: Expert | None = None
-    answered = LastAnswer()  # lockstep
+    answered: LastAnswer[tuple[float, ...]] = LastAnswer()  # lockstep
     latest: dict[str, list[float]] = {}  # at the prompt: the newest of each observed input
     started_s: float | None = None  # at the prompt: when `run` came; None: not driving
     node = Node()

@@ -17,7 +17,9 @@ At the prompt (`so101 teleop --policy`) it stands between the prompt and the bod
 does: what comes before it (`typed_cmd`) goes on to the body as it is; `policy_cmd` `on` resets
 the policy and has it drive, an action every `tick` (the dataset's 40 ms) from the newest state,
 until `off`, a typed command takes over, or inference fails (one line of news; the node stays, and
-typed commands still pass). Its news goes out on `policy_status`. The body's limits and ramps
+typed commands still pass), and then says what its inference cost while it drove (chunks, median and
+longest time). A tick that comes while it infers is dropped, not queued: the body holds the last
+targets meanwhile, and the next chunk starts from the newest state. Its news goes out on `policy_status`. The body's limits and ramps
 apply to its commands as to typed ones.
 Settings: so101.policy.settings.PolicySettings.
 """
@@ -27,6 +29,7 @@ from __future__ import annotations
 import logging
 import os
 import sys
+import time
 from pathlib import Path
 from typing import Any
 
@@ -41,7 +44,7 @@ from dora import Node  # noqa: E402
 from so101.dataset.features import ROBOT_TYPE  # noqa: E402
 from so101.policy.features import inputs_for, joint_targets_deg, observation  # noqa: E402
 from so101.policy.settings import PolicySettings  # noqa: E402
-from so101.runtime.lockstep import FrameParts, FrameTag, LastAnswer, frame_tag  # noqa: E402
+from so101.runtime.lockstep import INFERENCE_MS_KEY, FrameParts, FrameTag, LastAnswer, frame_tag  # noqa: E402
 from so101.runtime.logs import send_diagnostics_to  # noqa: E402
 from so101.runtime.node_events import STREAM_KEY, cannot_start, inputs_until_stop  # noqa: E402
 from so101.tasks import task_named  # noqa: E402
@@ -57,6 +60,7 @@ TEXT = {
         "took_over": "[策略] 键入的命令接管了控制,策略停下",
         "no_state": "[策略] 还没有收到 {inputs}:没有开始",
         "failed": "[策略] 推理失败,策略停下:{error}",
+        "timing": "[策略] 这次驾驶推理了 {chunks} 个动作块:中位 {median:.0f} 毫秒,最长 {longest:.0f} 毫秒({device})",
     },
     "en": {
         "loaded": "[policy] {kind} policy loaded from {folder}: it reads {inputs}",
@@ -65,6 +69,8 @@ TEXT = {
         "took_over": "[policy] a typed command took over: the policy stopped",
         "no_state": "[policy] no {inputs} yet: not started",
         "failed": "[policy] inference failed, the policy stopped: {error}",
+        "timing": "[policy] this drive inferred {chunks} action chunks: median {median:.0f} ms, longest {longest:.0f} ms "
+                  "({device})",
     },
 }
 
@@ -110,9 +116,15 @@ class LoadedPolicy:
         """A new episode: the action chunk and any history go."""
         self.policy.reset()
 
-    def act(self, values: dict[str, np.ndarray]) -> np.ndarray:
-        """The next action: the policy's own choice of when to predict a new chunk (select_action)."""
-        return self._run(self.policy.select_action, values)
+    def act(self, values: dict[str, np.ndarray]) -> tuple[np.ndarray, float | None]:
+        """The next action: the policy's own choice of when to predict a new chunk (select_action); and
+        when it took a new one, how long that took, in ms (None when the action came from the chunk)."""
+        # ACT plays a chunk out of its queue; a policy without one infers at every call.
+        queue = getattr(self.policy, "_action_queue", None)
+        inferring = queue is None or len(queue) == 0
+        started_s = time.perf_counter()
+        action = self._run(self.policy.select_action, values)
+        return action, (time.perf_counter() - started_s) * 1000.0 if inferring else None
 
     def chunk(self, values: dict[str, np.ndarray]) -> np.ndarray:
         """A whole action chunk for this observation (chunk x 6), the policy's history untouched: for
@@ -140,7 +152,7 @@ def main() -> int:
     logger.warning(text["loaded"].format(kind=loaded.kind, folder=settings.policy_dir, inputs=", ".join(needed)))
     frames = FrameParts(needed)
     episode: int | None = None  # lockstep: the episode the policy's history belongs to
-    answered = LastAnswer()  # lockstep
+    answered: LastAnswer[tuple[list[float], dict[str, float]]] = LastAnswer()  # lockstep
     latest: dict[str, Any] = {}  # at the prompt: the newest of each input the policy needs
     driving = False  # at the prompt: `on` came, and nothing has stopped it since
     node = Node()
@@ -149,10 +161,25 @@ def main() -> int:
         logger.warning(line)
         node.send_output("policy_status", pa.array([line]))
 
-    def act(frame: dict[str, Any], new_episode: bool = False) -> list[float]:
+    drive_ms: list[float] = []  # at the prompt: each new chunk's inference time since `on`
+
+    def stop(why: str) -> None:
+        """The policy stops driving: why, and what its inference cost while it drove (the body held
+        its last targets meanwhile: a tick that comes while it infers is dropped, not queued)."""
+        nonlocal driving
+        driving = False
+        say(why)
+        if drive_ms:
+            say(text["timing"].format(chunks=len(drive_ms), median=float(np.median(drive_ms)), longest=max(drive_ms),
+                                      device=settings.device))
+        drive_ms.clear()
+
+    def act(frame: dict[str, Any], new_episode: bool = False) -> tuple[list[float], dict[str, float]]:
+        """Six targets, and the metadata that says how long a new chunk's inference took."""
         if new_episode:  # the action chunk and any history of the episode before go
             loaded.reset()
-        return joint_targets_deg(loaded.act(observation(frame, settings.image_size)))
+        action, inference_ms = loaded.act(observation(frame, settings.image_size))
+        return joint_targets_deg(action), {} if inference_ms is None else {INFERENCE_MS_KEY: inference_ms}
 
     with inputs_until_stop(node, close=lambda: None) as inputs:
         for event in inputs:
@@ -163,39 +190,40 @@ def main() -> int:
                 if frame is None:
                     continue
                 try:
-                    targets_deg = answered.to(tag, lambda: act(frame, new_episode=tag.frame == 0 or tag.episode != episode))
+                    targets_deg, timing = answered.to(
+                        tag, lambda: act(frame, new_episode=tag.frame == 0 or tag.episode != episode))
                 except Exception as error:  # noqa: BLE001 (inference that raises: one line, and the node stops)
                     print(f"[{NODE_ID}] cannot go on: inference failed at frame {tag.frame} (seed {tag.seed}): "
                           f"{type(error).__name__}: {error}", file=sys.stderr, flush=True)
                     return 1
                 episode = tag.episode
-                node.send_output("joint_cmd", pa.array(targets_deg, type=pa.float64()), {**tag.metadata(), STREAM_KEY: 1})
+                node.send_output("joint_cmd", pa.array(targets_deg, type=pa.float64()),
+                                 {**tag.metadata(), STREAM_KEY: 1, **timing})
             elif input_id in needed:
                 latest[input_id] = value.to_numpy(zero_copy_only=False)
             elif input_id == "typed_cmd":
                 node.send_output("joint_cmd", value)
                 if driving:
-                    driving = False
-                    say(text["took_over"])
+                    stop(text["took_over"])
             elif input_id == "policy_cmd":
                 word = (value.to_pylist() or [""])[0]
                 if word == "off":
                     if driving:
-                        driving = False
-                        say(text["stopped"])
+                        stop(text["stopped"])
                 elif word == "on" and all(name in latest for name in needed):
                     loaded.reset()
+                    drive_ms.clear()
                     driving = True
                     say(text["driving"].format(kind=loaded.kind))
                 elif word == "on":
                     say(text["no_state"].format(inputs=", ".join(name for name in needed if name not in latest)))
             elif input_id == "tick" and driving:
                 try:
-                    targets_deg = act(latest)
+                    targets_deg, timing = act(latest)
                 except Exception as error:  # noqa: BLE001 (at the prompt: the news, and typed commands still pass)
-                    driving = False
-                    say(text["failed"].format(error=f"{type(error).__name__}: {error}"))
+                    stop(text["failed"].format(error=f"{type(error).__name__}: {error}"))
                     continue
+                drive_ms.extend(timing.values())
                 node.send_output("joint_cmd", pa.array(targets_deg, type=pa.float64()), {STREAM_KEY: NODE_ID})
     return 0
 

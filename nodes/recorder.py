@@ -61,9 +61,10 @@ def main() -> int:
         settings = RecorderSettings.from_environ(os.environ)
         # Opened before joining: a folder that is not this dataset stops the node in one line.
         task = task_named(settings.task) if settings.task else None
-        video_sizes = video_keys_and_sizes(settings.image_size, task is not None)
+        video_sizes = video_keys_and_sizes(settings.image_size, task is not None, settings.observed)
         writer = DatasetWriter.open(settings.root, settings.fps, video_sizes,
-                                    environment_names=task.object_state_names if task else ())
+                                    environment_names=task.object_state_names if task else (),
+                                    environment_state=settings.observed.environment)
     except (ValueError, DatasetError) as error:
         return cannot_start(error, NODE_ID)
     yield_cpu_to_the_body()
@@ -73,7 +74,8 @@ def main() -> int:
                                        "(empty it to record without video)"), NODE_ID)
     reports: queue.Queue[str] = queue.Queue()  # lines from the save thread, sent from this one
     recording = Recording(writer, str(settings.root), settings.fps, settings.lang,
-                          needs_image=settings.image_size is not None, say=reports.put, task=task, looks=settings.looks)
+                          needs_image=settings.image_size is not None, say=reports.put, task=task, looks=settings.looks,
+                          observed=settings.observed)
 
     def send_status(lines: list[str], reply_to: str | None = None) -> None:
         for line in lines:

@@ -30,7 +30,9 @@ import pytest
 
 from so101.dataset import commit, video
 from so101.dataset.episode import EpisodeRecorder
-from so101.dataset.features import ACTION_KEY, IMAGE_KEY, MOTOR_NAMES, ROBOT_TYPE, STATE_KEY
+from so101.dataset.features import (
+    ACTION_KEY, IMAGE_KEY, MOTOR_NAMES, ROBOT_TYPE, STATE_KEY, WRIST_IMAGE_KEY, video_keys_and_sizes,
+)
 from so101.dataset.layout import DatasetError
 from so101.dataset.reader import Dataset
 from so101.dataset.stats import QUANTILE_BINS
@@ -986,3 +988,51 @@ def test_a_tasks_episodes_carry_the_environment_state_reward_and_success(tmp_pat
     record(plain, [("pick", 3)], video=False)
     with pytest.raises(DatasetError, match=r"holds episodes without a task: record a task's episodes \(--task\) in another folder$"):
         DatasetWriter.open(plain, FPS, {}, environment_names=names)
+    # What the frames observe is the folder's too: one that shows the objects' poses takes no episode
+    # without them, and the other way round.
+    with pytest.raises(DatasetError, match=r"show the objects' poses \(observation.environment_state\): record with "
+                                           r"--observe including environment, or use another folder$"):
+        DatasetWriter.open(root, FPS, {}, environment_names=names, environment_state=False)
+
+
+@pytest.mark.parametrize("text, task, video, problem", [
+    ("state,environment,front,wrist", True, True, None),
+    ("state,front,wrist", True, True, None),
+    ("state, front", False, True, None),
+    ("state,environment", False, False, "environment is a task's objects: it goes with --task"),
+    ("state,wrist", False, True, "the wrist camera is drawn for a task's episodes: wrist goes with --task"),
+    ("state,front", True, False, "front and wrist are the cameras, and there are none here (--no-video)"),
+])
+def test_what_the_frames_observe_reads_back_as_written_and_asks_for_no_more_than_the_body_has(text, task, video, problem):
+    from so101.observe import observed_for, parse_observed
+
+    observed = parse_observed(text)
+    assert str(observed) == text.replace(" ", "") and parse_observed(str(observed)) == observed
+    assert observed.problem(task, video) == problem
+    assert observed_for(task, video).problem(task, video) is None  # all that the body has: the default
+    if problem is None and video:
+        assert list(video_keys_and_sizes((96, 72), task, observed)) == [
+            key for key, shown in ((IMAGE_KEY, observed.front), (WRIST_IMAGE_KEY, observed.wrist)) if shown]
+
+
+def test_a_dataset_that_leaves_the_objects_poses_out_keeps_reward_and_success(tmp_path: Path) -> None:
+    """`--observe state,front,wrist`: a task's episodes without observation.environment_state, for a
+    policy that sees; its reward and success stay (they are not observations)."""
+    from so101.dataset.features import ENVIRONMENT_KEY, REWARD_KEY, SUCCESS_KEY
+    from so101.tasks import CUBE_TO_BOX
+
+    names = CUBE_TO_BOX.object_state_names
+    root = tmp_path / "seen"
+    with DatasetWriter.open(root, FPS, {}, environment_names=names, environment_state=False) as writer:
+        episode = writer.start_episode("put the cube in the box")
+        with pytest.raises(DatasetError, match="not a feature of this dataset"):
+            episode.add_frame({**frame(0, 0, video=False), ENVIRONMENT_KEY: np.zeros(len(names), np.float32),
+                               REWARD_KEY: np.array([0.0], np.float32), SUCCESS_KEY: np.array([False])})
+        for i in range(5):
+            episode.add_frame({**frame(0, i, video=False), REWARD_KEY: np.array([0.0], np.float32),
+                               SUCCESS_KEY: np.array([False])})
+        episode.save()
+    assert list(read_json(root / "meta/info.json")["features"])[:4] == [ACTION_KEY, STATE_KEY, REWARD_KEY, SUCCESS_KEY]
+    with pytest.raises(DatasetError, match=r"do not show the objects' poses .*: record with --observe without "
+                                           r"environment, or use another folder$"):
+        DatasetWriter.open(root, FPS, {}, environment_names=names)

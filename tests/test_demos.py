@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from so101.bodies.registry import SIMULATED_BODIES
-from so101.dataset.features import ACTION_KEY, ENVIRONMENT_KEY, STATE_KEY, SUCCESS_KEY
+from so101.dataset.features import ACTION_KEY, ENVIRONMENT_KEY, STATE_KEY, SUCCESS_KEY, WRIST_IMAGE_KEY
 from so101.dataset.layout import SEEDS_KEY
 from so101.dataset.reader import Dataset
 from so101.dataset.writer import DatasetWriter
@@ -125,6 +125,15 @@ def test_demos_with_video_append_to_the_folder_and_every_episode_reads(tmp_path)
         assert len(front) == len(wrist) == len(frames[STATE_KEY])
         assert front[0].shape == (120, 160, 3)
         assert np.abs(front[-1].astype(int) - front[0].astype(int)).mean() > 1.0  # the arm and the cube moved
+    # --observe: frames for a policy that sees what a real arm would, without the simulator's object poses.
+    seen = tmp_path / "seen"
+    result = so101("demos", str(seen), "--task", "cube_to_box", "--episodes", "1", "--camera-size", "96x72",
+                   "--observe", "state,wrist")
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert "observing state,wrist (wrist 96x72)" in result.stdout.splitlines()[0]
+    dataset = Dataset.open(seen)
+    assert [key for key in dataset.info["features"] if key.startswith("observation")] == [STATE_KEY, WRIST_IMAGE_KEY]
+    assert len(list(dataset.episode_images(0, WRIST_IMAGE_KEY))) == len(dataset.episode_frames(0)[STATE_KEY])
 
 
 def test_two_workers_write_the_dataset_one_worker_writes_byte_for_byte(tmp_path):
@@ -290,6 +299,10 @@ def test_a_full_disk_stops_demos_in_one_line_and_the_saved_episodes_stay_whole(t
     (["eval", "--idle", "--task", "cube_to_box", "--coordinator", "10.0.0.1:port", "--machine", "desk"],
      "--coordinator '10.0.0.1:port' is not ADDR[:PORT]"),
     (["demos", "OTHER", "--task", "cube_to_box", "--no-video"], "fps"),
+    (["demos", "DIR", "--task", "cube_to_box", "--observe", "front,wrist"], "state is always shown (the arm's joints)"),
+    (["demos", "DIR", "--task", "cube_to_box", "--observe", "state,cube"], "'cube' is not something the frames can show"),
+    (["demos", "DIR", "--task", "cube_to_box", "--no-video", "--observe", "state,front"],
+     "--observe state,front: front and wrist are the cameras, and there are none here (--no-video)"),
 ])
 def test_bad_input_is_one_line_and_starts_nothing(tmp_path, args, message):
     other = tmp_path / "other"

@@ -9,7 +9,9 @@ from so101.bodies.registry import SIMULATED_BODIES
 from so101.runtime.lockstep import (
     FrameParts, FrameTag, LastAnswer, answers, frame_tag, lockstep_rates, steps_per_frame,
 )
-from so101.tasks.episodes import EpisodeClock, Outcome, read_outcomes, score_line, split_seeds, wilson_interval
+from so101.tasks.episodes import (
+    EpisodeClock, Outcome, inference_line, read_outcomes, score_line, split_seeds, wilson_interval,
+)
 
 
 # -- the score --------------------------------------------------------------------------------------------------
@@ -36,6 +38,15 @@ def test_the_score_line_names_the_rate_its_interval_and_the_mean_time():
     outcomes = [Outcome(0, 0, True, 201, 8.0), Outcome(1, 1, False, 751, 30.0), Outcome(2, 2, True, 251, 10.0)]
     assert score_line(outcomes) == ("success: 2/3 (67%, 95% CI 21–94%, Wilson), mean time to success 9.00 s")
     assert score_line([Outcome(0, 5, False, 10, 0.4)]).endswith("mean time to success none (no success)")
+
+
+def test_a_policys_inference_times_are_summed_up_over_its_episodes_and_no_driver_that_says_none_gets_a_line():
+    outcomes = [Outcome(0, 0, True, 201, 8.0, inference_ms=[10.0, 12.0, 30.0]), Outcome(1, 1, False, 751, 30.0),
+                Outcome(2, 2, True, 251, 10.0, inference_ms=[11.0, 200.0])]
+    assert inference_line(outcomes) == ("inference: 5 action chunks, median 12 ms, 95th percentile 166 ms, "
+                                        "longest 200 ms")
+    assert inference_line(outcomes[1:2]) is None
+    assert Outcome.from_json(outcomes[0].to_json()) == outcomes[0]
 
 
 def test_an_outcome_goes_through_its_json_line_unchanged_and_reads_as_a_person_would():

@@ -218,8 +218,50 @@ def policy_python():
         pytest.skip(f"no policy environment, so the policy node is not run against a checkpoint: {error}")
 
 
-def probe(python, frames, **env):
-    asked = {"env": {"SO101_POLICY_DIR": str(TINY_POLICY), "SO101_LANG": "en", **env}, "frames": frames}
+SEEN_SIZE = (32, 24)  # the tiny policy that sees: its pictures' (width, height)
+
+
+@pytest.fixture(scope="session")
+def seeing_policy(policy_python, tmp_path_factory):
+    """A tiny ACT that sees: the front and wrist cameras at 32x24 and the joints, no
+    observation.environment_state, as `so101 demos --observe state,front,wrist` datasets train.
+    Made here by lerobot-train, 2 steps on 2 episodes of random pictures, because its ResNet-18
+    alone weighs 45 MB, too much to keep in tests/data."""
+    from so101.dataset.features import REWARD_KEY, SUCCESS_KEY, video_keys_and_sizes
+    from so101.dataset.writer import DatasetWriter
+    from so101.observe import parse_observed
+
+    root, out = tmp_path_factory.mktemp("seen") / "dataset", tmp_path_factory.mktemp("seeing") / "train"
+    observed = parse_observed("state,front,wrist")
+    pictures = np.random.default_rng(0)
+    width, height = SEEN_SIZE
+    with DatasetWriter.open(root, 25, video_keys_and_sizes(SEEN_SIZE, True, observed), environment_names=NAMES,
+                            environment_state=False) as writer:
+        for _ in range(2):
+            episode = writer.start_episode(CUBE_TO_BOX.instruction)
+            for i in range(30):
+                state = to_lerobot([i, -i, 2 * i, 0.5 * i, 0.0, 20.0])
+                episode.add_frame({STATE_KEY: state, ACTION_KEY: state + 1.0, REWARD_KEY: np.zeros(1, np.float32),
+                                   SUCCESS_KEY: np.array([False]),
+                                   **{key: pictures.integers(0, 256, (height, width, 3), dtype=np.uint8)
+                                      for key in (IMAGE_KEY, WRIST_IMAGE_KEY)}})
+            episode.save()
+    trainer = policy_python.parent / "lerobot-train"
+    done = subprocess.run([str(trainer), "--dataset.repo_id=local/seen", f"--dataset.root={root}",
+                           "--dataset.video_backend=pyav", "--policy.type=act", "--policy.device=cpu",
+                           "--policy.push_to_hub=false", "--policy.pretrained_backbone_weights=null",
+                           "--policy.dim_model=32", "--policy.n_heads=2", "--policy.dim_feedforward=64",
+                           "--policy.n_encoder_layers=1", "--policy.n_decoder_layers=1", "--policy.use_vae=false",
+                           "--policy.chunk_size=10", "--policy.n_action_steps=10", "--steps=2", "--batch_size=2",
+                           "--save_freq=2", "--num_workers=0", "--seed=1", "--wandb.enable=false", f"--output_dir={out}"],
+                          capture_output=True, text=True, timeout=600,
+                          env={**__import__("os").environ, "HF_HUB_OFFLINE": "1"})
+    assert done.returncode == 0, done.stderr[-3000:]
+    return out / "checkpoints" / "last" / "pretrained_model"
+
+
+def probe(python, frames, policy=TINY_POLICY, **env):
+    asked = {"env": {"SO101_POLICY_DIR": str(policy), "SO101_LANG": "en", **env}, "frames": frames}
     done = subprocess.run([str(python), str(ROOT / "tests" / "helpers" / "policy_probe.py")], input=json.dumps(asked),
                           capture_output=True, text=True, timeout=300, env={**__import__("os").environ, "HF_HUB_OFFLINE": "1"})
     assert done.stdout.strip(), done.stderr
@@ -246,6 +288,20 @@ def test_the_node_answers_each_frame_plays_its_chunk_out_and_resets_at_each_epis
     assert all(-10.0 - 1e-6 <= targets[5] <= 100.0 + 1e-6 for targets in (first, second, third))
 
 
+def test_a_policy_that_sees_answers_from_the_pictures_and_the_joints_alone(policy_python, seeing_policy):
+    inputs, _ = read_policy_features(seeing_policy)
+    assert ENVIRONMENT_KEY not in inputs and inputs[IMAGE_KEY] == inputs[WRIST_IMAGE_KEY] == (3, 24, 32)
+    here = [10.0, -20.0, 30.0, 40.0, 0.0]
+    dark, bright = [0] * (32 * 24 * 3), [255] * (32 * 24 * 3)
+    # The same joints, other pictures: a new episode each, so that each answer is its chunk's first.
+    frames = [[1, 0, 7, here, [5.0], None, dark, dark], [2, 0, 7, here, [5.0], None, bright, bright],
+              [3, 0, 7, here, [5.0], None, dark, dark]]
+    result, stderr = probe(policy_python, frames, seeing_policy, SO101_LOCKSTEP_PICTURES="32x24")
+    assert result["code"] == 0, stderr
+    from_dark, from_bright, dark_again = (answer[2] for answer in result["joint_cmd"])
+    assert from_dark == dark_again and from_dark != from_bright  # what it sees moves its answer
+
+
 def test_inference_that_fails_stops_the_node_in_one_line(policy_python):
     nan = float("nan")
     result, stderr = probe(policy_python, [[1, 0, 3, [nan] * 5, [nan], [nan] * 10]])
@@ -265,9 +321,12 @@ def test_eval_scores_a_policy_in_lockstep_episode_by_episode(policy_python):
                         "and how --policy.normalization_mapping scales it")
     assert lines[1].startswith(f"eval: cube_to_box on pybullet, the policy in {TINY_POLICY}, seeds 5..6")
     # 20 steps of training: it drives the arm for the whole time limit, and does not do the task.
-    assert lines[2:] == ["episode 0 (seed 5): failed (time limit, 2.0 s), 51 frames",
-                         "episode 1 (seed 6): failed (time limit, 2.0 s), 51 frames",
-                         "success: 0/2 (0%, 95% CI 0–66%, Wilson), mean time to success none (no success)"]
+    assert lines[2:5] == ["episode 0 (seed 5): failed (time limit, 2.0 s), 51 frames",
+                          "episode 1 (seed 6): failed (time limit, 2.0 s), 51 frames",
+                          "success: 0/2 (0%, 95% CI 0–66%, Wilson), mean time to success none (no success)"]
+    # Its chunks are 10 actions: a new one at frames 0, 10, ... 50 of each episode, each timed.
+    assert re.fullmatch(r"inference: 12 action chunks, median \d+ ms, 95th percentile \d+ ms, longest \d+ ms \(on cpu\)",
+                        lines[5]), lines[5]
 
 
 def test_a_python_without_lerobot_refuses_the_policy_node_in_one_line(tmp_path):
@@ -315,12 +374,16 @@ def test_the_prompt_says_how_to_ask_the_policy_and_without_one_how_to_start_it()
 
 
 @pytest.mark.skipif(__import__("shutil").which("tmux") is None, reason="tmux is not installed (.ci/run installs it)")
-def test_at_the_prompt_the_policy_drives_and_a_typed_command_takes_over(tmp_path, policy_python):
+@pytest.mark.parametrize("kind", ["state-only", "seeing"])
+def test_at_the_prompt_the_policy_drives_and_a_typed_command_takes_over(tmp_path, policy_python, kind, request):
+    """The state-only policy reads the body's objects; the one that sees, the camera node's two pictures
+    (drawn at 25 a second, the rate it learned from): `policy on` starts only once all it reads has come."""
     import time
 
     from tests.helpers.terminal import start_teleop
 
-    terminal, _, _ = start_teleop(tmp_path, "en", extra=f"--task cube_to_box --seed 3 --policy {TINY_POLICY} "
+    policy = TINY_POLICY if kind == "state-only" else request.getfixturevalue("seeing_policy")
+    terminal, _, _ = start_teleop(tmp_path, "en", extra=f"--task cube_to_box --seed 3 --policy {policy} "
                                                          f"--policy-python {policy_python}", HF_HUB_OFFLINE="1")
     try:
         terminal.seen = terminal.wait_for_prompt(timeout_s=180).start()
@@ -335,6 +398,10 @@ def test_at_the_prompt_the_policy_drives_and_a_typed_command_takes_over(tmp_path
         terminal.command("0 40", re.escape("  → joint 0 (shoulder_pan) → 40°"))
         terminal.wait_for(re.escape("  [policy] a typed command took over: the policy stopped"), timeout_s=10,
                           after=terminal.seen)
+        # What its inference cost while it drove: chunks of 10 actions, one every 40 ms, for about 3 s.
+        chunks = terminal.wait_for(r"  \[policy\] this drive inferred (\d+) action chunks: median \d+ ms, longest \d+ ms "
+                                   r"\(cpu\)", timeout_s=10, after=terminal.seen)
+        assert 3 <= int(chunks.group(1)) <= 20, chunks.group(0)
         time.sleep(3.0)  # the policy sends nothing more: the arm stays where it was typed to
         assert abs(float(terminal.command("state", state).group(1)) - 40.0) < 2.0
         terminal.type_line("quit")
@@ -345,11 +412,18 @@ def test_at_the_prompt_the_policy_drives_and_a_typed_command_takes_over(tmp_path
 
 @pytest.mark.parametrize("extra, message", [
     ("--policy /nowhere", "so101 teleop: /nowhere is not a folder"),
+    ("--policy {seeing}", "so101 teleop: the policy sees the task's cameras (the wrist's is drawn for a task's scene): "
+                          "add --task cube_to_box"),
+    ("--task cube_to_box --record {tmp}/seen --policy {seeing}",
+     "so101 teleop: the policy sees 32x24 pictures, and one camera draws them for the recording too: record at "
+     "--camera-size 32x24"),
     (f"--policy {TINY_POLICY} --policy-python /no/python", "so101 teleop: the policy reads a task's objects"),
     (f"--task cube_to_box --policy {TINY_POLICY} --policy-python /no/python", "so101 teleop: /no/python does not exist"),
     ("--policy-python /no/python", "so101 teleop: --policy-python goes with --policy DIR"),
 ])
-def test_teleop_with_a_policy_it_cannot_run_says_why_in_one_line(extra, message):
+def test_teleop_with_a_policy_it_cannot_run_says_why_in_one_line(tmp_path, extra, message):
+    seeing = write_config(tmp_path / "seeing", {STATE_KEY: (6,), IMAGE_KEY: (3, 24, 32), WRIST_IMAGE_KEY: (3, 24, 32)})
+    extra = extra.format(seeing=f"{seeing} --policy-python {sys.executable}", tmp=tmp_path)
     done = subprocess.run([str(SO101), "teleop", "--mode", "direct", "--lang", "en", *extra.split()],
                           capture_output=True, text=True, timeout=60, stdin=subprocess.DEVNULL)
     assert done.returncode == 2 and done.stderr.startswith(message) and len(done.stderr.strip().splitlines()) == 1, \

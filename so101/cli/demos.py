@@ -17,7 +17,8 @@ import argparse
 import time
 from pathlib import Path
 
-from so101.runtime.argtypes import add_camera_size_option
+from so101.observe import OBSERVE_HELP
+from so101.runtime.argtypes import add_camera_size_option, observed_list
 from so101.launch.lockstep import add_common_arguments, cluster_place, expert_driver, fail, flows_for, log_place, refuse_real, run_flows, work_folder
 from so101.dataset.settings import DEFAULT_IMAGE_SIZE
 from so101.runtime.lockstep import DEFAULT_LOCKSTEP_FPS
@@ -34,11 +35,13 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
     parser.add_argument("--keep", choices=("success", "all"), default="success",
                         help="which episodes are written (default success: failed ones are counted, not written)")
     parser.add_argument("--no-video", action="store_true", help="leave the cameras out (a state-only dataset)")
+    parser.add_argument("--observe", type=observed_list, default=None, metavar="LIST", help=OBSERVE_HELP)
     add_camera_size_option(parser, DEFAULT_IMAGE_SIZE, "the cameras' picture size")
 
 
 def run(args: argparse.Namespace) -> int:
-    from so101.dataset.features import video_keys_and_sizes
+    from so101.dataset.features import IMAGE_KEY, WRIST_IMAGE_KEY, video_keys_and_sizes
+    from so101.observe import OBSERVE_ENV_VAR, observed_for
     from so101.dataset.layout import DatasetError
     from so101.dataset.spool import pop, spooled
     from so101.dataset.writer import DatasetWriter
@@ -51,24 +54,34 @@ def run(args: argparse.Namespace) -> int:
     if isinstance(place, str):
         return fail(f"so101 demos: {place}")
     root = args.dataset.expanduser().resolve()
-    picture_size = None if args.no_video else args.image_size
+    observed = args.observe or observed_for(task=True, video=not args.no_video)
+    problem = observed.problem(task=True, video=not args.no_video)
+    if problem:
+        return fail(f"so101 demos: --observe {observed}: {problem}")
+    picture_size = args.image_size if observed.front or observed.wrist else None
+    video_sizes = video_keys_and_sizes(picture_size, True, observed)
     merged = args.workers > 1
     try:  # another dataset's folder (other features, another rate) is refused here, before anything starts
-        opened = DatasetWriter.open(root, DEFAULT_LOCKSTEP_FPS, video_keys_and_sizes(picture_size, True),
-                                    environment_names=task_named(args.task).object_state_names)
+        opened = DatasetWriter.open(root, DEFAULT_LOCKSTEP_FPS, video_sizes,
+                                    environment_names=task_named(args.task).object_state_names,
+                                    environment_state=observed.environment)
     except DatasetError as error:
         return fail(f"so101 demos: {error}")
     writer = opened if merged else None
     if not merged:  # the runner writes it
         opened.close()
     work = work_folder("demos")
-    flows = flows_for(args, work, expert_driver(args), ("image", "wrist_image"), picture_size,
+    pictures = tuple(input_id for input_id, key in (("image", IMAGE_KEY), ("wrist_image", WRIST_IMAGE_KEY))
+                     if key in video_sizes)
+    flows = flows_for(args, work, expert_driver(args), pictures, picture_size,
                       lambda folder: {"SO101_SPOOL_DIR" if merged else "SO101_RECORD_DIR": str(folder / "spool" if merged else root),
-                                      "SO101_KEEP": args.keep})
-    cameras = f"front and wrist {flows[0].picture_size}" if flows[0].picture_size else "no video"
+                                      "SO101_KEEP": args.keep, OBSERVE_ENV_VAR: str(observed)})
+    cameras = (f"{' and '.join(name for name in ('front', 'wrist') if getattr(observed, name))} {flows[0].picture_size}"
+               if flows[0].picture_size else "no video")
     workers = f", {args.workers} workers merged in seed order" if merged else ""
     print(f"demos: {args.task} on {args.body} by the expert (noise {args.noise:g}, misses {args.misses:g}), seeds {args.seed}.."
-          f"{args.seed + args.episodes - 1}, {cameras}, into {root}{workers} (logs: {log_place(args, work)})", flush=True)
+          f"{args.seed + args.episodes - 1}, observing {observed} ({cameras}), into {root}{workers} "
+          f"(logs: {log_place(args, work)})", flush=True)
     started = time.monotonic()
     kept = 0
 

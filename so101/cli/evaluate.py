@@ -26,7 +26,7 @@ from so101.launch.lockstep import (
 from so101.dataset.settings import DEFAULT_IMAGE_SIZE
 from so101.policy.environment import default_dir, python_in
 from so101.runtime.dataflow import POLICY_NODE_FILE
-from so101.tasks.episodes import score_line
+from so101.tasks.episodes import inference_line, score_line
 
 
 def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
@@ -84,6 +84,9 @@ def run(args: argparse.Namespace) -> int:
     if problem:
         return fail(f"so101 eval: {problem}")
     print(score_line(outcomes), flush=True)
+    inference = inference_line(outcomes)
+    if inference:
+        print(f"{inference} (on {args.policy_device})", flush=True)
     return 0
 
 

@@ -38,11 +38,13 @@ from so101.launch.beside_prompt import (
     task_problem,
 )
 from so101.policy.settings import torch_device
-from so101.runtime.argtypes import add_camera_size_option, add_language_option, whole_number
+from so101.observe import OBSERVE_ENV_VAR, OBSERVE_HELP, Observed, observed_for
+from so101.runtime.argtypes import add_camera_size_option, add_language_option, observed_list, whole_number
 from so101.runtime.dataflow import (
     LEADER_READY_MARKS, LOADED_MARKS, POLICY_READY_MARKS, PROMPT_NODE_FILE, WEB_VIEW_MARKS, dataflow_copy,
-    with_expert, with_leader, with_policy, with_recorder, with_task,
+    with_camera, with_expert, with_leader, with_policy, with_recorder, with_task,
 )
+from so101.runtime.lockstep import DEFAULT_LOCKSTEP_FPS
 from so101.tasks import task_named
 
 
@@ -62,6 +64,7 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
     parser.add_argument("--looks", choices=LOOKS_CHOICES, default=DEFAULT_LOOKS,
                         help="--task --record: the cameras' pictures, fixed (default) or varied (each layout's seed draws "
                              "its light, floor and object colours and camera placement; the dataset keeps them)")
+    parser.add_argument("--observe", type=observed_list, default=None, metavar="LIST", help=f"--record: {OBSERVE_HELP}")
     add_camera_size_option(parser, DEFAULT_IMAGE_SIZE, "--record on a simulation: each camera's pictures, stored as "
                                                        "video; `so101 bench --cameras --camera-size WxH` says what a size costs")
     parser.add_argument(
@@ -120,9 +123,16 @@ def run(args: argparse.Namespace) -> int:
         print(f"so101 teleop: --looks {args.looks} goes with --task NAME and --record DIR on a simulated body: "
               "the task's cameras draw only while recording", file=sys.stderr)
         return 2
+    if args.observe is not None and args.record is None:
+        print("so101 teleop: --observe says what a recording's frames show: it goes with --record DIR", file=sys.stderr)
+        return 2
     if args.record is not None:
-        problem = add_recorder(descriptor, launch.body, args.record.expanduser().resolve(), args.fps, args.lang,
-                               args.task, args.image_size, args.looks)
+        observed = args.observe or observed_for(task=args.task is not None, video=launch.body.simulated)
+        problem = observed.problem(task=args.task is not None, video=launch.body.simulated,
+                                   why_no_video="the real arm has no camera of its own")
+        problem = problem and f"--observe {observed}: {problem}"
+        problem = problem or add_recorder(descriptor, launch.body, args.record.expanduser().resolve(), args.fps,
+                                          args.lang, args.task, args.image_size, args.looks, observed)
         if problem:
             print(f"so101 teleop: {problem}", file=sys.stderr)
             return 2
@@ -144,9 +154,17 @@ def add_policy(descriptor: dict, body: BodyKind, args: argparse.Namespace) -> st
         chosen = choose_policy(args.policy, args.policy_python, args.task, names)
     except ValueError as error:
         return str(error)
-    if chosen.picture_size is not None:
-        return ("the policy sees the cameras, and at the prompt the body draws no wrist picture: score it with "
-                "so101 eval --policy, where the body draws both for each frame")
+    if chosen.picture_size is not None:  # the camera node draws what it sees, at the rate it learned from
+        width, height = chosen.picture_size
+        if not body.simulated:
+            return ("the policy sees cameras, and the real arm has none here: run it on a simulation "
+                    "(--body pybullet or mujoco)")
+        if not args.task:
+            return "the policy sees the task's cameras (the wrist's is drawn for a task's scene): add --task cube_to_box"
+        if args.record is not None and tuple(args.image_size) != chosen.picture_size:
+            return (f"the policy sees {width}x{height} pictures, and one camera draws them for the recording too: "
+                    f"record at --camera-size {width}x{height}")
+        with_camera(descriptor, body.node_id, {"SO101_RECORD_IMAGE_SIZE": f"{width}x{height}"}, DEFAULT_LOCKSTEP_FPS)
     for line in chosen.notes():
         print(f"so101 teleop: {line}", flush=True)
     env = {**chosen.env(args.task or "", args.policy_device), "SO101_LANG": args.lang}
@@ -178,21 +196,24 @@ def add_leader(descriptor: dict, body: BodyKind, port: str | None, calibration_f
 
 
 def add_recorder(descriptor: dict, body: BodyKind, dataset_dir: Path, fps: int, lang: str,
-                 task: str | None, image_size: tuple[int, int], looks: str = DEFAULT_LOOKS) -> str | None:
+                 task: str | None, image_size: tuple[int, int], looks: str = DEFAULT_LOOKS,
+                 observed: Observed | None = None) -> str | None:
     """The recorder (and a simulation's camera) added to `descriptor`; or why DIR cannot take
     these episodes, in one line, before anything starts."""
     from so101.dataset.layout import DatasetError
     from so101.dataset.writer import DatasetWriter
 
-    pictures = image_size if body.simulated else None  # the real arm has no camera of its own
+    observed = observed or observed_for(task=task is not None, video=body.simulated)
+    pictures = image_size if observed.front or observed.wrist else None  # the real arm has no camera of its own
     try:  # checked now, and let go: the recorder node opens it again
-        DatasetWriter.open(dataset_dir, fps, video_keys_and_sizes(pictures, task is not None),
-                           environment_names=task_named(task).object_state_names if task else ()).close()
+        DatasetWriter.open(dataset_dir, fps, video_keys_and_sizes(pictures, task is not None, observed),
+                           environment_names=task_named(task).object_state_names if task else (),
+                           environment_state=observed.environment).close()
     except DatasetError as error:
         return str(error)
     size_text = f"{pictures[0]}x{pictures[1]}" if pictures else ""
     recorder_env = {"SO101_RECORD_DIR": str(dataset_dir), "SO101_RECORD_FPS": str(fps),
-                    "SO101_RECORD_IMAGE_SIZE": size_text, "SO101_LANG": lang}
+                    "SO101_RECORD_IMAGE_SIZE": size_text, "SO101_LANG": lang, OBSERVE_ENV_VAR: str(observed)}
     camera_env = {"SO101_RECORD_IMAGE_SIZE": size_text} if pictures else None
     if camera_env is not None and looks != DEFAULT_LOOKS:  # the camera draws them, the recorder keeps them
         camera_env["SO101_LOOKS"] = recorder_env["SO101_LOOKS"] = looks

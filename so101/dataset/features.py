@@ -13,6 +13,7 @@ from typing import Sequence
 import numpy as np
 import numpy.typing as npt
 
+from so101.observe import ALL_OBSERVED, Observed
 from so101.robot import ACTUATED_JOINTS, GRIPPER_COMMAND_INDEX
 
 DEFAULT_FPS = 30
@@ -59,9 +60,12 @@ def from_lerobot(values: Sequence[float] | npt.NDArray[np.floating]) -> Float64A
     return angles
 
 
-def video_keys_and_sizes(image_size: tuple[int, int] | None, task: bool) -> dict[str, tuple[int, int]]:
+def video_keys_and_sizes(image_size: tuple[int, int] | None, task: bool,
+                         observed: Observed = ALL_OBSERVED) -> dict[str, tuple[int, int]]:
     """The videos an episode holds, each with its (width, height): the front camera's where there
-    are pictures, and with a task the wrist camera's too, the same size; {} without pictures."""
+    are pictures, and with a task the wrist camera's too, the same size, each as far as `observed`
+    shows it; {} without pictures."""
     if image_size is None:
         return {}
-    return {IMAGE_KEY: image_size, **({WRIST_IMAGE_KEY: image_size} if task else {})}
+    return {**({IMAGE_KEY: image_size} if observed.front else {}),
+            **({WRIST_IMAGE_KEY: image_size} if task and observed.wrist else {})}

@@ -78,17 +78,18 @@ LOOKS_KEY = "so101_episode_looks"
 
 
 def recorder_features(video_sizes: Mapping[str, tuple[int, int]],
-                      environment_names: Sequence[str] = ()) -> dict[str, dict[str, Any]]:
+                      environment_names: Sequence[str] = (), environment_state: bool = True) -> dict[str, dict[str, Any]]:
     """The features a DatasetWriter writes, in LeRobot's order: ours, then LeRobot's defaults.
 
     video_sizes: each video feature's (width, height), e.g. {IMAGE_KEY: (320, 240)}; {} for none.
     environment_names: a task's object_state names (so101.tasks); with them, a frame also holds
-    the environment state, the reward and success, as LeRobot's simulation datasets do."""
+    the environment state (unless not `environment_state`: a dataset for a policy that sees), the
+    reward and success, as LeRobot's simulation datasets do."""
     features: dict[str, dict[str, Any]] = {
         ACTION_KEY: {"dtype": "float32", "shape": [len(MOTOR_NAMES)], "names": list(MOTOR_NAMES)},
         STATE_KEY: {"dtype": "float32", "shape": [len(MOTOR_NAMES)], "names": list(MOTOR_NAMES)},
     }
-    if environment_names:
+    if environment_names and environment_state:
         features[ENVIRONMENT_KEY] = {"dtype": "float32", "shape": [len(environment_names)],
                                      "names": list(environment_names)}
     for key, (width, height) in video_sizes.items():

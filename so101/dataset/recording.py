@@ -24,6 +24,7 @@ from so101.dataset.features import (
     ACTION_KEY, ENVIRONMENT_KEY, IMAGE_KEY, REWARD_KEY, STATE_KEY, SUCCESS_KEY, WRIST_IMAGE_KEY, to_lerobot,
 )
 from so101.dataset.messages import COMMANDS, RecordCommand
+from so101.observe import ALL_OBSERVED, Observed
 from so101.robot import ACTUATED_JOINTS, NUM_ARM_JOINTS
 from so101.tasks.cube_to_box import CubeToBox
 
@@ -119,6 +120,7 @@ class Recording:
 
     `say(line)` reports what happens later (a save that ended); commands return their replies.
     `needs_image`: the dataset has video, so a frame waits for the first picture.
+    `observed`: what the frames show (so101.observe), as far as the body has it.
     `task`: the body runs this task (so101.tasks), so a frame holds its objects' poses, its reward
     and whether it succeeded, and waits for the first object_state; with video, the wrist camera's
     picture too, and it waits for the first of those.
@@ -126,10 +128,10 @@ class Recording:
 
     def __init__(self, writer: Writer, root: str, fps: int, lang: str, needs_image: bool,
                  say: Callable[[str], None], clock: Callable[[], float] = time.monotonic, task: CubeToBox | None = None,
-                 looks: str = DEFAULT_LOOKS):
+                 looks: str = DEFAULT_LOOKS, observed: Observed = ALL_OBSERVED):
         self.writer, self.root, self.fps = writer, root, fps
         self.text = TEXT[lang]
-        self.needs_image = needs_image
+        self.needs_image = needs_image and observed.front
         self.say = say
         self.clock = clock
         self.arm_deg: tuple[float, ...] | None = None
@@ -139,7 +141,8 @@ class Recording:
         self.task = task
         self.object_state: npt.NDArray[np.float32] | None = None
         self.wrist_image: npt.NDArray[np.uint8] | None = None
-        self.needs_wrist_image = needs_image and task is not None
+        self.needs_wrist_image = needs_image and task is not None and observed.wrist
+        self.shows_environment = observed.environment
         self.success = False
         self.looks = looks  # the pictures' looks (so101.bodies.looks), drawn from the layout's seed
         self.seed: int | None = None  # the layout's, from task_status
@@ -206,8 +209,9 @@ class Recording:
                 frame[IMAGE_KEY] = self.image
             if self.needs_wrist_image:
                 frame[WRIST_IMAGE_KEY] = self.wrist_image
-            if self.task is not None:
+            if self.task is not None and self.shows_environment:
                 frame[ENVIRONMENT_KEY] = self.object_state
+            if self.task is not None:
                 frame[REWARD_KEY] = np.array([self.task.reward(self.success)], dtype=np.float32)
                 frame[SUCCESS_KEY] = np.array([self.success])
             for _ in range(due):
@@ -244,12 +248,12 @@ class Recording:
         self.episode = self.writer.start_episode(task)
         if self.task is not None and self.seed is not None:  # the layout it starts from, and how it looks
             self.episode.seed = self.seed
-            if self.needs_image:
+            if self.needs_image or self.needs_wrist_image:
                 self.episode.looks = looks_metadata(self.looks, self.seed)
         self._frame_clock = None
         self.last_task = task
         line = self.text["started"].format(episode=self.episode_index, task=task)
-        if self.needs_image and self.image is None:
+        if (self.needs_image and self.image is None) or (self.needs_wrist_image and self.wrist_image is None):
             line += " " + self.text["waiting_picture"]
         return line
 

@@ -13,9 +13,10 @@ from so101.bodies.settings import read_language
 from so101.tasks.settings import read_task
 from so101.dataset.features import DEFAULT_FPS
 from so101.lang import DEFAULT_LANGUAGE, ENV_VAR as LANG_ENV_VAR
+from so101.observe import ALL_OBSERVED, OBSERVE_ENV_VAR, Observed, parse_observed
 from so101.runtime.settings import (
-    EnvironSettings, Setting, read_choice, read_file_path, read_image_size, read_optional_path, read_whole_number,
-    setting,
+    EnvironSettings, Setting, read_choice, read_file_path, read_image_size, read_optional_path, read_parsed,
+    read_whole_number, setting,
 )
 
 DEFAULT_IMAGE_SIZE = "320x240"
@@ -47,6 +48,10 @@ class RecorderSettings(EnvironSettings):
     looks: str = setting(
         "SO101_LOOKS", DEFAULT_LOOKS, "the pictures' looks, as the camera draws them (`fixed` or `varied`): each "
         "episode's, from the seed its layout starts from, is kept in info.json", read_choice(LOOKS_CHOICES))
+    observed: Observed = setting(
+        OBSERVE_ENV_VAR, str(ALL_OBSERVED), "what the frames show, from state,environment,front,wrist (so101.observe), "
+        "as far as the body has it: without a task no environment or wrist, without video no camera",
+        read_parsed(parse_observed))
 
 
 @dataclass(frozen=True)

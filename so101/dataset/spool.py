@@ -40,11 +40,11 @@ class EpisodeSpool:
     """Episodes saved into `folder` in the order they are saved (EpisodeRecorder.save), one folder each."""
 
     def __init__(self, folder: Path, fps: int, video_sizes: Mapping[str, tuple[int, int]],
-                 environment_names: Sequence[str] = ()):
+                 environment_names: Sequence[str] = (), environment_state: bool = True):
         self.folder = Path(folder)
         self.fps = fps
         self.video_sizes = dict(video_sizes)
-        self.features = recorder_features(self.video_sizes, environment_names)
+        self.features = recorder_features(self.video_sizes, environment_names, environment_state)
         try:
             self.folder.mkdir(parents=True, exist_ok=True)
             (self.folder / "work").mkdir(exist_ok=True)

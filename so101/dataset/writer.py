@@ -22,7 +22,7 @@ from so101.dataset import video as videos
 from so101.dataset.commit import (WORK_DIR, CommitIncomplete, Plan, commit, fsync_path, is_ours,
                                   lock_for_writing, not_saved, one_line_os_error, place_durably, recover)
 from so101.dataset.episode import EpisodeRecorder
-from so101.dataset.features import ENVIRONMENT_KEY, ROBOT_TYPE
+from so101.dataset.features import ENVIRONMENT_KEY, REWARD_KEY, ROBOT_TYPE
 from so101.dataset.layout import (CODEBASE_VERSION, DATA_PATH, DEFAULT_CHUNK_SIZE, DEFAULT_DATA_FILE_SIZE_IN_MB,
                                   DEFAULT_VIDEO_FILE_SIZE_IN_MB, EPISODES_DIR, EPISODES_PATH, INFO_PATH, LOOKS_KEY, SEEDS_KEY,
                                   STATS_PATH, TASKS_PATH, VIDEO_PATH, DatasetError, EpisodeSummary,
@@ -51,18 +51,25 @@ def _feature_difference(root: Path, have: dict[str, dict[str, Any]], want: dict[
     """Why an existing dataset's features are not this recorder's, in one line."""
     unasked = [key for key in video_keys(have) if key not in video_sizes]
     if unasked:
-        return f"{root} has video ({', '.join(unasked)}): record with its image size, or use another folder"
+        return (f"{root} has video ({', '.join(unasked)}): record with its image size (and an --observe that shows it), "
+                "or use another folder")
     for key, (width, height) in video_sizes.items():
         if key not in have:
-            return f"{root} has no video ({key}): record without an image size (no video), or use another folder"
+            return (f"{root} has no video ({key}): record without an image size (no video), or with an --observe "
+                    "that leaves it out, or use another folder")
         if list(have[key]["shape"]) != list(want[key]["shape"]):
             have_height, have_width = have[key]["shape"][:2]
             return (f"{root}'s {key} video is {have_width}x{have_height}, not {width}x{height}: record at "
                     f"{have_width}x{have_height}, or use another folder")
-    if (ENVIRONMENT_KEY in have) != (ENVIRONMENT_KEY in want):
-        return (f"{root} holds a task's episodes (its environment state, reward and success): record them with --task"
-                if ENVIRONMENT_KEY in have else
+    if (REWARD_KEY in have) != (REWARD_KEY in want):
+        return (f"{root} holds a task's episodes (its reward and success): record them with --task"
+                if REWARD_KEY in have else
                 f"{root} holds episodes without a task: record a task's episodes (--task) in another folder")
+    if (ENVIRONMENT_KEY in have) != (ENVIRONMENT_KEY in want):
+        return (f"{root}'s frames show the objects' poses ({ENVIRONMENT_KEY}): record with --observe including "
+                "environment, or use another folder" if ENVIRONMENT_KEY in have else
+                f"{root}'s frames do not show the objects' poses ({ENVIRONMENT_KEY}): record with --observe "
+                "without environment, or use another folder")
     differing = sorted(set(have) ^ set(want)) or sorted(
         key for key in have if (have[key]["dtype"], list(have[key]["shape"]), have[key].get("names"))
         != (want[key]["dtype"], list(want[key]["shape"]), want[key].get("names")))
@@ -139,13 +146,14 @@ class DatasetWriter:
     # -- opening -----------------------------------------------------------------------------
     @classmethod
     def open(cls, root: Path, fps: int, video_sizes: VideoSizes, *, environment_names: Sequence[str] = (),
-             chunks_size: int = DEFAULT_CHUNK_SIZE, data_files_size_in_mb: float = DEFAULT_DATA_FILE_SIZE_IN_MB,
+             environment_state: bool = True, chunks_size: int = DEFAULT_CHUNK_SIZE, data_files_size_in_mb: float = DEFAULT_DATA_FILE_SIZE_IN_MB,
              video_files_size_in_mb: float = DEFAULT_VIDEO_FILE_SIZE_IN_MB) -> "DatasetWriter":
         """Open `root` to add episodes: creates the dataset if the folder is new or empty.
 
         video_sizes: each video feature's (width, height), e.g. {IMAGE_KEY: (320, 240)}; {} for a
         dataset without video. environment_names: a task's object_state names, for a dataset of a
-        task's episodes (layout.recorder_features). The size limits and chunks_size apply to a dataset created here
+        task's episodes (layout.recorder_features), with their environment state unless not
+        `environment_state`. The size limits and chunks_size apply to a dataset created here
         (an existing one keeps its own)."""
         root = Path(root)
         if not isinstance(fps, int) or isinstance(fps, bool) or fps <= 0:
@@ -162,16 +170,16 @@ class DatasetWriter:
         except OSError as error:
             raise DatasetError(f"cannot open {root}: {one_line_os_error(error)}") from None
         try:
-            return cls._open_locked(root, lock_fd, fps, video_sizes, tuple(environment_names), chunks_size,
-                                    data_files_size_in_mb, video_files_size_in_mb)
+            want = recorder_features(video_sizes, tuple(environment_names), environment_state)
+            return cls._open_locked(root, lock_fd, fps, video_sizes, want, chunks_size, data_files_size_in_mb,
+                                    video_files_size_in_mb)
         except BaseException:
             os.close(lock_fd)
             raise
 
     @classmethod
-    def _open_locked(cls, root: Path, lock_fd: int, fps: int, video_sizes: VideoSizes, environment_names: tuple[str, ...],
+    def _open_locked(cls, root: Path, lock_fd: int, fps: int, video_sizes: VideoSizes, want: dict[str, dict[str, Any]],
                      chunks_size: int, data_mb: float, video_mb: float) -> "DatasetWriter":
-        want = recorder_features(video_sizes, environment_names)
         try:
             if not (root / INFO_PATH).exists():
                 if any(not is_ours(entry.name) for entry in root.iterdir()):

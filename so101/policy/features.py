@@ -66,7 +66,8 @@ def observation(frame: Mapping[str, Any], image_size: tuple[int, int] | None) ->
     for input_id, key in (("image", IMAGE_KEY), ("wrist_image", WRIST_IMAGE_KEY)):
         if input_id in frame and image_size is not None:
             width, height = image_size
-            values[key] = np.asarray(frame[input_id], dtype=np.uint8).reshape(height, width, 3)
+            # A copy: arrow's buffers are read-only, and torch warns of every one it is given.
+            values[key] = np.array(frame[input_id], dtype=np.uint8).reshape(height, width, 3)
     return values
 
 

@@ -7,6 +7,7 @@ import os
 from typing import Callable
 
 from so101 import lang
+from so101.observe import Observed, parse_observed
 
 
 def number(accepted: Callable[[float], bool], expected: str) -> Callable[[str], float]:
@@ -73,3 +74,11 @@ def add_camera_size_option(parser: argparse.ArgumentParser, default: str, purpos
     parser.add_argument("--camera-size", "--image-size", dest="image_size", type=image_size, default=default,
                         metavar="WxH", help=f"{purpose} (default {default}; 96x72 and up: small pictures train a "
                                             "policy that sees on a CPU)")
+
+
+def observed_list(text: str) -> Observed:
+    """An argparse `type` for --observe (so101.observe.parse_observed's rule)."""
+    try:
+        return parse_observed(text)
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None

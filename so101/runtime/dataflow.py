@@ -13,6 +13,7 @@ PROMPT_NODE_ID = "keyboard_control"
 # `so101 teleop --record` adds these two; `so101 replay` starts the replay node as the prompt is started.
 RECORDER_NODE_FILE = ROOT / "nodes" / "recorder.py"
 CAMERA_NODE_FILE = ROOT / "nodes" / "camera.py"
+CAMERA_NODE_ID = "camera"
 REPLAY_NODE_FILE = ROOT / "nodes" / "replay.py"
 REPLAY_NODE_ID = "replay"
 # `so101 teleop --leader` puts the leader node between the prompt and the body (dataflow_leader.yml).
@@ -149,6 +150,7 @@ def _node(descriptor: dict, node_id: str) -> dict:
 # The recorder and the camera only use the newest state and tick, but each drop out of a full queue
 # is a warning line in dora's log: their queues hold what comes while they encode a frame (a few ms)
 # or draw a picture (up to a few hundred ms), so they read everything and nothing is dropped.
+PICTURE_OUTPUTS = ("image", "wrist_image")  # the camera node's
 STATE_QUEUE = 500  # 2 s of the body's 250 states a second
 TICK_QUEUE = 100
 
@@ -181,26 +183,46 @@ def with_recorder(descriptor: dict, body_node_id: str, recorder_env: dict[str, s
         recorder_inputs["task_status"] = {"source": f"{body_node_id}/task_status", "queue_size": 100}
         recorder_env = {**recorder_env, "SO101_TASK": task}
     if camera_env is not None:
-        recorder_inputs["image"] = _queued("camera/image", TICK_QUEUE)
-        camera_inputs = {
-            "tick": _queued(f"dora/timer/millis/{max(1, round(1000 / picture_hz))}", TICK_QUEUE),
-            "joint_state": _queued(f"{body_node_id}/joint_state", STATE_QUEUE),
-            "gripper_state": _queued(f"{body_node_id}/gripper_state", STATE_QUEUE),
-        }
-        camera_outputs = ["image"]
-        if task:  # its objects are in the pictures, and the wrist camera's too; the seed, for varied looks
-            camera_inputs["object_state"] = _queued(f"{body_node_id}/object_state", STATE_QUEUE)
-            camera_inputs["task_status"] = {"source": f"{body_node_id}/task_status", "queue_size": 10}
-            camera_env = {**camera_env, "SO101_TASK": task}
-            camera_outputs.append("wrist_image")
-            recorder_inputs["wrist_image"] = _queued("camera/wrist_image", TICK_QUEUE)
-        descriptor["nodes"].append({
-            "id": "camera", "path": str(root / CAMERA_NODE_FILE.relative_to(ROOT)), "restart_policy": "never",
-            "inputs": camera_inputs, "outputs": camera_outputs, "env": camera_env,
-        })
+        with_camera(descriptor, body_node_id, camera_env, picture_hz, root)
+        recorder_inputs.update({name: _queued(f"{CAMERA_NODE_ID}/{name}", TICK_QUEUE)
+                                for name in _node(descriptor, CAMERA_NODE_ID)["outputs"]})
     descriptor["nodes"].append({
         "id": "recorder", "path": str(root / RECORDER_NODE_FILE.relative_to(ROOT)), "restart_policy": "never",
         "inputs": recorder_inputs, "outputs": ["record_status"], "env": recorder_env,
+    })
+    return descriptor
+
+
+def with_camera(descriptor: dict, body_node_id: str, camera_env: dict[str, str], picture_hz: float,
+                root: PurePath = ROOT) -> dict:
+    """A dataflow with the camera node, which draws the body's `image` (and with a task `wrist_image`)
+    `picture_hz` times a second. One camera serves every node that reads pictures (the recorder, a
+    policy that sees): where there is one, it is kept, at the higher of the two rates; its
+    pictures' size is one (so101 teleop refuses two sizes before it gets here), its settings the
+    union of the callers'."""
+    period_ms = max(1, round(1000 / picture_hz))
+    timer = f"dora/timer/millis/{period_ms}"
+    if any(node["id"] == CAMERA_NODE_ID for node in descriptor["nodes"]):
+        camera = _node(descriptor, CAMERA_NODE_ID)
+        camera["env"] = {**camera["env"], **camera_env}
+        if period_ms < 1000 * (timer_period_s(camera) or 0.0):
+            _retarget(camera, "tick", timer)
+        return descriptor
+    camera_inputs = {
+        "tick": _queued(timer, TICK_QUEUE),
+        "joint_state": _queued(f"{body_node_id}/joint_state", STATE_QUEUE),
+        "gripper_state": _queued(f"{body_node_id}/gripper_state", STATE_QUEUE),
+    }
+    camera_outputs = ["image"]
+    task = body_task(descriptor, body_node_id)
+    if task:  # its objects are in the pictures, and the wrist camera's too; the seed, for varied looks
+        camera_inputs["object_state"] = _queued(f"{body_node_id}/object_state", STATE_QUEUE)
+        camera_inputs["task_status"] = {"source": f"{body_node_id}/task_status", "queue_size": 10}
+        camera_env = {**camera_env, "SO101_TASK": task}
+        camera_outputs.append("wrist_image")
+    descriptor["nodes"].append({
+        "id": CAMERA_NODE_ID, "path": str(root / CAMERA_NODE_FILE.relative_to(ROOT)), "restart_policy": "never",
+        "inputs": camera_inputs, "outputs": camera_outputs, "env": camera_env,
     })
     return descriptor
 
@@ -281,7 +303,9 @@ def with_policy(descriptor: dict, body_node_id: str, observed: tuple[str, ...], 
     (`policy_cmd`), telling it on `policy_status`."""
     prompt = _node(descriptor, PROMPT_NODE_ID)
     prompt["outputs"] = [*prompt["outputs"], "policy_cmd"]
-    inputs = {name: _queued(f"{body_node_id}/{name}", STATE_QUEUE) for name in observed}
+    # Its pictures from the camera node (with_camera): only the newest matters, so one is queued.
+    inputs = {name: {"source": f"{CAMERA_NODE_ID}/{name}", "queue_size": 1} if name in PICTURE_OUTPUTS
+              else _queued(f"{body_node_id}/{name}", STATE_QUEUE) for name in observed}
     return _before_body(descriptor, body_node_id, POLICY_NODE_ID, POLICY_NODE_FILE, POLICY_TICK, policy_env, root,
                         {"policy_cmd": {"source": f"{PROMPT_NODE_ID}/policy_cmd", "queue_size": 10}, **inputs}, python)
 

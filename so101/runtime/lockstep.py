@@ -20,7 +20,7 @@ and `so101 eval`. Light: nothing here imports a simulator or dora.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any, Callable, Generic, Mapping, Sequence, TypeVar
 
 from so101.runtime.dataflow import TICK_PERIOD_S
 
@@ -31,6 +31,9 @@ SEED_KEY = "seed"
 # A driver's joint_cmd with this key true is played but not written into a dataset: the expert's miss
 # on purpose, whose recovery alone is a demonstration (so101.tasks.expert.Expert.rehearsing).
 NOT_WRITTEN_KEY = "not_written"
+# A policy's joint_cmd that took a new action chunk says how long its inference took, in ms (wall
+# time: in lockstep it costs no simulated time); `so101 eval` sums them up.
+INFERENCE_MS_KEY = "inference_ms"
 # A task_cmd that asks a body in lockstep for the frame now once more: dora 1.1 loses a message now
 # and then (dora-rs/dora#3428 reports it for lockstep), and a lockstep loop that lost one would wait for ever.
 AGAIN_WORD = "again"
@@ -110,16 +113,19 @@ class FrameParts:
         return None
 
 
-class LastAnswer:
+Answer = TypeVar("Answer")
+
+
+class LastAnswer(Generic[Answer]):
     """A driver's answer to the last frame it answered. A frame sent again (after a loss) gets that
     same answer, and the driver's own state (a plan's clock, an action chunk) does not move on."""
 
     def __init__(self) -> None:
         self._tag: FrameTag | None = None
-        self._answer: Sequence[float] = ()
+        self._answer: Answer | None = None
 
-    def to(self, tag: FrameTag, compute: Callable[[], Sequence[float]]) -> Sequence[float]:
+    def to(self, tag: FrameTag, compute: Callable[[], Answer]) -> Answer:
         """The answer to frame `tag`: `compute()`'s, or the one given before if `tag` was the last frame answered."""
-        if tag != self._tag:
+        if tag != self._tag or self._answer is None:
             self._answer, self._tag = compute(), tag
         return self._answer

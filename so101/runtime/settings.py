@@ -139,3 +139,13 @@ def read_choice(choices: tuple[str, ...]) -> Callable[[Mapping[str, str], Settin
             raise ValueError(f"{declared_setting.env_var}={raw!r} is not one of: {', '.join(choices)}")
         return raw
     return read
+
+
+def read_parsed(parse: Callable[[str], Any]) -> Callable[[Mapping[str, str], Setting], Any]:
+    """`parse(text)`, whose ValueError (one line) is named by the setting."""
+    def read(environ: Mapping[str, str], declared_setting: Setting) -> Any:
+        try:
+            return parse(declared_setting.raw(environ))
+        except ValueError as error:
+            raise ValueError(f"{declared_setting.env_var}: {error}") from None
+    return read

@@ -10,8 +10,10 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from typing import Iterable, Sequence
+
+import numpy as np
 
 # The normal quantile of a 95% two-sided interval.
 Z_95 = 1.959963984540054
@@ -28,6 +30,7 @@ class Outcome:
     seconds: float  # simulated time: to success, or to the time limit
     attempts: int = 0  # grasps the driver tried, where it says (the expert); 0: not said
     kept: bool = False  # written into the dataset
+    inference_ms: list[float] = field(default_factory=list)  # a policy's: each new action chunk's inference time
 
     def line(self) -> str:
         """One line per episode, as `so101 eval` and `so101 demos` print it."""
@@ -66,6 +69,18 @@ def score_line(outcomes: Sequence[Outcome]) -> str:
     mean = f"{sum(times) / len(times):.2f} s" if times else "none (no success)"
     return (f"success: {successes}/{trials} ({rate:.0f}%, 95% CI {100 * low:.0f}–{100 * high:.0f}%, Wilson), "
             f"mean time to success {mean}")
+
+
+def inference_line(outcomes: Sequence[Outcome]) -> str | None:
+    """`inference: N action chunks, median M ms, 95th percentile P ms, longest L ms` over a
+    policy's episodes (wall time on its device; in lockstep it costs no simulated time); None when
+    no driver said (the expert, idle)."""
+    times = [ms for outcome in outcomes for ms in outcome.inference_ms]
+    if not times:
+        return None
+    median, high = np.percentile(times, [50, 95])
+    return (f"inference: {len(times)} action chunks, median {median:.0f} ms, 95th percentile {high:.0f} ms, "
+            f"longest {max(times):.0f} ms")
 
 
 class EpisodeClock:

@@ -10,9 +10,10 @@ from typing import Mapping
 from so101.bodies.looks import DEFAULT_LOOKS, LOOKS_CHOICES
 from so101.bodies.settings import read_language, read_lockstep_fps
 from so101.lang import DEFAULT_LANGUAGE, ENV_VAR as LANG_ENV_VAR
+from so101.observe import ALL_OBSERVED, OBSERVE_ENV_VAR, Observed, parse_observed
 from so101.runtime.settings import (
     EnvironSettings, Setting, parse_number, read_choice, read_image_size, read_number, read_optional_path,
-    read_stripped_text, read_text, read_whole_number, setting,
+    read_parsed, read_stripped_text, read_text, read_whole_number, setting,
 )
 from so101.tasks import task_for_setting
 
@@ -95,4 +96,7 @@ class EpisodeSettings(EnvironSettings):
     looks: str = setting(
         "SO101_LOOKS", DEFAULT_LOOKS, "the pictures' looks, as the body draws them (`fixed` or `varied`): a dataset "
         "keeps each episode's in info.json", read_choice(LOOKS_CHOICES))
+    observed: Observed = setting(
+        OBSERVE_ENV_VAR, str(ALL_OBSERVED), "what the written frames show, from state,environment,front,wrist "
+        "(so101.observe): state,front,wrist leaves the objects' exact poses out", read_parsed(parse_observed))
     lang: str = setting(LANG_ENV_VAR, DEFAULT_LANGUAGE, "log language, `zh` or `en`", read_language)

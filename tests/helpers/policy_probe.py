@@ -1,7 +1,8 @@
 """Run by the policy environment's Python (tests/test_policy.py): nodes/policy.py's main() on a
 MockNode fed lockstep frames given as JSON on stdin, its outputs as JSON on stdout.
 
-stdin: {"env": {...}, "frames": [[episode, frame, seed, joint_state, gripper_state, object_state], ...]}
+stdin: {"env": {...}, "frames": [[episode, frame, seed, joint_state, gripper_state, object_state], ...]}; a frame
+may add its `image` and `wrist_image` (flat bytes), and its object_state may be null (a policy that sees).
 stdout (last line): {"code": main()'s return, "joint_cmd": [[episode, frame, [six targets]], ...]}
 """
 
@@ -23,11 +24,15 @@ def main() -> None:
     asked = json.loads(sys.stdin.read())
     os.environ.update(asked["env"])
     events = []
-    for episode, frame, seed, joint_state, gripper_state, object_state in asked["frames"]:
+    for episode, frame, seed, joint_state, gripper_state, object_state, *pictures in asked["frames"]:
         tags = {"episode": episode, "frame": frame, "seed": seed}
         for name, values in (("joint_state", joint_state), ("gripper_state", gripper_state),
                              ("object_state", object_state)):
-            events.append({"type": "INPUT", "id": name, "value": pa.array(values, type=pa.float64()),
+            if values is not None:
+                events.append({"type": "INPUT", "id": name, "value": pa.array(values, type=pa.float64()),
+                               "metadata": dict(tags)})
+        for name, values in zip(("image", "wrist_image"), pictures):
+            events.append({"type": "INPUT", "id": name, "value": pa.array(values, type=pa.uint8()),
                            "metadata": dict(tags)})
     node = MockNode(events)
     sent = []
