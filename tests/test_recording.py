@@ -11,14 +11,20 @@ import numpy as np
 import pyarrow as pa
 import pytest
 
-from so101.dataset.features import ACTION_KEY, IMAGE_KEY, MOTOR_NAMES, STATE_KEY, from_lerobot, to_lerobot
+from so101.dataset.features import (
+    ACTION_KEY, ENVIRONMENT_KEY, IMAGE_KEY, MOTOR_NAMES, REWARD_KEY, STATE_KEY, SUCCESS_KEY, WRIST_IMAGE_KEY, from_lerobot,
+    to_lerobot,
+)
 from so101.dataset.messages import (RecordCommand, decode_record_cmd, encode_record_cmd, recording_from_metadata,
                                     recording_metadata)
 from so101.dataset.recording import FrameClock, Recording
 from so101.dataset.replay import ramp_deg, send_time_s, tracking_errors_deg, tracking_line
 from so101.prompt.commands import Episodes, ParseError, parse_command
 from so101.prompt.recorder_link import RecorderLink
-from so101.runtime.dataflow import DATAFLOW_FILE, dataflow_copy, with_recorder, with_replay, with_web_view
+from so101.observe import ALL_OBSERVED, parse_observed
+from so101.runtime.dataflow import (
+    DATAFLOW_FILE, dataflow_copy, with_camera, with_policy, with_recorder, with_replay, with_task, with_web_view,
+)
 from tests.helpers.dataflow import TICK, TICK_TIMER_CONFIG, run_simulation_node
 
 
@@ -107,11 +113,12 @@ class Clock:
         return self.now_s
 
 
-def recording(needs_image=False, lang="en", task=None):
+def recording(needs_image=False, lang="en", task=None, observed=ALL_OBSERVED):
     said: list[str] = []
     clock = Clock()
     writer = FakeWriter()
-    return Recording(writer, "/data/set", 30, lang, needs_image, said.append, clock, task), writer, clock, said
+    return (Recording(writer, "/data/set", 30, lang, needs_image, said.append, clock, task, observed=observed), writer,
+            clock, said)
 
 
 def feed(rec, clock, seconds, arm=(10.0, 20.0, 30.0, 40.0, 50.0), gripper=45.0):
@@ -171,6 +178,28 @@ def test_with_video_frames_wait_for_the_first_picture():
     rec.on_image(picture)
     feed(rec, clock, 0.5, arm=(0,) * 5, gripper=0.0)
     assert 15 <= rec.episode.frames <= 16 and rec.episode.rows[0][2] is picture
+
+
+@pytest.mark.parametrize("observe, keys", [
+    ("state,environment,front,wrist", [ENVIRONMENT_KEY, IMAGE_KEY, WRIST_IMAGE_KEY]),
+    ("state,front,wrist", [IMAGE_KEY, WRIST_IMAGE_KEY]),  # a policy trained on it sees
+    ("state,environment,front", [ENVIRONMENT_KEY, IMAGE_KEY]),
+])
+def test_a_tasks_frames_hold_what_they_observe_and_wait_only_for_that(observe, keys):
+    from so101.tasks import CUBE_TO_BOX
+
+    rec, writer, clock, said = recording(needs_image=True, task=CUBE_TO_BOX, observed=parse_observed(observe))
+    rec.on_object_state([0.0] * len(CUBE_TO_BOX.object_state_names))
+    rec.on_image(np.zeros((240, 320, 3), np.uint8))
+    record_for(rec, clock, "put the cube in the box", 0.5)
+    if WRIST_IMAGE_KEY in keys:  # a frame waits for every picture it holds
+        assert rec.episode.frames == 0
+        rec.on_wrist_image(np.ones((240, 320, 3), np.uint8))
+        feed(rec, clock, 0.5)
+    assert 15 <= rec.episode.frames <= 16
+    given = rec.episode.frames_given[0]
+    assert {key for key in given if key.startswith("observation.") and key != STATE_KEY} == set(keys)
+    assert {REWARD_KEY, SUCCESS_KEY} <= set(given)  # not observations: they stay
 
 
 @pytest.mark.parametrize("lang", ["en", "zh"])
@@ -391,6 +420,23 @@ def test_the_web_view_reads_the_camera_and_the_recorders_status_where_there_are_
         "joint_state": "simulation/joint_state", "gripper_state": "simulation/gripper_state",
         "image": "camera/image", "record_status": "recorder/record_status"}
     assert nodes["web_view"]["env"] == {"SO101_WEB_PORT": "8200"} and "outputs" not in nodes["web_view"]
+
+
+def test_a_policy_that_sees_and_the_recorder_share_one_camera_at_the_higher_rate():
+    descriptor = with_task(dataflow_copy({}), "simulation", "cube_to_box", 3)
+    with_camera(descriptor, "simulation", {"SO101_RECORD_IMAGE_SIZE": "96x72"}, 25)
+    with_policy(descriptor, "simulation", ("joint_state", "gripper_state", "image", "wrist_image"), {}, "/py")
+    with_recorder(descriptor, "simulation", {}, {"SO101_RECORD_IMAGE_SIZE": "96x72", "SO101_LOOKS": "varied"}, 30)
+    nodes = {node["id"]: node for node in descriptor["nodes"]}
+    assert [node["id"] for node in descriptor["nodes"]].count("camera") == 1
+    camera = nodes["camera"]
+    assert camera["outputs"] == ["image", "wrist_image"] and camera["inputs"]["tick"]["source"] == "dora/timer/millis/33"
+    assert camera["env"] == {"SO101_RECORD_IMAGE_SIZE": "96x72", "SO101_TASK": "cube_to_box", "SO101_LOOKS": "varied"}
+    # The policy takes the newest picture only; the recorder, every one.
+    assert nodes["policy"]["inputs"]["image"] == {"source": "camera/image", "queue_size": 1}
+    assert nodes["policy"]["inputs"]["wrist_image"] == {"source": "camera/wrist_image", "queue_size": 1}
+    assert nodes["policy"]["inputs"]["joint_state"]["source"] == "simulation/joint_state"
+    assert nodes["recorder"]["inputs"]["wrist_image"]["source"] == "camera/wrist_image"
 
 
 def test_record_without_a_camera_has_no_image_input():

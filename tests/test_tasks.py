@@ -129,13 +129,17 @@ def test_a_typed_seed_must_be_a_whole_number(text):
     (["--task", "cube_to_box", "--body", "real", "--port", "/dev/ttyACM0", "--calibration", "arm.json"],
      "so101 teleop: --task cube_to_box is for a simulated body (--body pybullet or mujoco): nothing reports where a "
      "real cube is, so the real arm has no task scene and no object_state"),
+    (["--observe", "state,front"], "so101 teleop: --observe says what a recording's frames show: it goes with --record DIR"),
+    (["--record", "DIR", "--observe", "state,environment,front"],
+     "so101 teleop: --observe state,environment,front: environment is a task's objects: it goes with --task"),
 ])
 def test_teleop_refuses_a_task_it_cannot_run_in_one_line_before_starting_anything(tmp_path, capsys, options, message):
     from so101.cli import main as cli
 
     log_file = tmp_path / "dora.log"
     try:
-        code = cli.main(["teleop", "--mode", "direct", "--lang", "en", "--log", str(log_file), *options])
+        code = cli.main(["teleop", "--mode", "direct", "--lang", "en", "--log", str(log_file),
+                         *(str(tmp_path / "dataset") if option == "DIR" else option for option in options)])
     except SystemExit as exit:  # argparse's refusals
         code = exit.code
     assert code == 2
