@@ -7,7 +7,8 @@ publishes it on `image` (uint8 RGB, metadata width, height, encoding "rgb8"), wh
 since the last one; with a task, the wrist camera's picture too, on `wrist_image`.
 A picture of this arm takes a CPU renderer tens of milliseconds (`so101 bench` measures it):
 drawn inside the body's physics loop it would hold the loop back, so it is drawn here, below the
-body's priority. The recorder takes the latest picture at each of its frames.
+body's priority. The recorder takes the latest picture at each of its frames; a policy that sees
+(`so101 teleop --policy`), the newest at each of its ticks.
 Settings: so101.dataset.settings.CameraSettings.
 """
 

@@ -82,7 +82,7 @@ class PolicyFailed(Exception):
 class LoadedPolicy:
     """A LeRobot policy folder, loaded: its features, and one action per observation."""
 
-    def __init__(self, folder: Path, device: str, instruction: str):
+    def __init__(self, folder: Path, device: str, instruction: str, threads: int | None = None):
         if not folder.is_dir():
             raise PolicyFailed(f"{folder} is not a folder: give a trained policy's folder "
                                "(.../checkpoints/last/pretrained_model)")
@@ -97,6 +97,8 @@ class LoadedPolicy:
         except Exception as error:  # noqa: BLE001 (any import failure is the one line a user needs)
             raise PolicyFailed(f"LeRobot does not import in {sys.executable} ({type(error).__name__}: {error}): "
                                "run the node with a policy environment's Python (so101 policy-env)") from None
+        if threads is not None:
+            torch.set_num_threads(threads)
         try:
             config = PreTrainedConfig.from_pretrained(str(folder))
             config.device = device
@@ -143,7 +145,7 @@ def main() -> int:
     try:
         settings = PolicySettings.from_environ(os.environ)
         task = task_named(settings.task)
-        loaded = LoadedPolicy(settings.policy_dir, settings.device, task.instruction)
+        loaded = LoadedPolicy(settings.policy_dir, settings.device, task.instruction, settings.threads)
         needed = inputs_for(loaded.input_shapes, loaded.output_shapes, task.object_state_names, settings.image_size)
     except (ValueError, PolicyFailed) as error:
         return cannot_start(error, NODE_ID)

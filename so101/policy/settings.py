@@ -11,7 +11,7 @@ from typing import Mapping
 
 from so101.lang import DEFAULT_LANGUAGE, ENV_VAR as LANG_ENV_VAR, language_from_environ
 from so101.runtime.settings import (
-    EnvironSettings, Setting, read_image_size, read_stripped_text, setting,
+    EnvironSettings, Setting, read_image_size, read_stripped_text, read_whole_number, setting,
 )
 from so101.tasks import task_named
 
@@ -27,6 +27,13 @@ def read_task_name(environ: Mapping[str, str], declared_setting: Setting) -> str
     except ValueError as error:
         raise ValueError(f"{declared_setting.env_var}: {error}") from None
     return name
+
+
+def read_threads(environ: Mapping[str, str], declared_setting: Setting) -> int:
+    threads = read_whole_number(environ, declared_setting)
+    if not 1 <= threads <= 256:
+        raise ValueError(f"{declared_setting.env_var}={threads} is not a number of threads from 1 to 256")
+    return threads
 
 
 def checked_device(device: str) -> str:
@@ -55,6 +62,10 @@ class PolicySettings(EnvironSettings):
                           read_device)
     task: str = setting("SO101_TASK", "cube_to_box", "the task the policy performs: its objects' poses and its "
                         "instruction", read_task_name)
+    threads: int = setting(
+        "SO101_POLICY_THREADS", "1", "PyTorch's threads for inference on the CPU: the body, the camera and the "
+        "episodes' runner share the cores, and PyTorch's threads that outnumber the free cores wait on each other "
+        "(docs/experiments/seeing-on-a-cpu.md)", read_threads)
     image_size: tuple[int, int] | None = setting(
         "SO101_LOCKSTEP_PICTURES", "", "WIDTHxHEIGHT of the body's pictures, for a policy that sees them; "
         "empty = none", read_image_size)
