@@ -4,12 +4,12 @@ library and this project's plain modules, as the policy's own Python imports the
 
 from __future__ import annotations
 
-import argparse
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Mapping
 
 from so101.lang import DEFAULT_LANGUAGE, ENV_VAR as LANG_ENV_VAR, language_from_environ
+from so101.runtime.argtypes import parsed_by
 from so101.runtime.settings import (
     EnvironSettings, Setting, read_image_size, read_stripped_text, read_whole_number, setting,
 )
@@ -73,9 +73,4 @@ class PolicySettings(EnvironSettings):
                         lambda environ, declared_setting: language_from_environ(environ))
 
 
-def torch_device(text: str) -> str:
-    """An argparse `type` for a torch device (`checked_device`'s rule)."""
-    try:
-        return checked_device(text)
-    except ValueError as error:
-        raise argparse.ArgumentTypeError(str(error)) from None
+torch_device = parsed_by(checked_device)  # an argparse `type` for a torch device

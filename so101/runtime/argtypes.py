@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import argparse
 import os
-from typing import Callable
+from typing import Callable, TypeVar
 
 from so101 import lang
-from so101.observe import Observed, parse_observed
+from so101.observe import parse_observed
+
+Parsed = TypeVar("Parsed")
 
 
 def number(accepted: Callable[[float], bool], expected: str) -> Callable[[str], float]:
@@ -26,13 +28,19 @@ def number(accepted: Callable[[float], bool], expected: str) -> Callable[[str], 
     return parse
 
 
-def _checked_language(text: str) -> str:
-    # A `type`, not `choices`: argparse passes a string default through `type` but never checks it
-    # against `choices`, so a bad $SO101_LANG would crash later. An empty one (unset) is the locale's.
-    try:
-        return lang.session_language(text, os.environ)
-    except ValueError as error:
-        raise argparse.ArgumentTypeError(str(error)) from None
+def parsed_by(parse: Callable[[str], Parsed]) -> Callable[[str], Parsed]:
+    """An argparse `type` made of a parser whose ValueError is one line for the user."""
+    def parse_argument(text: str) -> Parsed:
+        try:
+            return parse(text)
+        except ValueError as error:
+            raise argparse.ArgumentTypeError(str(error)) from None
+    return parse_argument
+
+
+# A `type`, not `choices`: argparse passes a string default through `type` but never checks it
+# against `choices`, so a bad $SO101_LANG would crash later. An empty one (unset) is the locale's.
+_checked_language = parsed_by(lambda text: lang.session_language(text, os.environ))
 
 
 def add_language_option(parser: argparse.ArgumentParser, what: str) -> None:
@@ -75,10 +83,4 @@ def add_camera_size_option(parser: argparse.ArgumentParser, default: str, purpos
                         metavar="WxH", help=f"{purpose} (default {default}; 96x72 and up: small pictures train a "
                                             "policy that sees on a CPU)")
 
-
-def observed_list(text: str) -> Observed:
-    """An argparse `type` for --observe (so101.observe.parse_observed's rule)."""
-    try:
-        return parse_observed(text)
-    except ValueError as error:
-        raise argparse.ArgumentTypeError(str(error)) from None
+observed_list = parsed_by(parse_observed)  # --observe
