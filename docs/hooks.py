@@ -148,6 +148,15 @@ def made_node(node_id: str) -> str:
     }
     if node_id == "episodes":
         return eval_dataflow()
+    if node_id == "camera_front":  # a real camera of the real arm's dataflow
+        from so101.launch.real_cameras import add_real_cameras
+
+        real = dataflow.dataflow_copy({}, dataflow.ROOT / "dataflow_real.yml", root=root)
+        add_real_cameras(real, {"front": "/dev/video0"}, (640, 480), (640, 480), 30, root=root)
+        node = next(each for each in real["nodes"] if each["id"] == node_id)
+        text = yaml.safe_dump({"nodes": [node]}, sort_keys=False, allow_unicode=True)
+        command = "so101 teleop --body real --camera front=/dev/video0 ..."
+        return f"```yaml\n# the node `{command}` adds to dataflow_real.yml\n{text.rstrip()}\n```"
     command, make = recipes[node_id]
     node = next(each for each in make()["nodes"] if each["id"] == node_id)
     text = yaml.safe_dump({"nodes": [node]}, sort_keys=False, allow_unicode=True)

@@ -3,7 +3,8 @@
 `so101 teleop --record DIR` adds this node. Each `tick` (a 5 ms timer) adds the frames due at
 the dataset's rate, each with the latest `joint_state` + `gripper_state` (observation.state),
 `joint_target` (action: what the body was told) and `image` (the camera node's picture, stored
-as video; with a task, `wrist_image` too), and with a task (SO101_TASK) its `object_state` (observation.environment_state) and
+as video; with a task or a real wrist camera, `wrist_image` too: a real camera's picture is paired with
+the state sent nearest its capture), and with a task (SO101_TASK) its `object_state` (observation.environment_state) and
 `task_status` (next.success, and next.reward from it); `record_cmd` messages from the prompt start, stop, discard and list episodes, and
 each gets its reply on `record_status`, whose metadata also says which episode is recording (the
 web view's marker). Saving runs in the background. STOP saves an episode
@@ -18,6 +19,7 @@ import logging
 import os
 import queue
 import sys
+from datetime import datetime
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -55,13 +57,26 @@ def picture(event: dict, image_size: tuple[int, int]) -> np.ndarray | None:
     return pixels.astype(np.uint8, copy=False).reshape(height, width, 3)
 
 
+def sent_s(event: dict) -> float | None:
+    """When a message was sent (dora's stamp, on the wall clock), or None without one."""
+    stamp = (event.get("metadata") or {}).get("timestamp")
+    return stamp.timestamp() if isinstance(stamp, datetime) and stamp.tzinfo is not None else None
+
+
+def captured_s(event: dict) -> float | None:
+    """When a real camera's picture was taken (its `captured` metadata, wall clock), or None (a simulation's)."""
+    captured = (event.get("metadata") or {}).get("captured")
+    return float(captured) if isinstance(captured, (int, float)) and not isinstance(captured, bool) else None
+
+
 def main() -> int:
     send_diagnostics_to("stdout")
     try:
         settings = RecorderSettings.from_environ(os.environ)
         # Opened before joining: a folder that is not this dataset stops the node in one line.
         task = task_named(settings.task) if settings.task else None
-        video_sizes = video_keys_and_sizes(settings.image_size, task is not None, settings.observed)
+        wrist = "wrist" in settings.real_cameras  # the real arm's wrist camera, without a task
+        video_sizes = video_keys_and_sizes(settings.image_size, task is not None or wrist, settings.observed)
         writer = DatasetWriter.open(settings.root, settings.fps, video_sizes,
                                     environment_names=task.object_state_names if task else (),
                                     environment_state=settings.observed.environment)
@@ -75,7 +90,9 @@ def main() -> int:
     reports: queue.Queue[str] = queue.Queue()  # lines from the save thread, sent from this one
     recording = Recording(writer, str(settings.root), settings.fps, settings.lang,
                           needs_image=settings.image_size is not None, say=reports.put, task=task, looks=settings.looks,
-                          observed=settings.observed)
+                          observed=settings.observed, wrist=wrist,
+                          camera_lost=settings.camera_lost if settings.real_cameras else "",
+                          log=lambda line: logger.info("[recorder] %s", line))
 
     def send_status(lines: list[str], reply_to: str | None = None) -> None:
         for line in lines:
@@ -92,9 +109,9 @@ def main() -> int:
                 if name == "tick":
                     recording.tick()
                 elif name == "joint_state":
-                    recording.on_joint_state(event["value"].to_pylist())
+                    recording.on_joint_state(event["value"].to_pylist(), sent_s(event))
                 elif name == "gripper_state":
-                    recording.on_gripper_state(event["value"].to_pylist())
+                    recording.on_gripper_state(event["value"].to_pylist(), sent_s(event))
                 elif name == "joint_target":
                     recording.on_joint_target(event["value"].to_pylist())
                 elif name == "object_state":
@@ -107,11 +124,11 @@ def main() -> int:
                 elif name == "image" and settings.image_size:
                     rgb = picture(event, settings.image_size)
                     if rgb is not None:
-                        recording.on_image(rgb)
+                        recording.on_image(rgb, captured_s(event))
                 elif name == "wrist_image" and settings.image_size:
                     rgb = picture(event, settings.image_size)
                     if rgb is not None:
-                        recording.on_wrist_image(rgb)
+                        recording.on_wrist_image(rgb, captured_s(event))
                 elif name == "record_cmd":
                     texts = event["value"].to_pylist()
                     reply_to = (event.get("metadata") or {}).get("request", "")

@@ -26,10 +26,16 @@ class Observed:
     def __str__(self) -> str:
         return ",".join(name for name, shown in zip(OBSERVABLE, (True, self.environment, self.front, self.wrist)) if shown)
 
-    def problem(self, task: bool, video: bool, why_no_video: str = "--no-video") -> str | None:
-        """What asks for more than the body has, in one line; None when it has all of it."""
+    def problem(self, task: bool, video: bool, why_no_video: str = "--no-video",
+                cameras: tuple[str, ...] | None = None) -> str | None:
+        """What asks for more than the body has, in one line; None when it has all of it. `cameras`: the
+        real arm's (`front`, `wrist`), where a body has real ones; a task's scene is not needed for them."""
         if self.environment and not task:
             return "environment is a task's objects: it goes with --task"
+        if cameras:
+            missing = [name for name, shown in (("front", self.front), ("wrist", self.wrist))
+                       if shown and name not in cameras]
+            return f"{missing[0]} is a camera not given: add --camera {missing[0]}=SOURCE" if missing else None
         if (self.front or self.wrist) and not video:
             return f"front and wrist are the cameras, and there are none here ({why_no_video})"
         if self.wrist and not task:
@@ -55,6 +61,9 @@ def parse_observed(text: str) -> Observed:
     return Observed(*(name in names for name in OBSERVABLE[1:]))
 
 
-def observed_for(task: bool, video: bool) -> Observed:
-    """All that a body has: the objects with a task, the front camera with video, the wrist with both."""
+def observed_for(task: bool, video: bool, cameras: tuple[str, ...] = ()) -> Observed:
+    """All that a body has: the objects with a task, the front camera with video, the wrist with both;
+    with real `cameras`, those given."""
+    if cameras:
+        return Observed(environment=task, front="front" in cameras, wrist="wrist" in cameras)
     return Observed(environment=task, front=video, wrist=task and video)

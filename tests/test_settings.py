@@ -104,6 +104,7 @@ NODE_PAGES = {
     "keyboard_control.py": ("keyboard_control.md", ["so101.prompt.settings:PromptSettings"]),
     "recorder.py": ("recorder.md", ["so101.dataset.settings:RecorderSettings"]),
     "camera.py": ("camera.md", ["so101.dataset.settings:CameraSettings"]),
+    "real_camera.py": ("real_camera.md", ["so101.cameras.settings:RealCameraSettings"]),
     "replay.py": ("replay.md", ["so101.dataset.settings:ReplaySettings"]),
     "leader_node.py": ("leader.md", ["so101.leader.settings:LeaderSettings"]),
     "web_view.py": ("web_view.md", ["so101.web.settings:WebViewSettings"]),

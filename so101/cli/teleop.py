@@ -20,6 +20,10 @@ publishes `object_state` and `task_status`, and the prompt's `reset [SEED]` and 
 `--record DIR` adds the recorder node (and, for a simulation, the camera node that draws its
 pictures) to that copy: the prompt's `record`, `stop`, `discard` and `episodes` then keep
 episodes in DIR as a LeRobot dataset.
+
+`--body real --camera front=SOURCE --camera wrist=SOURCE` gives the real arm eyes: one real camera node
+per camera (so101.launch.real_cameras), recorded as observation.images.front and .wrist and seen by a
+policy that sees.
 """
 
 from __future__ import annotations
@@ -37,9 +41,15 @@ from so101.launch.beside_prompt import (
     TEXT, add_body_arguments, add_log_option, add_task_arguments, add_web_arguments, add_web_view, prepare, run_beside,
     task_problem,
 )
+from so101.policy.choice import ChosenPolicy
 from so101.policy.settings import torch_device
 from so101.observe import OBSERVE_ENV_VAR, OBSERVE_HELP, Observed, observed_for
-from so101.runtime.argtypes import add_camera_size_option, add_language_option, observed_list, whole_number
+from so101.cameras.sources import DEFAULT_CAMERA_FPS, DEFAULT_CAMERA_SIZE, parse_camera_option
+from so101.dataset.recording import CAMERA_LOST_CHOICES
+from so101.launch.real_cameras import add_real_cameras, checked_cameras, policy_picture_problem
+from so101.runtime.argtypes import (
+    add_camera_size_option, add_language_option, image_size, observed_list, parsed_by, whole_number,
+)
 from so101.runtime.dataflow import (
     LEADER_READY_MARKS, LOADED_MARKS, POLICY_READY_MARKS, PROMPT_NODE_FILE, WEB_VIEW_MARKS, dataflow_copy,
     with_camera, with_expert, with_leader, with_policy, with_recorder, with_task,
@@ -65,8 +75,17 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
                         help="--task --record: the cameras' pictures, fixed (default) or varied (each layout's seed draws "
                              "its light, floor and object colours and camera placement; the dataset keeps them)")
     parser.add_argument("--observe", type=observed_list, default=None, metavar="LIST", help=f"--record: {OBSERVE_HELP}")
-    add_camera_size_option(parser, DEFAULT_IMAGE_SIZE, "--record on a simulation: each camera's pictures, stored as "
-                                                       "video; `so101 bench --cameras --camera-size WxH` says what a size costs")
+    add_camera_size_option(parser, None, "--record: each camera's pictures, stored as video; real cameras are asked "
+                                         "for it; `so101 bench --cameras --camera-size WxH` says what a size costs",
+                           default_text=f"{DEFAULT_IMAGE_SIZE} on a simulation, {DEFAULT_CAMERA_SIZE} for real cameras")
+    parser.add_argument("--camera", type=parsed_by(parse_camera_option), action="append", metavar="NAME=SOURCE",
+                        help="--body real: a real camera, NAME front or wrist, SOURCE a device index, /dev/videoN or a "
+                             "video file (played at its own rate); once per camera; `so101 cameras` lists them")
+    parser.add_argument("--camera-fps", type=whole_number(1, 240), default=DEFAULT_CAMERA_FPS, metavar="N",
+                        help=f"--camera: frames per second asked of each camera (default {DEFAULT_CAMERA_FPS})")
+    parser.add_argument("--camera-lost", choices=CAMERA_LOST_CHOICES, default="save",
+                        help="--camera --record: a camera that stops ends the episode recording; save it up to then "
+                             "(default) or discard it")
     parser.add_argument(
         "--leader", metavar="PORT", default=None,
         help="an SO-101 leader arm on PORT drives the body (with --leader-calibration; `so101 fake-arm` emulates one); "
@@ -99,6 +118,14 @@ def run(args: argparse.Namespace) -> int:
     if launch is None:
         return 2
     descriptor = dataflow_copy(launch.node_env, launch.body.dataflow_file)
+    try:
+        cameras = checked_cameras(args.camera, launch.body.simulated)
+    except ValueError as error:
+        print(f"so101 teleop: {error}", file=sys.stderr)
+        return 2
+    if args.image_size is None:
+        args.image_size = image_size(DEFAULT_CAMERA_SIZE if cameras else DEFAULT_IMAGE_SIZE)
+    args.cameras = cameras
     ready_marks: tuple[tuple[str, ...], ...] = (LOADED_MARKS,)
     if args.task is not None:
         with_task(descriptor, launch.body.node_id, args.task, args.seed or 0)
@@ -127,15 +154,21 @@ def run(args: argparse.Namespace) -> int:
         print("so101 teleop: --observe says what a recording's frames show: it goes with --record DIR", file=sys.stderr)
         return 2
     if args.record is not None:
-        observed = args.observe or observed_for(task=args.task is not None, video=launch.body.simulated)
+        names = tuple(cameras)
+        observed = args.observe or observed_for(task=args.task is not None, video=launch.body.simulated, cameras=names)
         problem = observed.problem(task=args.task is not None, video=launch.body.simulated,
-                                   why_no_video="the real arm has no camera of its own")
+                                   why_no_video="the real arm has no camera of its own: give --camera NAME=SOURCE",
+                                   cameras=names)
         problem = problem and f"--observe {observed}: {problem}"
+        if not problem and cameras:
+            add_real_cameras(descriptor, cameras, args.image_size, args.image_size, args.camera_fps)
         problem = problem or add_recorder(descriptor, launch.body, args.record.expanduser().resolve(), args.fps,
-                                          args.lang, args.task, args.image_size, args.looks, observed)
+                                          args.lang, args.task, args.image_size, args.looks, observed,
+                                          names, args.camera_lost)
         if problem:
             print(f"so101 teleop: {problem}", file=sys.stderr)
             return 2
+    add_real_cameras(descriptor, cameras, args.image_size, args.image_size, args.camera_fps)  # seen in the web view
     web_line = add_web_view(args, descriptor, launch.body, "teleop")
     if web_line:
         ready_marks += (WEB_VIEW_MARKS,)
@@ -147,7 +180,6 @@ def add_policy(descriptor: dict, body: BodyKind, args: argparse.Namespace) -> st
     """The policy node added to `descriptor`, before `body`; or, in one line, why it cannot be (a folder that
     is not a policy's, features this dataflow cannot give, no Python to run it)."""
     from so101.policy.choice import choose_policy
-    from so101.tasks import task_named
 
     names = task_named(args.task).object_state_names if args.task else ()
     try:
@@ -156,22 +188,38 @@ def add_policy(descriptor: dict, body: BodyKind, args: argparse.Namespace) -> st
         return str(error)
     if chosen.picture_size is not None:  # the camera node draws what it sees, at the rate it learned from
         width, height = chosen.picture_size
-        if not body.simulated:
-            return ("the policy sees cameras, and the real arm has none here: run it on a simulation "
-                    "(--body pybullet or mujoco)")
+        if not body.simulated:  # the real cameras' pictures, scaled to the policy's where the camera's differ
+            if not args.cameras:
+                return ("the policy sees cameras, and the real arm has none here: give --camera front=SOURCE "
+                        "--camera wrist=SOURCE (`so101 cameras` lists them), or run it on a simulation")
+            problem = policy_picture_problem(chosen.inputs, args.cameras, tuple(args.image_size), chosen.picture_size,
+                                             args.record is not None)
+            if problem:
+                return problem
+            if tuple(args.image_size) != chosen.picture_size:
+                print(f"so101 teleop: note: the cameras' {args.image_size[0]}x{args.image_size[1]} pictures are "
+                      f"scaled to the policy's {width}x{height}", flush=True)
+            add_real_cameras(descriptor, args.cameras, tuple(args.image_size), chosen.picture_size, args.camera_fps)
+            finish_policy(descriptor, body, args, chosen)
+            return None
         if not args.task:
             return "the policy sees the task's cameras (the wrist's is drawn for a task's scene): add --task cube_to_box"
         if args.record is not None and tuple(args.image_size) != chosen.picture_size:
             return (f"the policy sees {width}x{height} pictures, and one camera draws them for the recording too: "
                     f"record at --camera-size {width}x{height}")
         with_camera(descriptor, body.node_id, {"SO101_RECORD_IMAGE_SIZE": f"{width}x{height}"}, DEFAULT_LOCKSTEP_FPS)
+    finish_policy(descriptor, body, args, chosen)
+    return None
+
+
+def finish_policy(descriptor: dict, body: BodyKind, args: argparse.Namespace, chosen: ChosenPolicy) -> None:
+    """The policy node added, once its pictures (if it sees) have a camera."""
     for line in chosen.notes():
         print(f"so101 teleop: {line}", flush=True)
     env = {**chosen.env(args.task or "", args.policy_device), "SO101_LANG": args.lang}
     if not args.task:
         del env["SO101_TASK"]
     with_policy(descriptor, body.node_id, chosen.inputs, env, str(chosen.python))
-    return None
 
 
 def add_leader(descriptor: dict, body: BodyKind, port: str | None, calibration_file: Path | None,
@@ -197,16 +245,19 @@ def add_leader(descriptor: dict, body: BodyKind, port: str | None, calibration_f
 
 def add_recorder(descriptor: dict, body: BodyKind, dataset_dir: Path, fps: int, lang: str,
                  task: str | None, image_size: tuple[int, int], looks: str = DEFAULT_LOOKS,
-                 observed: Observed | None = None) -> str | None:
+                 observed: Observed | None = None, real_cameras: tuple[str, ...] = (),
+                 camera_lost: str = "save") -> str | None:
     """The recorder (and a simulation's camera) added to `descriptor`; or why DIR cannot take
-    these episodes, in one line, before anything starts."""
+    these episodes, in one line, before anything starts. `real_cameras`: the real arm's, whose nodes
+    the dataflow has (so101.launch.real_cameras)."""
     from so101.dataset.layout import DatasetError
     from so101.dataset.writer import DatasetWriter
 
-    observed = observed or observed_for(task=task is not None, video=body.simulated)
-    pictures = image_size if observed.front or observed.wrist else None  # the real arm has no camera of its own
+    observed = observed or observed_for(task=task is not None, video=body.simulated, cameras=real_cameras)
+    pictures = image_size if observed.front or observed.wrist else None  # the real arm has only the cameras given
+    has_wrist = task is not None or "wrist" in real_cameras
     try:  # checked now, and let go: the recorder node opens it again
-        DatasetWriter.open(dataset_dir, fps, video_keys_and_sizes(pictures, task is not None, observed),
+        DatasetWriter.open(dataset_dir, fps, video_keys_and_sizes(pictures, has_wrist, observed),
                            environment_names=task_named(task).object_state_names if task else (),
                            environment_state=observed.environment).close()
     except DatasetError as error:
@@ -214,7 +265,9 @@ def add_recorder(descriptor: dict, body: BodyKind, dataset_dir: Path, fps: int, 
     size_text = f"{pictures[0]}x{pictures[1]}" if pictures else ""
     recorder_env = {"SO101_RECORD_DIR": str(dataset_dir), "SO101_RECORD_FPS": str(fps),
                     "SO101_RECORD_IMAGE_SIZE": size_text, "SO101_LANG": lang, OBSERVE_ENV_VAR: str(observed)}
-    camera_env = {"SO101_RECORD_IMAGE_SIZE": size_text} if pictures else None
+    if real_cameras and pictures:  # their own nodes, already in the dataflow
+        recorder_env.update({"SO101_RECORD_CAMERAS": ",".join(real_cameras), "SO101_RECORD_CAMERA_LOST": camera_lost})
+    camera_env = {"SO101_RECORD_IMAGE_SIZE": size_text} if pictures and body.simulated else None
     if camera_env is not None and looks != DEFAULT_LOOKS:  # the camera draws them, the recorder keeps them
         camera_env["SO101_LOOKS"] = recorder_env["SO101_LOOKS"] = looks
     with_recorder(descriptor, body.node_id, recorder_env, camera_env, picture_hz=fps)

@@ -8,12 +8,19 @@ and target at the frame's tick; its timestamp is frame_index / fps (LeRobot's ru
 recorder that fell behind adds the frames it owes, each with the latest sample, and the episode
 keeps the wall clock's length. Saving runs in a thread: the recorder goes on answering and
 sampling while an episode is written.
+
+Real cameras stamp each picture with the time it was captured, and the body's states come stamped
+with the time they were sent: a frame then takes the state nearest the front picture's capture, as
+LeRobot's recorder reads the arm and the cameras at one moment. A real camera that sends nothing for
+CAMERA_SILENT_S stops the episode, saved up to then or discarded, as the user chose.
 """
 
 from __future__ import annotations
 
 import threading
 import time
+from bisect import bisect_left
+from collections import deque
 from typing import Any, Callable, Mapping, Protocol, Sequence
 
 import numpy as np
@@ -31,6 +38,11 @@ from so101.tasks.cube_to_box import CubeToBox
 # A recorder that stalled longer than this many frames (a suspended laptop) starts counting
 # afresh rather than fill the gap with copies of one sample.
 MAX_FRAMES_OWED = 30
+# The states kept to pair a picture with: about 1 s of the real arm's 50 a second, 1.2 s of a simulation's 250.
+STATE_HISTORY = 300
+# A real camera that sent no picture for this long has stopped (unplugged, a read that failed, a file that ended).
+CAMERA_SILENT_S = 0.5
+CAMERA_LOST_CHOICES = ("save", "discard")  # what becomes of the episode a camera stopped
 
 TEXT = {
     "zh": {
@@ -51,6 +63,8 @@ TEXT = {
         "unknown": "录制器不认识这条指令: {command!r}(可用: {accepted})",
         "stopping_save": "数据流停止:保存未结束的第 {episode} 段",
         "waiting_picture": "(等待第一张画面,之后开始计帧)",
+        "camera_lost": "✗ {camera} 相机 {seconds:.1f} 秒没有画面:{result}",
+        "camera_silent": "{camera} 相机 {seconds:.1f} 秒没有画面:未开始录制(相机插好了吗?)",
     },
     "en": {
         "started": "● recording episode {episode}: task '{task}' (stop: stop, drop: discard)",
@@ -70,6 +84,8 @@ TEXT = {
         "unknown": "the recorder does not know {command!r} (accepted: {accepted})",
         "stopping_save": "the dataflow stops: saving the unfinished episode {episode}",
         "waiting_picture": "(waiting for the first picture; frames count from then)",
+        "camera_lost": "✗ the {camera} camera sent no picture for {seconds:.1f} s: {result}",
+        "camera_silent": "the {camera} camera has sent no picture for {seconds:.1f} s: not recording (is it plugged in?)",
     },
 }
 
@@ -94,6 +110,15 @@ class Writer(Protocol):
     episodes: list  # of EpisodeSummary: index, length, tasks, duration_s
 
     def start_episode(self, task: str) -> Episode: ...
+
+
+def nearest_in_time(history: Sequence[tuple[float, Any]], when_s: float) -> tuple[float, Any] | None:
+    """The (time, value) of `history` (in time order) nearest `when_s`; None for an empty history."""
+    if not history:
+        return None
+    index = bisect_left([stamp for stamp, _ in history], when_s)
+    candidates = [history[at] for at in (index - 1, index) if 0 <= at < len(history)]
+    return min(candidates, key=lambda each: abs(each[0] - when_s))
 
 
 class FrameClock:
@@ -124,11 +149,16 @@ class Recording:
     `task`: the body runs this task (so101.tasks), so a frame holds its objects' poses, its reward
     and whether it succeeded, and waits for the first object_state; with video, the wrist camera's
     picture too, and it waits for the first of those.
+    `wrist`: a wrist camera without a task (the real arm's); `camera_lost`: the cameras are real, and
+    one that stops ends the episode, `save`d up to then or `discard`ed ("" for a simulation's camera,
+    which draws only when something moved). `log` hears how far apart each episode's pictures and
+    states were taken, where the pictures say when.
     """
 
     def __init__(self, writer: Writer, root: str, fps: int, lang: str, needs_image: bool,
                  say: Callable[[str], None], clock: Callable[[], float] = time.monotonic, task: CubeToBox | None = None,
-                 looks: str = DEFAULT_LOOKS, observed: Observed = ALL_OBSERVED):
+                 looks: str = DEFAULT_LOOKS, observed: Observed = ALL_OBSERVED, wrist: bool = False,
+                 camera_lost: str = "", log: Callable[[str], None] = lambda line: None):
         self.writer, self.root, self.fps = writer, root, fps
         self.text = TEXT[lang]
         self.needs_image = needs_image and observed.front
@@ -141,7 +171,13 @@ class Recording:
         self.task = task
         self.object_state: npt.NDArray[np.float32] | None = None
         self.wrist_image: npt.NDArray[np.uint8] | None = None
-        self.needs_wrist_image = needs_image and task is not None and observed.wrist
+        self.needs_wrist_image = needs_image and (task is not None or wrist) and observed.wrist
+        self.camera_lost, self.log = camera_lost, log
+        self._arrived_s: dict[str, float] = {}  # camera -> when its newest picture came
+        self.captured_s: float | None = None  # when the newest front picture was taken, where it says
+        self._arm_history: deque[tuple[float, tuple[float, ...]]] = deque(maxlen=STATE_HISTORY)
+        self._gripper_history: deque[tuple[float, float]] = deque(maxlen=STATE_HISTORY)
+        self._pairing_s = 0.0  # the episode's widest gap between a picture and its state
         self.shows_environment = observed.environment
         self.success = False
         self.looks = looks  # the pictures' looks (so101.bodies.looks), drawn from the layout's seed
@@ -155,23 +191,29 @@ class Recording:
         self.last_task = ""
 
     # -- inputs --------------------------------------------------------------------------
-    def on_joint_state(self, arm_deg: Sequence[float]) -> None:
+    def on_joint_state(self, arm_deg: Sequence[float], sent_s: float | None = None) -> None:
         if len(arm_deg) == NUM_ARM_JOINTS:
             self.arm_deg = tuple(float(angle) for angle in arm_deg)
+            if sent_s is not None:
+                self._arm_history.append((sent_s, self.arm_deg))
 
-    def on_gripper_state(self, gripper_deg: Sequence[float]) -> None:
+    def on_gripper_state(self, gripper_deg: Sequence[float], sent_s: float | None = None) -> None:
         if len(gripper_deg) == 1:
             self.gripper_deg = float(gripper_deg[0])
+            if sent_s is not None:
+                self._gripper_history.append((sent_s, self.gripper_deg))
 
     def on_joint_target(self, targets_deg: Sequence[float]) -> None:
         if len(targets_deg) == len(ACTUATED_JOINTS):
             self.targets_deg = tuple(float(angle) for angle in targets_deg)
 
-    def on_image(self, rgb: npt.NDArray[np.uint8]) -> None:
-        self.image = rgb
+    def on_image(self, rgb: npt.NDArray[np.uint8], captured_s: float | None = None) -> None:
+        self.image, self.captured_s = rgb, captured_s
+        self._arrived_s["front"] = self.clock()
 
-    def on_wrist_image(self, rgb: npt.NDArray[np.uint8]) -> None:
+    def on_wrist_image(self, rgb: npt.NDArray[np.uint8], captured_s: float | None = None) -> None:
         self.wrist_image = rgb
+        self._arrived_s["wrist"] = self.clock()
 
     def on_object_state(self, values: Sequence[float]) -> None:
         if self.task is not None and len(values) == len(self.task.object_state_names):
@@ -187,12 +229,42 @@ class Recording:
             return None
         return self.arm_deg + (self.gripper_deg,)
 
+    def state_at_picture(self) -> tuple[float, ...] | None:
+        """The state of the moment the front picture was taken (the nearest one sent), where the picture and
+        the states say when; else the latest."""
+        arm = nearest_in_time(self._arm_history, self.captured_s) if self.captured_s is not None else None
+        gripper = nearest_in_time(self._gripper_history, self.captured_s) if self.captured_s is not None else None
+        if arm is None or gripper is None or self.captured_s is None:
+            return self.state_deg()
+        self._pairing_s = max(self._pairing_s, abs(arm[0] - self.captured_s))
+        return arm[1] + (gripper[1],)
+
+    def silent_camera(self) -> tuple[str, float] | None:
+        """(camera, seconds) of a real camera whose newest picture is older than CAMERA_SILENT_S; None when all send."""
+        if not self.camera_lost:
+            return None
+        now_s = self.clock()
+        needed = [name for name, needs in (("front", self.needs_image), ("wrist", self.needs_wrist_image)) if needs]
+        for name in needed:
+            if name in self._arrived_s and now_s - self._arrived_s[name] > CAMERA_SILENT_S:
+                return name, now_s - self._arrived_s[name]
+        return None
+
     # -- the frame clock -----------------------------------------------------------------
     def tick(self) -> int:
         """Add the frames due now; returns how many were added."""
         if self.episode is None:
             return 0
-        state = self.state_deg()
+        silent = self.silent_camera() if self._frame_clock is not None else None
+        if silent is not None:  # the camera stopped: the episode ends here, as the user chose
+            def announce(result: str) -> None:
+                self.say(self.text["camera_lost"].format(camera=silent[0], seconds=silent[1], result=result))
+            if self.camera_lost == "save":
+                self.stop(announce)
+            else:
+                announce(self.discard())
+            return 0
+        state = self.state_at_picture()
         if (state is None or (self.needs_image and self.image is None)
                 or (self.needs_wrist_image and self.wrist_image is None)
                 or (self.task is not None and self.object_state is None)):
@@ -242,6 +314,9 @@ class Recording:
             return self.text["no_task"]
         if self.state_deg() is None:
             return self.text["no_state"]
+        silent = self.silent_camera()
+        if silent is not None:
+            return self.text["camera_silent"].format(camera=silent[0], seconds=silent[1])
         # The writer numbers episodes as they are saved: after those saved and those saving (a
         # save that fails gives its number back).
         self.episode_index = len(self.writer.episodes) + len(self._pending)
@@ -250,7 +325,7 @@ class Recording:
             self.episode.seed = self.seed
             if self.needs_image or self.needs_wrist_image:
                 self.episode.looks = looks_metadata(self.looks, self.seed)
-        self._frame_clock = None
+        self._frame_clock, self._pairing_s = None, 0.0
         self.last_task = task
         line = self.text["started"].format(episode=self.episode_index, task=task)
         if (self.needs_image and self.image is None) or (self.needs_wrist_image and self.wrist_image is None):
@@ -261,21 +336,31 @@ class Recording:
         """(episode index, task) of the episode recording, or None: what `record_status` carries for the web view."""
         return (self.episode_index, self.last_task) if self.episode is not None else None
 
-    def stop(self) -> str:
-        """End the episode in progress and save it in the background."""
+    def stop(self, announce: Callable[[str], None] | None = None) -> str:
+        """End the episode in progress and save it in the background; `announce` hears the reply before the
+        save starts (so that it comes before the save's own news)."""
         episode = self.episode
         if episode is None:
             return self.text["not_recording"]
         index, frames = self.episode_index, episode.frames
         self.episode, self._frame_clock = None, None
+        if self.captured_s is not None and frames:
+            self.log(f"episode {index}: each picture paired with the state sent nearest its capture, "
+                     f"at most {self._pairing_s * 1000:.0f} ms apart")
         if frames == 0:
             episode.discard()
-            return self.text["empty"].format(episode=index)
+            reply = self.text["empty"].format(episode=index)
+            if announce is not None:
+                announce(reply)
+            return reply
         self._pending[index] = frames
+        reply = self.text["saving"].format(episode=index, frames=frames, seconds=frames / self.fps)
+        if announce is not None:
+            announce(reply)
         saving = threading.Thread(target=self._save, args=(episode, index, frames), name=f"save-{index}")
         self._saves.append(saving)
         saving.start()
-        return self.text["saving"].format(episode=index, frames=frames, seconds=frames / self.fps)
+        return reply
 
     def _save(self, episode: Episode, index: int, frames: int) -> None:
         started = time.monotonic()

@@ -13,7 +13,9 @@ from so101.bodies.settings import read_language
 from so101.tasks.settings import read_task
 from so101.dataset.features import DEFAULT_FPS
 from so101.lang import DEFAULT_LANGUAGE, ENV_VAR as LANG_ENV_VAR
+from so101.dataset.recording import CAMERA_LOST_CHOICES
 from so101.observe import ALL_OBSERVED, OBSERVE_ENV_VAR, Observed, parse_observed
+from so101.runtime.dataflow import PICTURE_OF_CAMERA
 from so101.runtime.settings import (
     EnvironSettings, Setting, read_choice, read_file_path, read_image_size, read_optional_path, read_parsed,
     read_whole_number, setting,
@@ -27,6 +29,15 @@ def read_fps(environ: Mapping[str, str], declared_setting: Setting) -> int:
     if not 1 <= fps <= 1000:
         raise ValueError(f"{declared_setting.env_var}={fps} is not a frame rate from 1 to 1000 per second")
     return fps
+
+
+def parse_real_cameras(text: str) -> tuple[str, ...]:
+    """`front,wrist` -> ("front", "wrist"); "" -> (); ValueError in one line for another name."""
+    names = tuple(name.strip() for name in text.split(",") if name.strip())
+    unknown = [name for name in names if name not in PICTURE_OF_CAMERA]
+    if unknown:
+        raise ValueError(f"{unknown[0]!r} is not a camera: give {' and/or '.join(PICTURE_OF_CAMERA)}, comma-separated")
+    return names
 
 
 @dataclass(frozen=True)
@@ -52,6 +63,13 @@ class RecorderSettings(EnvironSettings):
         OBSERVE_ENV_VAR, str(ALL_OBSERVED), "what the frames show, from state,environment,front,wrist (so101.observe), "
         "as far as the body has it: without a task no environment or wrist, without video no camera",
         read_parsed(parse_observed))
+    real_cameras: tuple[str, ...] = setting(
+        "SO101_RECORD_CAMERAS", "", "the real cameras recorded (`front`, `wrist`; nodes/real_camera.py): each picture "
+        "is paired with the state of its capture, and one that stops ends the episode; empty = a simulation's camera",
+        read_parsed(parse_real_cameras))
+    camera_lost: str = setting(
+        "SO101_RECORD_CAMERA_LOST", "save", "with real cameras, what becomes of the episode when one stops sending "
+        "pictures: `save` it up to then, or `discard` it", read_choice(CAMERA_LOST_CHOICES))
 
 
 @dataclass(frozen=True)

@@ -77,10 +77,12 @@ def image_size(text: str) -> tuple[int, int]:
     return size
 
 
-def add_camera_size_option(parser: argparse.ArgumentParser, default: str, purpose: str) -> None:
-    """--camera-size WxH (and its older name --image-size): the cameras' picture size, as `image_size`."""
+def add_camera_size_option(parser: argparse.ArgumentParser, default: str | None, purpose: str,
+                           default_text: str = "") -> None:
+    """--camera-size WxH (and its older name --image-size): the cameras' picture size, as `image_size`
+    (None by default where `default` is None: the command chooses, as `default_text` says)."""
     parser.add_argument("--camera-size", "--image-size", dest="image_size", type=image_size, default=default,
-                        metavar="WxH", help=f"{purpose} (default {default}; 96x72 and up: small pictures train a "
-                                            "policy that sees on a CPU)")
+                        metavar="WxH", help=f"{purpose} (default {default_text or default}; 96x72 and up: small "
+                                            "pictures train a policy that sees on a CPU)")
 
 observed_list = parsed_by(parse_observed)  # --observe

@@ -14,6 +14,13 @@ PROMPT_NODE_ID = "keyboard_control"
 RECORDER_NODE_FILE = ROOT / "nodes" / "recorder.py"
 CAMERA_NODE_FILE = ROOT / "nodes" / "camera.py"
 CAMERA_NODE_ID = "camera"
+# `so101 teleop --body real --camera NAME=SOURCE` adds one of these per real camera, as camera_NAME.
+REAL_CAMERA_NODE_FILE = ROOT / "nodes" / "real_camera.py"
+# Each real camera's picture reaches the recorder and the policy on the input the simulated camera's
+# picture of the same camera has.
+PICTURE_OF_CAMERA = {"front": "image", "wrist": "wrist_image"}
+# A real camera node sends its newest picture at each of these ticks (a picture waits at most this long).
+REAL_CAMERA_TICK = "dora/timer/millis/5"
 REPLAY_NODE_FILE = ROOT / "nodes" / "replay.py"
 REPLAY_NODE_ID = "replay"
 # `so101 teleop --leader` puts the leader node between the prompt and the body (dataflow_leader.yml).
@@ -184,8 +191,8 @@ def with_recorder(descriptor: dict, body_node_id: str, recorder_env: dict[str, s
         recorder_env = {**recorder_env, "SO101_TASK": task}
     if camera_env is not None:
         with_camera(descriptor, body_node_id, camera_env, picture_hz, root)
-        recorder_inputs.update({name: _queued(f"{CAMERA_NODE_ID}/{name}", TICK_QUEUE)
-                                for name in _node(descriptor, CAMERA_NODE_ID)["outputs"]})
+    if camera_env is not None or recorder_env.get("SO101_RECORD_CAMERAS"):  # a simulation's camera, or real ones
+        recorder_inputs.update({name: _queued(source, TICK_QUEUE) for name, source in picture_sources(descriptor).items()})
     descriptor["nodes"].append({
         "id": "recorder", "path": str(root / RECORDER_NODE_FILE.relative_to(ROOT)), "restart_policy": "never",
         "inputs": recorder_inputs, "outputs": ["record_status"], "env": recorder_env,
@@ -225,6 +232,35 @@ def with_camera(descriptor: dict, body_node_id: str, camera_env: dict[str, str],
         "inputs": camera_inputs, "outputs": camera_outputs, "env": camera_env,
     })
     return descriptor
+
+
+def real_camera_node_id(name: str) -> str:
+    """The node of the real camera `name` (one node per camera)."""
+    return f"camera_{name}"
+
+
+def with_real_cameras(descriptor: dict, camera_envs: dict[str, dict[str, str]], root: PurePath = ROOT) -> dict:
+    """A dataflow with a real camera node (nodes/real_camera.py) for each of `camera_envs`, name -> its settings:
+    each publishes `image` on its own; the recorder, the policy and the web view take the front camera's as
+    `image` and the wrist camera's as `wrist_image` (picture_sources)."""
+    body_index = next(index for index, node in enumerate(descriptor["nodes"]) if node.get("path") != "dynamic")
+    for offset, (name, env) in enumerate(camera_envs.items()):
+        descriptor["nodes"].insert(body_index + offset, {
+            "id": real_camera_node_id(name), "path": str(root / REAL_CAMERA_NODE_FILE.relative_to(ROOT)),
+            "restart_policy": "never",  # it retries a camera that stopped itself; a crash is said, not hidden
+            "inputs": {"tick": {"source": REAL_CAMERA_TICK, "queue_size": 1}}, "outputs": ["image"], "env": env,
+        })
+    return descriptor
+
+
+def picture_sources(descriptor: dict) -> dict[str, str]:
+    """Where the pictures come from, by the input that takes them (`image`, `wrist_image`): the simulated
+    camera node's outputs, or the real camera nodes'; {} for a dataflow without pictures."""
+    node_ids = {node["id"] for node in descriptor["nodes"]}
+    if CAMERA_NODE_ID in node_ids:
+        return {name: f"{CAMERA_NODE_ID}/{name}" for name in _node(descriptor, CAMERA_NODE_ID)["outputs"]}
+    return {picture: f"{real_camera_node_id(name)}/image" for name, picture in PICTURE_OF_CAMERA.items()
+            if real_camera_node_id(name) in node_ids}
 
 
 def _retarget(node: dict, input_id: str, source: str) -> None:
@@ -304,7 +340,8 @@ def with_policy(descriptor: dict, body_node_id: str, observed: tuple[str, ...], 
     prompt = _node(descriptor, PROMPT_NODE_ID)
     prompt["outputs"] = [*prompt["outputs"], "policy_cmd"]
     # Its pictures from the camera node (with_camera): only the newest matters, so one is queued.
-    inputs = {name: {"source": f"{CAMERA_NODE_ID}/{name}", "queue_size": 1} if name in PICTURE_OUTPUTS
+    pictures = picture_sources(descriptor)
+    inputs = {name: {"source": pictures[name], "queue_size": 1} if name in PICTURE_OUTPUTS
               else _queued(f"{body_node_id}/{name}", STATE_QUEUE) for name in observed}
     return _before_body(descriptor, body_node_id, POLICY_NODE_ID, POLICY_NODE_FILE, POLICY_TICK, policy_env, root,
                         {"policy_cmd": {"source": f"{PROMPT_NODE_ID}/policy_cmd", "queue_size": 10}, **inputs}, python)
@@ -325,8 +362,9 @@ def with_web_view(descriptor: dict, body_node_id: str, web_env: dict[str, str], 
         "gripper_state": _queued(f"{body_node_id}/gripper_state", STATE_QUEUE),
     }
     node_ids = {node["id"] for node in descriptor["nodes"]}
-    if "camera" in node_ids:
-        inputs["image"] = _queued("camera/image", TICK_QUEUE)
+    front = picture_sources(descriptor).get("image")
+    if front:
+        inputs["image"] = _queued(front, TICK_QUEUE)
     if "recorder" in node_ids:
         inputs["record_status"] = {"source": "recorder/record_status", "queue_size": 100}
     task = body_task(descriptor, body_node_id)
