@@ -54,7 +54,9 @@ def picture(event: dict, image_size: tuple[int, int]) -> np.ndarray | None:
         logger.warning("[recorder] ignored an image of %sx%s: the dataset's video is %dx%d",
                        metadata.get("width", "?"), metadata.get("height", "?"), width, height)
         return None
-    return pixels.astype(np.uint8, copy=False).reshape(height, width, 3)
+    # A copy: the message's memory goes back to dora once the event is dropped, and may carry a later
+    # picture by the time this one is written into a frame.
+    return np.array(pixels, dtype=np.uint8).reshape(height, width, 3)
 
 
 def sent_s(event: dict) -> float | None:
