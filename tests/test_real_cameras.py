@@ -26,6 +26,27 @@ pytestmark = [pytest.mark.person, pytest.mark.realtime,
 STATE = r"  joint angles now: \[(-?[\d.]+), .*"
 
 
+def teleop_on_the_emulated_arm(tmp_path: Path, env: dict[str, str], cameras: str):
+    """`so101 teleop --body real` on the emulated arm with `cameras` (its --camera options), recording into
+    tmp_path/real, in a new terminal whose prompt is ready; returns it and the dataflow's log."""
+    terminal, _, log_file = start_teleop(
+        tmp_path, "en", body="real",
+        extra=f"--port {env['SO101_PORT']} --calibration {env['SO101_CALIBRATION']} {cameras} --record {tmp_path / 'real'}")
+    terminal.seen = terminal.wait_for_prompt(timeout_s=120).start()
+    return terminal, log_file
+
+
+def quit_cleanly(terminal) -> None:
+    """`quit` at the prompt: the session ends with exit code 0 and no traceback."""
+    terminal.type_line("quit")
+    terminal.wait_for(r"^TELEOP_EXIT=0$", timeout_s=60, after=terminal.seen)
+    assert "Traceback" not in terminal.screen(), terminal.screen()
+
+
+def torque_is_off(arm) -> bool:
+    return [arm.read_register(servo, "Torque_Enable") for servo in range(1, 7)] == [0] * 6
+
+
 def front_video(dataset_dir: Path) -> Path:
     return next((dataset_dir / "videos" / IMAGE_KEY).rglob("*.mp4"))
 
@@ -35,12 +56,8 @@ def test_file_cameras_on_the_emulated_arm_record_the_files_frames_in_order_paire
     wrist = write_numbered_video(tmp_path / "wrist.mp4", 1000, width=320, height=240)
     dataset_dir = tmp_path / "real"
     with body_environment("real", tmp_path) as (env, arm):
-        terminal, _, log_file = start_teleop(
-            tmp_path, "en", body="real",
-            extra=f"--port {env['SO101_PORT']} --calibration {env['SO101_CALIBRATION']} --camera front={front} "
-                  f"--camera wrist={wrist} --record {dataset_dir}")
+        terminal, log_file = teleop_on_the_emulated_arm(tmp_path, env, f"--camera front={front} --camera wrist={wrist}")
         try:
-            terminal.seen = terminal.wait_for_prompt(timeout_s=120).start()
             terminal.command("record look at the arm", r"  ● recording episode 0: task 'look at the arm' .*")
             terminal.command("0 30", re.escape("  → joint 0 (shoulder_pan) → 30°"))
             time.sleep(2.0)
@@ -48,14 +65,10 @@ def test_file_cameras_on_the_emulated_arm_record_the_files_frames_in_order_paire
             time.sleep(2.0)
             terminal.command("stop", r"  ■ episode 0: \d+ frames \(\d+\.\d s\), saving\.\.\.")
             terminal.wait_for(r"^  ✓ episode 0 saved: \d+ frames", timeout_s=60, after=terminal.seen)
-            terminal.type_line("quit")
-            terminal.wait_for(r"^TELEOP_EXIT=0$", timeout_s=60, after=terminal.seen)
-            screen = terminal.screen()
+            quit_cleanly(terminal)
         finally:
             terminal.close()
-        torque = [arm.read_register(servo, "Torque_Enable") for servo in range(1, 7)]
-    assert "Traceback" not in screen, screen
-    assert torque == [0] * 6  # torque off on the way out
+        assert torque_is_off(arm)  # on the way out
     dataset = Dataset.open(dataset_dir)
     frames = dataset.episode_frames(0)
     assert {IMAGE_KEY, WRIST_IMAGE_KEY} <= set(dataset.info["features"]), dataset.info["features"]
@@ -79,12 +92,8 @@ def test_a_camera_that_vanishes_mid_episode_is_said_and_the_episode_so_far_is_ke
     shutil.copy(front, kept)
     dataset_dir = tmp_path / "real"
     with body_environment("real", tmp_path) as (env, arm):
-        terminal, _, log_file = start_teleop(
-            tmp_path, "en", body="real",
-            extra=f"--port {env['SO101_PORT']} --calibration {env['SO101_CALIBRATION']} --camera front={front} "
-                  f"--camera-size 320x240 --record {dataset_dir}")
+        terminal, log_file = teleop_on_the_emulated_arm(tmp_path, env, f"--camera front={front} --camera-size 320x240")
         try:
-            terminal.seen = terminal.wait_for_prompt(timeout_s=120).start()
             terminal.command("record until it vanishes", r"  ● recording episode 0: .*")
             time.sleep(2.0)
             front.write_bytes(b"")  # the camera vanishes: its reads fail, and it cannot be opened again
@@ -101,14 +110,10 @@ def test_a_camera_that_vanishes_mid_episode_is_said_and_the_episode_so_far_is_ke
             deadline = time.monotonic() + 20
             while "is back" not in log_file.read_text() and time.monotonic() < deadline:
                 time.sleep(0.2)
-            terminal.type_line("quit")
-            terminal.wait_for(r"^TELEOP_EXIT=0$", timeout_s=60, after=terminal.seen)
-            screen = terminal.screen()
+            quit_cleanly(terminal)
         finally:
             terminal.close()
-        torque = [arm.read_register(servo, "Torque_Enable") for servo in range(1, 7)]
-    assert "Traceback" not in screen, screen
-    assert torque == [0] * 6
+        assert torque_is_off(arm)  # on the way out
     log = log_file.read_text()
     assert re.search(rf"camera front: {re.escape(str(front))} stopped \(no picture came", log), log[-3000:]
     assert f"camera front: {front} is back" in log, log[-3000:]
