@@ -60,6 +60,15 @@ def from_lerobot(values: Sequence[float] | npt.NDArray[np.floating]) -> Float64A
     return angles
 
 
+def joint_targets_deg(action: Sequence[float] | npt.NDArray[np.floating]) -> list[float]:
+    """A policy's action (LeRobot's six values) as the body's six joint targets, in degrees: the policy
+    node's joint_cmd, the Gymnasium environment's step (so101.gym)."""
+    values = np.asarray(action, dtype=np.float64).reshape(-1)
+    if values.shape != (len(ACTUATED_JOINTS),) or not np.all(np.isfinite(values)):
+        raise ValueError(f"the policy's action is {values.tolist()}: expected {len(ACTUATED_JOINTS)} finite numbers")
+    return [float(angle) for angle in from_lerobot(values)]
+
+
 def video_keys_and_sizes(image_size: tuple[int, int] | None, task: bool,
                          observed: Observed = ALL_OBSERVED) -> dict[str, tuple[int, int]]:
     """The videos an episode holds, each with its (width, height): the front camera's where there

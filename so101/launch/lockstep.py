@@ -32,11 +32,10 @@ from so101.runtime.dataflow import EXPERT_NODE_FILE, ROOT, node_launch, write_da
 from so101.runtime.dora_run import Dataflow, port_held_problem, refusal
 from so101.runtime.lockstep import DEFAULT_LOCKSTEP_FPS
 from so101.tasks import TASKS
-from so101.tasks.episodes import EpisodeClock, Outcome, read_outcomes, seeds_for, split_seeds
+from so101.tasks.episodes import DEFAULT_TIME_LIMIT_S, EpisodeClock, Outcome, read_outcomes, seeds_for, split_seeds
 
 EPISODES_NODE_FILE = ROOT / "nodes" / "episodes.py"
 BODY_FRAME_OUTPUTS = ["joint_state", "gripper_state", "object_state", "task_status"]
-DEFAULT_TIME_LIMIT_S = 30.0
 MAX_WORKERS = 16
 WORKERS_MACHINE = "local"  # the daemon's machine id when --workers runs several dataflows here
 # A run whose dataflow said nothing for this long (no episode ended, dora did not exit) is stuck.

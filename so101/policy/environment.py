@@ -1,9 +1,13 @@
 """The policy environment: a virtual environment of its own with LeRobot, torch and dora-rs, whose
 interpreter runs nodes/policy.py (`--policy-python`). LeRobot and torch are heavy, and LeRobot 0.5
 and later need Python >= 3.12 while this project is 3.11, so they stay out of the project's .venv.
+LeRobot's own `lerobot-eval` runs there too, on the Gymnasium environment (so101.gym), which it makes
+in that interpreter: so the environment also holds the simulators and Gymnasium, and a `.pth` file
+puts this checkout on its path (the project's plain modules, as the policy node reaches them).
 
 `so101 policy-env` builds it once per machine (in the user's cache by default) and checks it: the
-imports the node makes, offline. A built one is only checked again.
+imports the node and lerobot-eval's environment make, offline. A built one is linked to the checkout
+again (a moved checkout) and checked.
 """
 
 from __future__ import annotations
@@ -16,13 +20,18 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
+from so101.runtime.dataflow import ROOT
 from so101.runtime.versions import LIBRARY_DISTRIBUTION, library_version
 
 # LeRobot 0.4.4 is the last release for Python 3.11 (0.5 and later need 3.12); its pins take
 # torch < 2.11. dora-rs is this project's own version: the daemon and the node library must match.
 LEROBOT_REQUIREMENT = "lerobot==0.4.4"
 DORA_REQUIREMENT = f"{LIBRARY_DISTRIBUTION}=={library_version()}"
-REQUIREMENTS = (LEROBOT_REQUIREMENT, DORA_REQUIREMENT)
+# What so101.gym needs in lerobot-eval's interpreter: pyproject.toml's own pins (tests/test_gym.py holds them equal).
+SIMULATION_REQUIREMENTS = ("pybullet==3.2.7", "mujoco>=4.0,<5", "gymnasium>=1.1.1,<2")
+REQUIREMENTS = (LEROBOT_REQUIREMENT, DORA_REQUIREMENT, *SIMULATION_REQUIREMENTS)
+# The file in the environment's site-packages that puts this checkout on its path.
+CHECKOUT_LINK_NAME = "so101-checkout.pth"
 # The dora-rs a Python holds, from its metadata (importing nothing: quick, before a dataflow starts).
 DORA_PROBE = f"""
 from importlib.metadata import PackageNotFoundError, version
@@ -32,17 +41,23 @@ except PackageNotFoundError:
     print()
 """
 STAMP_NAME = "so101-policy-env.json"
-# What nodes/policy.py imports, and the versions it reports; run offline, as the node runs.
+# What nodes/policy.py imports, and what lerobot-eval imports of so101.gym (its config, the checkout's
+# modules, both simulators), and the versions; run offline, as the node and lerobot-eval run.
 CHECK_SCRIPT = """
 import json
 import dora, numpy, pyarrow, torch
 import lerobot
 from lerobot.configs.policies import PreTrainedConfig
 from lerobot.policies.factory import get_policy_class, make_pre_post_processors
+import gymnasium, mujoco, pybullet
+import so101.gym.lerobot_config, so101.gym.cube_to_box
 from importlib.metadata import version
 print(json.dumps({"lerobot": version("lerobot"), "torch": torch.__version__, "dora-rs": version("dora-rs"),
-                  "numpy": numpy.__version__, "pyarrow": pyarrow.__version__}))
+                  "numpy": numpy.__version__, "pyarrow": pyarrow.__version__, "gymnasium": gymnasium.__version__,
+                  "mujoco": mujoco.__version__, "pybullet": version("pybullet"), "so101": so101.__path__[0]}))
 """
+# Where an interpreter keeps its packages.
+SITE_PACKAGES_PROBE = "import sysconfig; print(sysconfig.get_paths()['purelib'])"
 OFFLINE = {"HF_HUB_OFFLINE": "1", "HF_DATASETS_OFFLINE": "1", "TRANSFORMERS_OFFLINE": "1"}
 
 
@@ -106,8 +121,10 @@ def check(python: Path, timeout_s: float = 300.0) -> PolicyEnv:
     if problem:
         raise PolicyEnvError(problem)
     try:
+        # From the interpreter's own folder: the project is found through the environment's link, not the
+        # folder this command was run in.
         done = subprocess.run([str(python), "-c", CHECK_SCRIPT], capture_output=True, text=True, timeout=timeout_s,
-                              env={**os.environ, **OFFLINE})
+                              env={**os.environ, **OFFLINE}, cwd=python.parent)
     except (OSError, subprocess.TimeoutExpired) as error:
         raise PolicyEnvError(f"{python} could not be run: {error}") from None
     if done.returncode != 0:
@@ -129,6 +146,7 @@ def build(folder: Path, base_python: str = sys.executable, say: Callable[[str], 
     if stamp.exists() and python.exists():
         try:
             if json.loads(stamp.read_text()).get("requirements") == list(REQUIREMENTS):
+                link_checkout(python, say)
                 return check(python)
         except (OSError, ValueError):
             pass  # a stamp that cannot be read: build again over it
@@ -146,6 +164,25 @@ def build(folder: Path, base_python: str = sys.executable, say: Callable[[str], 
         if done.returncode != 0:
             last = (done.stderr.strip().splitlines() or done.stdout.strip().splitlines() or ["no message"])[-1]
             raise PolicyEnvError(f"`{' '.join(command[:4])} ...` failed: {last}")
+    link_checkout(python, say)
     env = check(python)
     stamp.write_text(json.dumps({"requirements": list(REQUIREMENTS), "versions": env.versions}, indent=2))
     return env
+
+
+def link_checkout(python: Path, say: Callable[[str], None] = print, root: Path = ROOT) -> Path:
+    """A .pth file in `python`'s site-packages naming the checkout `root`, so that its interpreter imports
+    this project's modules (lerobot-eval: `--env.discover_packages_path=so101.gym`); rewritten where the
+    checkout moved. Returns the file."""
+    try:
+        done = subprocess.run([str(python), "-c", SITE_PACKAGES_PROBE], capture_output=True, text=True, timeout=60)
+    except (OSError, subprocess.TimeoutExpired) as error:
+        raise PolicyEnvError(f"{python} could not be run: {error}") from None
+    if done.returncode != 0 or not done.stdout.strip():
+        raise PolicyEnvError(f"{python} did not say where its packages are: {(done.stderr.strip().splitlines() or [''])[-1]}")
+    link = Path(done.stdout.strip().splitlines()[-1]) / CHECKOUT_LINK_NAME
+    wanted = f"{root}\n"
+    if not link.exists() or link.read_text(encoding="utf-8") != wanted:
+        say(f"+ {link}: {root}")
+        link.write_text(wanted, encoding="utf-8")
+    return link

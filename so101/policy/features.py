@@ -14,8 +14,8 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from so101.dataset.features import (
-    ACTION_KEY, ENVIRONMENT_KEY, IMAGE_KEY, MOTOR_NAMES, STATE_KEY, WRIST_IMAGE_KEY, from_lerobot, to_lerobot,
+from so101.dataset.features import (  # noqa: F401  (joint_targets_deg: the policy node's, named here too)
+    ACTION_KEY, ENVIRONMENT_KEY, IMAGE_KEY, MOTOR_NAMES, STATE_KEY, WRIST_IMAGE_KEY, joint_targets_deg, to_lerobot,
 )
 
 # Each input feature a policy may declare, and the dataflow inputs that give it.
@@ -69,14 +69,6 @@ def observation(frame: Mapping[str, Any], image_size: tuple[int, int] | None) ->
             # A copy: arrow's buffers are read-only, and torch warns of every one it is given.
             values[key] = np.array(frame[input_id], dtype=np.uint8).reshape(height, width, 3)
     return values
-
-
-def joint_targets_deg(action: Sequence[float] | np.ndarray) -> list[float]:
-    """A policy's action (LeRobot's six values) as the body's joint_cmd, in degrees."""
-    values = np.asarray(action, dtype=np.float64).reshape(-1)
-    if values.shape != (len(MOTOR_NAMES),) or not np.all(np.isfinite(values)):
-        raise ValueError(f"the policy's action is {values.tolist()}: expected {len(MOTOR_NAMES)} finite numbers")
-    return [float(angle) for angle in from_lerobot(values)]
 
 
 def read_policy_features(folder: Path) -> tuple[dict[str, tuple[int, ...]], dict[str, tuple[int, ...]]]:

@@ -17,6 +17,9 @@ import numpy as np
 
 # The normal quantile of a 95% two-sided interval.
 Z_95 = 1.959963984540054
+# Simulated seconds an episode may take before it fails: `so101 eval`'s, `so101 demos`' and the
+# Gymnasium environment's (so101.gym) default, so that their scores mean the same.
+DEFAULT_TIME_LIMIT_S = 30.0
 
 
 @dataclass(frozen=True)

@@ -16,6 +16,7 @@ from so101.runtime.settings import (
     read_parsed, read_stripped_text, read_text, read_whole_number, setting,
 )
 from so101.tasks import task_for_setting
+from so101.tasks.episodes import DEFAULT_TIME_LIMIT_S
 
 KEEP_CHOICES = ("success", "all")
 
@@ -74,7 +75,7 @@ class EpisodeSettings(EnvironSettings):
     episodes: int = setting("SO101_EPISODES", "1", "how many episodes", read_whole_number)
     lockstep_fps: int = setting("SO101_LOCKSTEP_FPS", "25", "the body's lockstep frame rate", read_lockstep_fps)
     time_limit_s: float = setting(
-        "SO101_TIME_LIMIT_S", "30", "simulated seconds an episode may take before it counts as failed",
+        "SO101_TIME_LIMIT_S", f"{DEFAULT_TIME_LIMIT_S:g}", "simulated seconds an episode may take before it counts as failed",
         read_positive_number)
     results_path: Path = setting(
         "SO101_EPISODES_OUT", "episodes.jsonl", "a file the runner appends one JSON line to per episode, then `done`",
