@@ -23,6 +23,8 @@ One run on one machine measures:
      joint_state that shows it, through `so101 teleop --leader`'s dataflow;
   13. the web view (bench/web_bench.py): the body with five viewers on `so101 teleop --web`'s
      page, viewers elsewhere and browsers on this machine (`--web`: this alone).
+  14. the Gymnasium environment (bench/gym_bench.py, `--gym` alone): steps a second of one
+     environment and of an async vector of two, without pictures and with both cameras.
 It prints a table and writes the figures, the targets and the machine to a JSON file.
 Timings are wall-clock on a shared machine: the load average is recorded with them.
 """
@@ -62,7 +64,9 @@ DEFAULT_OUT = {"pybullet": ROOT / "bench" / "results" / "latest.json", "mujoco":
                "cameras": ROOT / "bench" / "results" / "latest-cameras.json",
                "cameras-mujoco": ROOT / "bench" / "results" / "latest-cameras-mujoco.json",
                "demos": ROOT / "bench" / "results" / "latest-demos.json",
-               "demos-mujoco": ROOT / "bench" / "results" / "latest-demos-mujoco.json"}
+               "demos-mujoco": ROOT / "bench" / "results" / "latest-demos-mujoco.json",
+               "gym": ROOT / "bench" / "results" / "latest-gym.json",
+               "gym-mujoco": ROOT / "bench" / "results" / "latest-gym-mujoco.json"}
 # The engine's own call for one 4 ms tick, as the table names it.
 RAW_STEP_LABEL = {"pybullet": "raw stepSimulation, DIRECT", "mujoco": "raw mj_step x 2 (one 4 ms tick)"}
 
@@ -420,14 +424,24 @@ def run_demos_only(body: str, image_size: tuple[int, int], quick: bool) -> dict:
                      demos_bench.targets)
 
 
+def run_gym_only(body: str, image_size: tuple[int, int], quick: bool) -> dict:
+    """`--gym`: the Gymnasium environment's steps a second, one environment and an async vector of two."""
+    from bench import gym_bench
+
+    settings = {"seconds": 2.0 if quick else 10.0, "image_size": list(image_size)}
+    return run_alone("gym", "a simulation's environment", body, settings,
+                     lambda work_dir: gym_bench.run_gym_benchmark(body, settings["seconds"], image_size),
+                     gym_bench.targets)
+
+
 def alone_table(result: dict) -> str:
     """The table of a part run by itself (`run_alone`'s result)."""
-    from bench import camera_bench, demos_bench, web_bench
+    from bench import camera_bench, demos_bench, gym_bench, web_bench
 
     only = result["only"]
-    title = {"web": "web view", "cameras": "task cameras", "demos": "demonstrations"}[only]
+    title = {"web": "web view", "cameras": "task cameras", "demos": "demonstrations", "gym": "Gymnasium environment"}[only]
     lines = {"web": web_bench.table_lines, "cameras": camera_bench.table_lines,
-             "demos": demos_bench.table_lines}[only](result[only])
+             "demos": demos_bench.table_lines, "gym": gym_bench.table_lines}[only](result[only])
     machine = result["machine"]
     return "\n".join([f"SO-101 {title} benchmark ({result['body']}), {machine['date']}", machine_line(result), "",
                       *lines, "", *target_lines(result["targets"])])
@@ -524,8 +538,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--demos", action="store_true",
                         help="measure only `so101 demos` (cube_to_box, the expert): episodes a minute and × real time "
                         "without video and with both cameras, one worker and two, and where a frame's time goes")
+    parser.add_argument("--gym", action="store_true",
+                        help="measure only the Gymnasium environment (so101/CubeToBox-v0, in process): steps a second of "
+                        "one environment and of an async vector of two, without pictures and with both cameras")
     parser.add_argument("--image-size", type=image_size, default=DEFAULT_IMAGE_SIZE, metavar="WxH",
-                        help=f"--cameras, --demos: the pictures' size (default {DEFAULT_IMAGE_SIZE})")
+                        help=f"--cameras, --demos, --gym: the pictures' size (default {DEFAULT_IMAGE_SIZE})")
     parser.add_argument("--out", type=Path, default=None,
                         help="JSON file to write (default " + ", ".join(f"{path.relative_to(ROOT)} for {body}" for body, path in DEFAULT_OUT.items()) + ")")
     parser.add_argument("--quick", action="store_true",
@@ -548,7 +565,7 @@ def run(args: argparse.Namespace) -> int:
     from bench import cluster_bench, real_bench
 
     tables = {"real": real_bench.table, "cluster": cluster_bench.table, "web": alone_table, "cameras": alone_table,
-              "demos": alone_table}
+              "demos": alone_table, "gym": alone_table}
     if args.show is not None:
         try:
             shown = json.loads(args.show.read_text(encoding="utf-8"))
@@ -566,7 +583,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         settings = dict(duration_s=args.duration, fast_s=5.0, fast_steps=[1, 10, 100], raw_steps=40000, node_ticks=10000, after_sleep_steps=1000)
     kind = ("cluster" if args.cluster else "web" if args.web else "cameras" if args.cameras else "demos" if args.demos
-            else args.body)
+            else "gym" if args.gym else args.body)
     try:
         if args.cluster:
             result = cluster_bench.run_cluster_benchmark(settings["duration_s"])
@@ -576,6 +593,8 @@ def run(args: argparse.Namespace) -> int:
             result = run_cameras_only(settings["duration_s"], args.body, args.image_size)
         elif args.demos:
             result = run_demos_only(args.body, args.image_size, args.quick)
+        elif args.gym:
+            result = run_gym_only(args.body, args.image_size, args.quick)
         elif args.body == "real":
             result = real_bench.run_real_benchmark(settings["duration_s"], exchanges=500 if args.quick else 3000)
         else:
@@ -586,7 +605,7 @@ def run(args: argparse.Namespace) -> int:
     result["settings"]["quick"] = args.quick
     print()
     print(tables.get(kind, table)(result))
-    out = args.out or DEFAULT_OUT[f"{kind}-mujoco" if kind in ("cameras", "demos") and args.body == "mujoco" else kind]
+    out = args.out or DEFAULT_OUT[f"{kind}-mujoco" if kind in ("cameras", "demos", "gym") and args.body == "mujoco" else kind]
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(result, indent=2) + "\n")
     print(f"\nwrote {out}")

@@ -464,3 +464,34 @@ def test_dora_alone_times_the_lockstep_loops_messages_between_empty_nodes(tmp_pa
 
     ms = dora_alone_ms(tmp_path, 50)
     assert 0 < ms < 1000 and (tmp_path / "echo_ms.txt").read_text().strip() == f"{ms:.3f}"
+
+
+@pytest.mark.parametrize("name", ["latest-gym.json", "latest-gym-mujoco.json"])
+def test_the_saved_gym_results_show_each_run_beside_the_dataflows_lockstep(name, capsys):
+    saved = run_bench.ROOT / "bench" / "results" / name
+    result = json.loads(saved.read_text())
+    assert run_bench.main(["--show", str(saved)]) == 0
+    shown = capsys.readouterr().out
+    assert shown.startswith(f"SO-101 Gymnasium environment benchmark ({result['body']}), ")
+    runs = result["gym"]["runs"]
+    assert list(runs) == ["state_1_env", "state_2_envs", "all_2_envs", "all_1_env"]
+    for run in runs.values():
+        what = "no pictures (state)" if run["obs_type"] == "state" else "both cameras 320x240 (all)"
+        where = "one environment" if run["environments"] == 1 else "async vector of 2"
+        assert re.search(rf"^{re.escape(what)}, {where} +{run['steps_per_s']:.0f} \| {run['times_real_time']:.1f}", shown, re.M)
+        assert run["times_real_time"] == pytest.approx(run["steps_per_s"] / 25, abs=0.1)
+    assert f"{result['gym']['dataflow_frames_per_s']:.0f}" in shown
+    assert "gym steps/s without pictures, one env / dataflow lockstep frames/s" in shown
+
+
+def test_the_gym_bench_counts_a_vectors_steps_for_each_of_its_environments():
+    from bench import gym_bench
+
+    run = gym_bench.steps_per_s("pybullet", "state", 2, 0.3, (64, 48), warmup_s=0.1)
+    assert run["environments"] == 2 and run["steps_per_s"] > 100 and run["seconds"] >= 0.3
+    assert gym_bench.sweep_action(0, 2).shape == (2, 6)
+
+
+def test_gym_refuses_the_real_arm_in_one_line(capsys):
+    assert run_bench.main(["--gym", "--body", "real"]) == 1
+    assert capsys.readouterr().err == "so101 bench: --gym measures a simulation's environment: --body pybullet or mujoco\n"
