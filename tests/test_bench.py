@@ -386,12 +386,16 @@ def test_show_prints_the_saved_web_result(capsys):
     assert f"{json.loads(latest.read_text())['web']['sockets']['joint_state_per_s']:.2f}" in shown
 
 
+def saved_and_shown(name: str, capsys) -> tuple[dict, str]:
+    """A saved result of bench/results/ and its table as `so101 bench --show` prints it."""
+    saved = run_bench.ROOT / "bench" / "results" / name
+    assert run_bench.main(["--show", str(saved)]) == 0
+    return json.loads(saved.read_text()), capsys.readouterr().out
+
+
 @pytest.mark.parametrize("name", ["latest-cameras.json", "latest-cameras-mujoco.json"])
 def test_the_saved_camera_results_show_each_cameras_rates_and_the_targets(name, capsys):
-    saved = run_bench.ROOT / "bench" / "results" / name
-    result = json.loads(saved.read_text())
-    assert run_bench.main(["--show", str(saved)]) == 0
-    shown = capsys.readouterr().out
+    result, shown = saved_and_shown(name, capsys)
     assert shown.startswith(f"SO-101 task cameras benchmark ({result['body']}), ")
     for camera, key in (("front", "observation.images.front"), ("wrist", "observation.images.wrist")):
         alone = result["cameras"]["alone"][key]
@@ -426,10 +430,7 @@ def test_cameras_refuse_the_real_arm_in_one_line(capsys):
 
 @pytest.mark.parametrize("name", ["latest-demos.json", "latest-demos-mujoco.json"])
 def test_the_saved_demos_results_show_each_run_and_where_a_frames_time_goes(name, capsys):
-    saved = run_bench.ROOT / "bench" / "results" / name
-    result = json.loads(saved.read_text())
-    assert run_bench.main(["--show", str(saved)]) == 0
-    shown = capsys.readouterr().out
+    result, shown = saved_and_shown(name, capsys)
     assert shown.startswith(f"SO-101 demonstrations benchmark ({result['body']}), ")
     runs = result["demos"]["runs"]
     assert list(runs) == ["no_video_1_workers", "no_video_2_workers", "video_1_workers", "video_2_workers"]
@@ -468,17 +469,16 @@ def test_dora_alone_times_the_lockstep_loops_messages_between_empty_nodes(tmp_pa
 
 @pytest.mark.parametrize("name", ["latest-gym.json", "latest-gym-mujoco.json"])
 def test_the_saved_gym_results_show_each_run_beside_the_dataflows_lockstep(name, capsys):
-    saved = run_bench.ROOT / "bench" / "results" / name
-    result = json.loads(saved.read_text())
-    assert run_bench.main(["--show", str(saved)]) == 0
-    shown = capsys.readouterr().out
-    assert shown.startswith(f"SO-101 Gymnasium environment benchmark ({result['body']}), ")
-    runs = result["gym"]["runs"]
-    assert list(runs) == ["state_1_env", "state_2_envs", "all_2_envs", "all_1_env"]
-    for run in runs.values():
-        what = "no pictures (state)" if run["obs_type"] == "state" else "both cameras 320x240 (all)"
-        where = "one environment" if run["environments"] == 1 else "async vector of 2"
-        assert re.search(rf"^{re.escape(what)}, {where} +{run['steps_per_s']:.0f} \| {run['times_real_time']:.1f}", shown, re.M)
+    result, shown = saved_and_shown(name, capsys)
+    runs, title = result["gym"]["runs"], f"SO-101 Gymnasium environment benchmark ({result['body']}), "
+    assert shown.startswith(title) and list(runs) == ["state_1_env", "state_2_envs", "all_2_envs", "all_1_env"]
+    rows = {(run["obs_type"], run["environments"]): run for run in runs.values()}
+    for (obs_type, environments), label in {("state", 1): r"no pictures \(state\), one environment",
+                                            ("state", 2): r"no pictures \(state\), async vector of 2",
+                                            ("all", 2): r"both cameras 320x240 \(all\), async vector of 2",
+                                            ("all", 1): r"both cameras 320x240 \(all\), one environment"}.items():
+        run = rows[obs_type, environments]
+        assert re.search(rf"^{label} +{run['steps_per_s']:.0f} \| {run['times_real_time']:.1f}", shown, re.M), label
         assert run["times_real_time"] == pytest.approx(run["steps_per_s"] / 25, abs=0.1)
     assert f"{result['gym']['dataflow_frames_per_s']:.0f}" in shown
     assert "gym steps/s without pictures, one env / dataflow lockstep frames/s" in shown
