@@ -16,9 +16,11 @@ body then holds where it is (in lockstep it steps only on an answer).
 At the prompt (`so101 teleop --policy`) it stands between the prompt and the body, as the expert
 does: what comes before it (`typed_cmd`) goes on to the body as it is; `policy_cmd` `on` resets
 the policy and has it drive, an action every `tick` (the dataset's 40 ms) from the newest state,
-until `off`, a typed command takes over, or inference fails (one line of news; the node stays, and
+until `off`, a typed command takes over, inference fails, or a real camera it sees (SO101_POLICY_CAMERAS)
+has sent no picture for CAMERA_SILENT_S, the recorder's rule (one line of news; the node stays, and
 typed commands still pass), and then says what its inference cost while it drove (chunks, median and
-longest time). A tick that comes while it infers is dropped, not queued: the body holds the last
+longest time). Stopped by a camera, it acts on no stale picture: the arm holds its last targets, as after
+`off`, and `on` is refused until the camera sends again. A tick that comes while it infers is dropped, not queued: the body holds the last
 targets meanwhile, and the next chunk starts from the newest state. Its news goes out on `policy_status`. The body's limits and ramps
 apply to its commands as to typed ones.
 Settings: so101.policy.settings.PolicySettings.
@@ -41,9 +43,11 @@ import numpy as np  # noqa: E402
 import pyarrow as pa  # noqa: E402
 from dora import Node  # noqa: E402
 
+from so101.cameras.sources import silent_camera  # noqa: E402
 from so101.dataset.features import ROBOT_TYPE  # noqa: E402
 from so101.policy.features import inputs_for, joint_targets_deg, observation  # noqa: E402
 from so101.policy.settings import PolicySettings  # noqa: E402
+from so101.runtime.dataflow import PICTURE_OF_CAMERA  # noqa: E402
 from so101.runtime.lockstep import INFERENCE_MS_KEY, FrameParts, FrameTag, LastAnswer, frame_tag  # noqa: E402
 from so101.runtime.logs import send_diagnostics_to  # noqa: E402
 from so101.runtime.node_events import STREAM_KEY, cannot_start, inputs_until_stop  # noqa: E402
@@ -60,6 +64,8 @@ TEXT = {
         "took_over": "[策略] 键入的命令接管了控制,策略停下",
         "no_state": "[策略] 还没有收到 {inputs}:没有开始",
         "failed": "[策略] 推理失败,策略停下:{error}",
+        "camera_lost": "[策略] {camera} 相机 {seconds:.1f} 秒没有画面:策略停下,机械臂保持不动;画面恢复后再 policy on",
+        "camera_silent": "[策略] {camera} 相机已有 {seconds:.1f} 秒没有画面:没有开始(插好了吗?)",
         "timing": "[策略] 这次驾驶推理了 {chunks} 个动作块:中位 {median:.0f} 毫秒,最长 {longest:.0f} 毫秒({device})",
     },
     "en": {
@@ -69,6 +75,10 @@ TEXT = {
         "took_over": "[policy] a typed command took over: the policy stopped",
         "no_state": "[policy] no {inputs} yet: not started",
         "failed": "[policy] inference failed, the policy stopped: {error}",
+        "camera_lost": "[policy] the {camera} camera sent no picture for {seconds:.1f} s: the policy stopped, the arm "
+                       "holds; policy on once its pictures are back",
+        "camera_silent": "[policy] the {camera} camera has sent no picture for {seconds:.1f} s: not started "
+                         "(is it plugged in?)",
         "timing": "[policy] this drive inferred {chunks} action chunks: median {median:.0f} ms, longest {longest:.0f} ms "
                   "({device})",
     },
@@ -157,6 +167,12 @@ def main() -> int:
     answered: LastAnswer[tuple[list[float], dict[str, float]]] = LastAnswer()  # lockstep
     latest: dict[str, Any] = {}  # at the prompt: the newest of each input the policy needs
     driving = False  # at the prompt: `on` came, and nothing has stopped it since
+    # The real cameras it sees, by their picture input; when each one's newest picture came (monotonic).
+    watched = {PICTURE_OF_CAMERA[name]: name for name in settings.real_cameras if PICTURE_OF_CAMERA[name] in needed}
+    arrived_s: dict[str, float] = {}
+
+    def silent() -> tuple[str, float] | None:
+        return silent_camera(arrived_s, watched.values(), time.monotonic())
     node = Node()
 
     def say(line: str) -> None:
@@ -203,6 +219,8 @@ def main() -> int:
                                  {**tag.metadata(), STREAM_KEY: 1, **timing})
             elif input_id in needed:
                 latest[input_id] = value.to_numpy(zero_copy_only=False)
+                if input_id in watched:
+                    arrived_s[watched[input_id]] = time.monotonic()
             elif input_id == "typed_cmd":
                 node.send_output("joint_cmd", value)
                 if driving:
@@ -212,6 +230,8 @@ def main() -> int:
                 if word == "off":
                     if driving:
                         stop(text["stopped"])
+                elif word == "on" and (stopped := silent()) is not None:
+                    say(text["camera_silent"].format(camera=stopped[0], seconds=stopped[1]))
                 elif word == "on" and all(name in latest for name in needed):
                     loaded.reset()
                     drive_ms.clear()
@@ -220,6 +240,10 @@ def main() -> int:
                 elif word == "on":
                     say(text["no_state"].format(inputs=", ".join(name for name in needed if name not in latest)))
             elif input_id == "tick" and driving:
+                stopped = silent()
+                if stopped is not None:  # its newest picture is stale: no action is taken from it
+                    stop(text["camera_lost"].format(camera=stopped[0], seconds=stopped[1]))
+                    continue
                 try:
                     targets_deg, timing = act(latest)
                 except Exception as error:  # noqa: BLE001 (at the prompt: the news, and typed commands still pass)

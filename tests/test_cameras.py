@@ -19,12 +19,13 @@ import pytest
 from so101.cameras.capture import Capturing, VideoSource
 from so101.cameras.listing import CameraFound, find_cameras, listing_lines
 from so101.cameras.sources import (
-    cameras_given, capture_source, capture_time_s, parse_camera_option, scaled_size, source_problem,
+    CAMERA_SILENT_S, cameras_given, capture_source, capture_time_s, parse_camera_option, scaled_size, silent_camera,
+    source_problem,
 )
 from so101.cameras.v4l2 import Mode
 from so101.dataset.features import IMAGE_KEY, STATE_KEY, WRIST_IMAGE_KEY, from_lerobot
 from so101.dataset.messages import RecordCommand
-from so101.dataset.recording import CAMERA_SILENT_S, Recording, nearest_in_time
+from so101.dataset.recording import Recording, nearest_in_time
 from so101.launch.real_cameras import add_real_cameras, policy_picture_problem
 from so101.observe import parse_observed
 from so101.runtime.dataflow import dataflow_copy, with_policy, with_recorder, with_web_view
@@ -190,6 +191,17 @@ def camera_recording(camera_lost="save"):
     rec = Recording(writer, "/data/set", 30, "en", True, said.append, clock, observed=parse_observed("state,front,wrist"),
                     wrist=True, camera_lost=camera_lost, log=logged.append)
     return rec, writer, clock, said, logged
+
+
+def test_a_camera_has_stopped_once_its_newest_picture_is_over_half_a_second_old_and_one_not_yet_seen_is_awaited():
+    # The one rule the recorder (ending an episode) and a policy that sees (ending its drive) share.
+    arrived_s = {"front": 10.0, "wrist": 10.3}
+    assert CAMERA_SILENT_S == 0.5
+    assert silent_camera(arrived_s, ("front", "wrist"), 10.5) is None  # 0.5 s: a late frame, not yet stopped
+    assert silent_camera(arrived_s, ("front", "wrist"), 10.6) == ("front", pytest.approx(0.6))
+    assert silent_camera(arrived_s, ("wrist", "front"), 10.9) == ("wrist", pytest.approx(0.6))  # the first needed
+    assert silent_camera(arrived_s, ("wrist",), 10.6) is None  # only the cameras needed count
+    assert silent_camera({}, ("front", "wrist"), 99.0) is None  # none has sent yet: waited for
 
 
 def test_nearest_in_time_picks_the_closest_sample():

@@ -1,9 +1,11 @@
 """Plain rules about real cameras: `--camera NAME=SOURCE` parsed, where a source is, the dataflow's
-names for a camera, whether a picture may be scaled to a size, and when a picture was captured."""
+names for a camera, whether a picture may be scaled to a size, when a picture was captured, and when a
+camera has stopped."""
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Iterable, Mapping
 
 from so101.runtime.dataflow import PICTURE_OF_CAMERA
 
@@ -14,6 +16,9 @@ DEFAULT_CAMERA_SIZE = "640x480"  # LeRobot's SO-101 guide's cameras
 DEFAULT_CAMERA_FPS = 30
 # Two sizes of one shape within this much of each other's aspect ratio: scaling keeps the picture undistorted.
 SAME_SHAPE = 0.01
+# A real camera that sent no picture for this long has stopped (unplugged, a read that failed, a file that ended):
+# the recorder ends its episode, a policy that sees it stops driving. 15 frames at 30 fps: far beyond a late frame.
+CAMERA_SILENT_S = 0.5
 
 
 def parse_camera_option(text: str) -> tuple[str, str]:
@@ -26,6 +31,25 @@ def parse_camera_option(text: str) -> tuple[str, str]:
         raise ValueError(f"{name!r} is not a camera's name here: {' or '.join(CAMERA_NAMES)} "
                          "(the dataset's observation.images.front and .wrist)")
     return name, source
+
+
+def parse_real_cameras(text: str) -> tuple[str, ...]:
+    """`front,wrist` -> ("front", "wrist"); "" -> (); ValueError in one line for another name."""
+    names = tuple(name.strip() for name in text.split(",") if name.strip())
+    unknown = [name for name in names if name not in PICTURE_OF_CAMERA]
+    if unknown:
+        raise ValueError(f"{unknown[0]!r} is not a camera: give {' and/or '.join(PICTURE_OF_CAMERA)}, comma-separated")
+    return names
+
+
+def silent_camera(arrived_s: Mapping[str, float], needed: Iterable[str], now_s: float) -> tuple[str, float] | None:
+    """(camera, seconds) of the first `needed` camera whose newest picture came (`arrived_s`: camera -> when,
+    on the clock of `now_s`) more than CAMERA_SILENT_S ago; None when all send. A camera that has sent
+    nothing yet is waited for, not stopped."""
+    for name in needed:
+        if name in arrived_s and now_s - arrived_s[name] > CAMERA_SILENT_S:
+            return name, now_s - arrived_s[name]
+    return None
 
 
 def cameras_given(options: list[tuple[str, str]]) -> dict[str, str]:

@@ -200,7 +200,7 @@ def add_policy(descriptor: dict, body: BodyKind, args: argparse.Namespace) -> st
                 print(f"so101 teleop: note: the cameras' {args.image_size[0]}x{args.image_size[1]} pictures are "
                       f"scaled to the policy's {width}x{height}", flush=True)
             add_real_cameras(descriptor, args.cameras, tuple(args.image_size), chosen.picture_size, args.camera_fps)
-            finish_policy(descriptor, body, args, chosen)
+            finish_policy(descriptor, body, args, chosen, tuple(args.cameras))
             return None
         if not args.task:
             return "the policy sees the task's cameras (the wrist's is drawn for a task's scene): add --task cube_to_box"
@@ -212,11 +212,14 @@ def add_policy(descriptor: dict, body: BodyKind, args: argparse.Namespace) -> st
     return None
 
 
-def finish_policy(descriptor: dict, body: BodyKind, args: argparse.Namespace, chosen: ChosenPolicy) -> None:
-    """The policy node added, once its pictures (if it sees) have a camera."""
+def finish_policy(descriptor: dict, body: BodyKind, args: argparse.Namespace, chosen: ChosenPolicy,
+                  real_cameras: tuple[str, ...] = ()) -> None:
+    """The policy node added, once its pictures (if it sees) have a camera; `real_cameras`: the real arm's,
+    one that stops sending stops the policy's drive."""
     for line in chosen.notes():
         print(f"so101 teleop: {line}", flush=True)
-    env = {**chosen.env(args.task or "", args.policy_device), "SO101_LANG": args.lang}
+    env = {**chosen.env(args.task or "", args.policy_device), "SO101_LANG": args.lang,
+           "SO101_POLICY_CAMERAS": ",".join(real_cameras)}
     if not args.task:
         del env["SO101_TASK"]
     with_policy(descriptor, body.node_id, chosen.inputs, env, str(chosen.python))

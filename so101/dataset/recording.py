@@ -12,7 +12,7 @@ sampling while an episode is written.
 Real cameras stamp each picture with the time it was captured, and the body's states come stamped
 with the time they were sent: a frame then takes the state nearest the front picture's capture, as
 LeRobot's recorder reads the arm and the cameras at one moment. A real camera that sends nothing for
-CAMERA_SILENT_S stops the episode, saved up to then or discarded, as the user chose.
+CAMERA_SILENT_S (so101.cameras.sources) stops the episode, saved up to then or discarded, as the user chose.
 """
 
 from __future__ import annotations
@@ -27,6 +27,7 @@ import numpy as np
 import numpy.typing as npt
 
 from so101.bodies.looks import DEFAULT_LOOKS, looks_metadata
+from so101.cameras.sources import silent_camera
 from so101.dataset.features import (
     ACTION_KEY, ENVIRONMENT_KEY, IMAGE_KEY, REWARD_KEY, STATE_KEY, SUCCESS_KEY, WRIST_IMAGE_KEY, to_lerobot,
 )
@@ -40,8 +41,6 @@ from so101.tasks.cube_to_box import CubeToBox
 MAX_FRAMES_OWED = 30
 # The states kept to pair a picture with: about 1 s of the real arm's 50 a second, 1.2 s of a simulation's 250.
 STATE_HISTORY = 300
-# A real camera that sent no picture for this long has stopped (unplugged, a read that failed, a file that ended).
-CAMERA_SILENT_S = 0.5
 CAMERA_LOST_CHOICES = ("save", "discard")  # what becomes of the episode a camera stopped
 
 TEXT = {
@@ -240,15 +239,12 @@ class Recording:
         return arm[1] + (gripper[1],)
 
     def silent_camera(self) -> tuple[str, float] | None:
-        """(camera, seconds) of a real camera whose newest picture is older than CAMERA_SILENT_S; None when all send."""
+        """(camera, seconds) of a real camera whose newest picture is older than CAMERA_SILENT_S
+        (so101.cameras.sources); None when all send."""
         if not self.camera_lost:
             return None
-        now_s = self.clock()
         needed = [name for name, needs in (("front", self.needs_image), ("wrist", self.needs_wrist_image)) if needs]
-        for name in needed:
-            if name in self._arrived_s and now_s - self._arrived_s[name] > CAMERA_SILENT_S:
-                return name, now_s - self._arrived_s[name]
-        return None
+        return silent_camera(self._arrived_s, needed, self.clock())
 
     # -- the frame clock -----------------------------------------------------------------
     def tick(self) -> int:

@@ -15,7 +15,7 @@ from so101.dataset.features import DEFAULT_FPS
 from so101.lang import DEFAULT_LANGUAGE, ENV_VAR as LANG_ENV_VAR
 from so101.dataset.recording import CAMERA_LOST_CHOICES
 from so101.observe import ALL_OBSERVED, OBSERVE_ENV_VAR, Observed, parse_observed
-from so101.runtime.dataflow import PICTURE_OF_CAMERA
+from so101.cameras.sources import parse_real_cameras
 from so101.runtime.settings import (
     EnvironSettings, Setting, read_choice, read_file_path, read_image_size, read_optional_path, read_parsed,
     read_whole_number, setting,
@@ -29,15 +29,6 @@ def read_fps(environ: Mapping[str, str], declared_setting: Setting) -> int:
     if not 1 <= fps <= 1000:
         raise ValueError(f"{declared_setting.env_var}={fps} is not a frame rate from 1 to 1000 per second")
     return fps
-
-
-def parse_real_cameras(text: str) -> tuple[str, ...]:
-    """`front,wrist` -> ("front", "wrist"); "" -> (); ValueError in one line for another name."""
-    names = tuple(name.strip() for name in text.split(",") if name.strip())
-    unknown = [name for name in names if name not in PICTURE_OF_CAMERA]
-    if unknown:
-        raise ValueError(f"{unknown[0]!r} is not a camera: give {' and/or '.join(PICTURE_OF_CAMERA)}, comma-separated")
-    return names
 
 
 @dataclass(frozen=True)

@@ -8,10 +8,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Mapping
 
+from so101.cameras.sources import CAMERA_SILENT_S, parse_real_cameras
 from so101.lang import DEFAULT_LANGUAGE, ENV_VAR as LANG_ENV_VAR, language_from_environ
 from so101.runtime.argtypes import parsed_by
 from so101.runtime.settings import (
-    EnvironSettings, Setting, read_image_size, read_stripped_text, read_whole_number, setting,
+    EnvironSettings, Setting, read_image_size, read_parsed, read_stripped_text, read_whole_number, setting,
 )
 from so101.tasks import task_named
 
@@ -69,6 +70,10 @@ class PolicySettings(EnvironSettings):
     image_size: tuple[int, int] | None = setting(
         "SO101_LOCKSTEP_PICTURES", "", "WIDTHxHEIGHT of the body's pictures, for a policy that sees them; "
         "empty = none", read_image_size)
+    real_cameras: tuple[str, ...] = setting(
+        "SO101_POLICY_CAMERAS", "", "the real cameras the policy sees (`front`, `wrist`; nodes/real_camera.py): one "
+        f"that sends no picture for {CAMERA_SILENT_S:g} s stops its drive; empty = a simulation's camera, which draws "
+        "only when something moved", read_parsed(parse_real_cameras))
     lang: str = setting(LANG_ENV_VAR, DEFAULT_LANGUAGE, "log language, `zh` or `en`",
                         lambda environ, declared_setting: language_from_environ(environ))
 
