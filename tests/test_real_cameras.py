@@ -13,10 +13,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
+from so101.bodies.registry import BODIES
 from so101.dataset.reader import Dataset
 from so101.dataset.features import IMAGE_KEY, STATE_KEY, WRIST_IMAGE_KEY
+from so101.runtime.dataflow import timer_period_s
+from tests.helpers.arm_limits import goals_beyond_the_limits
 from tests.helpers.dataflow import body_environment
+from tests.helpers.policies import SEEN_SIZE
 from tests.helpers.numbered_video import video_frame_numbers, write_numbered_video
 from tests.helpers.terminal import start_teleop
 
@@ -26,13 +31,15 @@ pytestmark = [pytest.mark.person, pytest.mark.realtime,
 STATE = r"  joint angles now: \[(-?[\d.]+), .*"
 
 
-def teleop_on_the_emulated_arm(tmp_path: Path, env: dict[str, str], cameras: str):
-    """`so101 teleop --body real` on the emulated arm with `cameras` (its --camera options), recording into
-    tmp_path/real, in a new terminal whose prompt is ready; returns it and the dataflow's log."""
+def teleop_on_the_emulated_arm(tmp_path: Path, env: dict[str, str], cameras: str, record: bool = True):
+    """`so101 teleop --body real` on the emulated arm with `cameras` (its --camera options, and any others),
+    recording into tmp_path/real unless `record` is False, in a new terminal whose prompt is ready; returns it
+    and the dataflow's log."""
+    recording = f" --record {tmp_path / 'real'}" if record else ""
     terminal, _, log_file = start_teleop(
-        tmp_path, "en", body="real",
-        extra=f"--port {env['SO101_PORT']} --calibration {env['SO101_CALIBRATION']} {cameras} --record {tmp_path / 'real'}")
-    terminal.seen = terminal.wait_for_prompt(timeout_s=120).start()
+        tmp_path, "en", body="real", HF_HUB_OFFLINE="1",
+        extra=f"--port {env['SO101_PORT']} --calibration {env['SO101_CALIBRATION']} {cameras}{recording}")
+    terminal.seen = terminal.wait_for_prompt(timeout_s=180).start()
     return terminal, log_file
 
 
@@ -119,3 +126,75 @@ def test_a_camera_that_vanishes_mid_episode_is_said_and_the_episode_so_far_is_ke
     assert f"camera front: {front} is back" in log, log[-3000:]
     frames = Dataset.open(dataset_dir).episode_frames(0)
     assert len(frames[STATE_KEY]) == int(lost.group(1)) > 30  # the part before it vanished, all of it
+
+
+def servo_positions(arm) -> list[int]:
+    return [arm.physical_position(servo) for servo in range(1, 7)]
+
+
+def test_a_policy_that_sees_drives_the_emulated_arm_from_file_cameras_within_its_limits_and_stops_with_a_camera(
+        tmp_path, policy_python, seeing_policy):
+    """`so101 teleop --body real --camera ... --policy DIR`: the cameras' 64x48 files scaled to the policy's 32x24.
+    The policy drives; the front camera vanishes mid-drive and the policy stops, said in one line, the arm held;
+    `policy on` is refused until the camera is back, and drives again once it is. Every goal the emulated bus was
+    sent kept the joint limits and the speed limit, and torque is off at the end."""
+    width, height = (2 * side for side in SEEN_SIZE)
+    front = write_numbered_video(tmp_path / "front.mp4", 1000, width=width, height=height)
+    wrist = write_numbered_video(tmp_path / "wrist.mp4", 1000, width=width, height=height)
+    kept = tmp_path / "front-kept.mp4"
+    shutil.copy(front, kept)
+    policy = f"--policy {seeing_policy} --policy-python {policy_python}"
+    with body_environment("real", tmp_path) as (env, arm):
+        terminal, log_file = teleop_on_the_emulated_arm(
+            tmp_path, env, f"--camera front={front} --camera wrist={wrist} --camera-size {width}x{height} {policy}",
+            record=False)
+        try:
+            assert f"the cameras' {width}x{height} pictures are scaled to the policy's 32x24" in terminal.screen()
+            started = servo_positions(arm)
+            terminal.command("policy on", re.escape("  → told the policy: on"))
+            terminal.wait_for(re.escape(DRIVING), timeout_s=10, after=terminal.seen)
+            time.sleep(3.0)
+            driven = servo_positions(arm)
+            assert max(abs(now - then) for now, then in zip(driven, started)) > 20, (started, driven)  # over 1.7°
+            front.write_bytes(b"")  # the front camera vanishes mid-drive
+            terminal.wait_for(r"^  \[policy\] the front camera sent no picture for \d+\.\d s: the policy stopped, the arm "
+                              r"holds; policy on once its pictures are back$", timeout_s=10, after=terminal.seen)
+            assert_held(arm)
+            terminal.command("policy on", re.escape("  → told the policy: on"))
+            terminal.wait_for(r"^  \[policy\] the front camera has sent no picture for \d+\.\d s: not started \(is it "
+                              r"plugged in\?\)$", timeout_s=10, after=terminal.seen)
+            shutil.copy(kept, front)  # plugged in again: pictures come, and the policy waits to be asked
+            wait_for_line(log_file, f"camera front: {front} is back")
+            assert_held(arm)
+            terminal.command("policy on", re.escape("  → told the policy: on"))
+            terminal.wait_for(re.escape(DRIVING), timeout_s=10, after=terminal.seen)
+            time.sleep(1.0)
+            quit_cleanly(terminal)
+        finally:
+            terminal.close()
+        assert torque_is_off(arm)  # on the way out
+        goals = {servo: arm.goals_written(servo) for servo in range(1, 7)}
+    real = BODIES["real"]
+    tick_s = timer_period_s(next(node for node in yaml.safe_load(real.dataflow_file.read_text())["nodes"]
+                                 if node["id"] == real.node_id))
+    assert goals_beyond_the_limits(goals, Path(env["SO101_CALIBRATION"]), float(env["SO101_MAX_SPEED_DEG_S"]),
+                                   tick_s) == []
+    assert min(len(written) for written in goals.values()) > 100  # the arm's goals, tick by tick, all checked
+
+
+DRIVING = "  [policy] act is driving: any move you type takes over; policy off stops it"
+
+
+def assert_held(arm, settle_s: float = 1.0, watched_s: float = 1.5) -> None:
+    """The arm, once it reached its last goal, stays where it is: nothing drives it."""
+    time.sleep(settle_s)
+    before = servo_positions(arm)
+    time.sleep(watched_s)
+    assert servo_positions(arm) == before
+
+
+def wait_for_line(log_file: Path, line: str, timeout_s: float = 20.0) -> None:
+    deadline = time.monotonic() + timeout_s
+    while line not in log_file.read_text():
+        assert time.monotonic() < deadline, log_file.read_text()[-3000:]
+        time.sleep(0.2)

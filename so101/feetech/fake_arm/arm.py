@@ -204,6 +204,11 @@ class FakeArm:
         with self._lock:
             return frozenset(self._servo(servo_id).written[name])
 
+    def goals_written(self, servo_id: int) -> tuple[int, ...]:
+        """Every Goal_Position the bus wrote to servo `servo_id`, in order (the last servo.GOALS_KEPT), as sent."""
+        with self._lock:
+            return tuple(self._servo(servo_id).goals)
+
     def physical_position(self, servo_id: int) -> int:
         """The joint's encoder reading before the homing offset (steps, 0..4095)."""
         with self._lock:

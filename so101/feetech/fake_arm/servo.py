@@ -22,6 +22,8 @@ as a real one listening at another speed.
 
 from __future__ import annotations
 
+from collections import deque
+
 from so101.feetech import sts3215
 from so101.feetech.fake_arm.hand_paths import HandPath, ScriptedHand
 from so101.feetech.fake_arm.mechanics import MIDDLE, Mechanics
@@ -40,6 +42,7 @@ BAUD_INDEX_1M = 0  # Baud_Rate register value for 1,000,000 baud: the bus this e
 DEFAULT_SPEED_STEPS_S = 3000.0
 SUPPLY_DECIVOLTS = 120  # Present_Voltage: 12.0 V
 TEMPERATURE_C = 30  # Present_Temperature
+GOALS_KEPT = 100_000  # Goal_Position writes kept per servo: over half an hour of a driver at 50 Hz
 
 # What each servo holds at power-up (all other addresses 0). Goal_Position = the present
 # position and the read-only registers are filled in from the physical state.
@@ -76,6 +79,9 @@ class Servo:
         self.hand: HandPath | ScriptedHand | None = None
         # Every value the bus wrote, by register (FakeArm.values_written).
         self.written: dict[str, set[int]] = {name: set() for name in sts3215.REGISTERS}
+        # Every Goal_Position the bus wrote, in order (FakeArm.goals_written): a driver's ramp is checked
+        # write by write. Bounded: an emulator left running for hours keeps its last GOALS_KEPT.
+        self.goals: deque[int] = deque(maxlen=GOALS_KEPT)
         self.pending: tuple[int, bytes] | None = None  # REG_WRITE, until ACTION
         for name, value in POWER_UP.items():
             self.set(name, value)
@@ -200,6 +206,8 @@ class Servo:
                 bit = sts3215.SIGN_BITS.get(name)
                 sent[name] = sts3215.decode_signed(raw, bit) if bit is not None else raw
                 self.written[name].add(sent[name])
+        if "Goal_Position" in sent:
+            self.goals.append(sent["Goal_Position"])
         self.write(address, data)
         return sent
 
