@@ -6,8 +6,10 @@ driven, and its torque goes off at the end."""
 
 from __future__ import annotations
 
+import json
 import re
 import shutil
+import subprocess
 import time
 from pathlib import Path
 
@@ -20,7 +22,7 @@ from so101.dataset.reader import Dataset
 from so101.dataset.features import IMAGE_KEY, STATE_KEY, WRIST_IMAGE_KEY
 from so101.runtime.dataflow import timer_period_s
 from tests.helpers.arm_limits import goals_beyond_the_limits
-from tests.helpers.dataflow import body_environment
+from tests.helpers.dataflow import ROOT, body_environment
 from tests.helpers.policies import SEEN_SIZE
 from tests.helpers.numbered_video import video_frame_numbers, write_numbered_video
 from tests.helpers.terminal import start_teleop
@@ -58,10 +60,13 @@ def front_video(dataset_dir: Path) -> Path:
     return next((dataset_dir / "videos" / IMAGE_KEY).rglob("*.mp4"))
 
 
-def test_file_cameras_on_the_emulated_arm_record_the_files_frames_in_order_paired_with_their_states(tmp_path):
+@pytest.fixture(scope="module")
+def recorded_from_file_cameras(tmp_path_factory) -> tuple[Path, str]:
+    """An episode recorded from two file cameras on the emulated arm, the arm moved twice as it was: the
+    dataset's folder and the dataflow's log. Torque is off at the end."""
+    tmp_path = tmp_path_factory.mktemp("file-cameras")
     front = write_numbered_video(tmp_path / "front.mp4", 1000)
     wrist = write_numbered_video(tmp_path / "wrist.mp4", 1000, width=320, height=240)
-    dataset_dir = tmp_path / "real"
     with body_environment("real", tmp_path) as (env, arm):
         terminal, log_file = teleop_on_the_emulated_arm(tmp_path, env, f"--camera front={front} --camera wrist={wrist}")
         try:
@@ -76,6 +81,12 @@ def test_file_cameras_on_the_emulated_arm_record_the_files_frames_in_order_paire
         finally:
             terminal.close()
         assert torque_is_off(arm)  # on the way out
+    return tmp_path / "real", log_file.read_text()
+
+
+def test_file_cameras_on_the_emulated_arm_record_the_files_frames_in_order_paired_with_their_states(
+        recorded_from_file_cameras):
+    dataset_dir, log = recorded_from_file_cameras
     dataset = Dataset.open(dataset_dir)
     frames = dataset.episode_frames(0)
     assert {IMAGE_KEY, WRIST_IMAGE_KEY} <= set(dataset.info["features"]), dataset.info["features"]
@@ -87,10 +98,26 @@ def test_file_cameras_on_the_emulated_arm_record_the_files_frames_in_order_paire
     # The file's frames in order: each frame the next one or the same, at most one missed in a row at 30 fps.
     assert len(numbers) == len(pan) and steps.min() >= 0 and steps.max() <= 2, numbers
     assert np.mean(steps == 1) > 0.8, numbers
-    log = log_file.read_text()
     paired = re.search(r"episode 0: each picture paired with the state sent nearest its capture, at most (\d+) ms apart",
                        log)
     assert paired and int(paired.group(1)) <= 33, log[-3000:]  # within one frame's time at 30 fps
+
+
+def test_lerobots_own_loader_reads_the_recording_with_both_cameras(policy_python, recorded_from_file_cameras):
+    """LeRobot 0.4.4's LeRobotDataset, in the policy environment (skipped, saying why, without one), decodes
+    observation.images.front and .wrist at every frame asked, at the recorded size, as many frames as recorded."""
+    dataset_dir, _ = recorded_from_file_cameras
+    recorded = Dataset.open(dataset_dir)
+    count = len(recorded.episode_frames(0)[STATE_KEY])
+    done = subprocess.run([str(policy_python), str(ROOT / "tests" / "helpers" / "lerobot_loads.py"), str(dataset_dir)],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-3000:]
+    loaded = json.loads(done.stdout.strip().splitlines()[-1])
+    height, width = recorded.info["features"][IMAGE_KEY]["shape"][:2]
+    indices = sorted({0, (count - 1) // 2, count - 1})
+    assert (loaded["frames"], loaded["episodes"]) == (count, 1)
+    assert loaded["items"] == {key: [[index, [3, height, width]] for index in indices]
+                               for key in (IMAGE_KEY, WRIST_IMAGE_KEY)}, loaded
 
 
 def test_a_camera_that_vanishes_mid_episode_is_said_and_the_episode_so_far_is_kept(tmp_path):
