@@ -29,11 +29,16 @@ def code_spans() -> list[str]:
     return spans + re.findall(r"\]\(([^)#]+)\)", README)
 
 
+GYMNASIUM_ID = re.compile(r"^\w+/[A-Z]\w*-v\d+$")  # namespace/Name-vN
+
+
 def named_paths() -> list[tuple[str, str | None]]:
     found = []
     for code in code_spans():
         for token in TOKEN.findall(code):
             path, _, test_name = token.partition("::")
+            if GYMNASIUM_ID.match(path):  # so101/CubeToBox-v0 names an environment, not a file
+                continue
             if "/" in path and path.split("/")[0] in PROJECT_FOLDERS:
                 found.append((path.rstrip("."), test_name or None))
     return found
