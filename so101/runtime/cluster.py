@@ -18,11 +18,13 @@ import socket
 import subprocess
 import time
 from pathlib import Path, PurePath
-from typing import IO, Protocol
+from dataclasses import dataclass
+from typing import IO, Callable, Protocol
 
 from so101.runtime.dataflow import ROOT, dataflow_copy, write_dataflow
 from so101.runtime.processes import kill_with_env, running_with_env, stop_process
 from so101.runtime.venv import dora_executable, env_with_bin_first
+from so101.runtime.wireguard import COORDINATOR_PORT, Machine, coordinator_command, daemon_command
 
 CLUSTER_DATAFLOW = ROOT / "dataflow_cluster.yml"
 DATAFLOW_NAME = "so101"
@@ -57,17 +59,35 @@ def one_line(text: str) -> str:
     return " ".join(line.strip() for line in text.splitlines() if line.strip() and line.strip() != "[ERROR]")
 
 
-class Cluster:
-    """A coordinator (token authentication on) and daemons, on 127.0.0.1, under `work_dir`."""
+@dataclass(frozen=True)
+class Seal:
+    """A sealed cluster (so101.runtime.wireguard): its machines, the coordinator's first, their
+    WireGuard up; how to run a program on one (`on(name)`, a command prefix: a machine of
+    so101.runtime.netns's rig); and the machine inside the tunnel where the dora CLI runs."""
 
-    def __init__(self, work_dir: Path, auth: bool = True, coordinator_addr: str = "127.0.0.1"):
+    machines: list[Machine]
+    on: Callable[[str], list[str]]
+    cli_machine: str
+
+    def machine(self, name: str) -> Machine:
+        return next(machine for machine in self.machines if machine.name == name)
+
+
+class Cluster:
+    """A coordinator (token authentication on) and daemons under `work_dir`: on 127.0.0.1 with
+    ports of their own, or, `seal`ed, each on its machine with the sealed cluster's command lines."""
+
+    def __init__(self, work_dir: Path, auth: bool = True, coordinator_addr: str = "127.0.0.1", seal: Seal | None = None):
         self.work_dir = work_dir
+        self.seal = seal
+        if seal is not None:
+            coordinator_addr = seal.machines[0].tunnel_address
         self.coordinator_addr = coordinator_addr
         self.is_joined = False  # joined(): a cluster someone else runs
         # In the environment of every process the cluster starts, and so of every node its daemons
         # start: a node whose daemon was killed outlives it, and is found by this.
         self.marker = f"{work_dir.resolve()}:{os.getpid()}:{time.monotonic_ns()}"
-        self.coordinator_port = free_port()
+        self.coordinator_port = COORDINATOR_PORT if seal else free_port()
         self.zenoh_port = free_port()
         self.auth = auth
         self.token: str | None = None
@@ -77,13 +97,15 @@ class Cluster:
 
     # -- processes -----------------------------------------------------------------------
 
-    def _spawn(self, name: str, args: list[str], env: dict[str, str], dora: str | None = None) -> subprocess.Popen:
+    def _spawn(self, name: str, args: list[str], env: dict[str, str], dora: str | None = None,
+               machine: str | None = None) -> subprocess.Popen:
         folder = self.work_dir / name
         folder.mkdir(parents=True, exist_ok=True)
         log = (self.work_dir / f"{name}.log").open("wb")
         self._logs.append(log)
         # A session of its own, stopped as a whole; nodes that left it are found by the marker.
-        process = subprocess.Popen([dora or dora_executable() or "dora", *args], cwd=folder, stdin=subprocess.DEVNULL, stdout=log,
+        on = self.seal.on(machine) if self.seal and machine else []
+        process = subprocess.Popen([*on, dora or dora_executable() or "dora", *args], cwd=folder, stdin=subprocess.DEVNULL, stdout=log,
                                    stderr=subprocess.STDOUT, env=env, start_new_session=True)
         self.processes[name] = process
         return process
@@ -115,8 +137,14 @@ class Cluster:
     def start_coordinator(self) -> None:
         home = self.work_dir / "home"  # `--auth` writes the token under $HOME: keep the user's own apart
         home.mkdir(parents=True, exist_ok=True)
-        args = ["coordinator", "--interface", "127.0.0.1", "--port", str(self.coordinator_port), "--store", "memory"]
-        self._spawn("coordinator", args + (["--auth"] if self.auth else []), dict(self.env(), HOME=str(home)))
+        machine = None
+        if self.seal:
+            machine = self.seal.machines[0].name
+            args = [*coordinator_command(self.seal.machines[0])[1:], "--store", "memory"]
+        else:
+            args = ["coordinator", "--interface", "127.0.0.1", "--port", str(self.coordinator_port), "--store", "memory",
+                    *(["--auth"] if self.auth else [])]
+        self._spawn("coordinator", args, dict(self.env(), HOME=str(home)), machine=machine)
         token_file = home / ".config" / "dora" / ".dora-token"
         deadline = time.monotonic() + START_TIMEOUT_S
         while "Listening on port" not in self.log("coordinator") or (self.auth and not token_file.exists()):
@@ -128,12 +156,16 @@ class Cluster:
 
     def start_daemon(self, machine_id: str, wait: bool = True, dora: str | None = None) -> subprocess.Popen:
         """A daemon under `machine_id`, run by this project's dora or another `dora` program."""
-        port = self.daemon_ports.setdefault(machine_id, free_port())
-        args = ["daemon", "--machine-id", machine_id, "--coordinator-addr", "127.0.0.1",
-                "--coordinator-port", str(self.coordinator_port), "--local-listen-port", str(port),
-                # No multicast here (containers, CI): the daemons meet at one Zenoh endpoint.
-                "--zenoh-peer", f"tcp/127.0.0.1:{self.zenoh_port}"]
-        process = self._spawn(f"daemon-{machine_id}", args, self.env(), dora)
+        if self.seal:  # a machine of its own: dora's default local port is free there
+            self.daemon_ports[machine_id] = 53291
+            args = daemon_command(self.seal.machine(machine_id), self.seal.machines)[1:]
+        else:
+            port = self.daemon_ports.setdefault(machine_id, free_port())
+            args = ["daemon", "--machine-id", machine_id, "--coordinator-addr", "127.0.0.1",
+                    "--coordinator-port", str(self.coordinator_port), "--local-listen-port", str(port),
+                    # No multicast here (containers, CI): the daemons meet at one Zenoh endpoint.
+                    "--zenoh-peer", f"tcp/127.0.0.1:{self.zenoh_port}"]
+        process = self._spawn(f"daemon-{machine_id}", args, self.env(), dora, machine=machine_id)
         if wait:
             deadline = time.monotonic() + START_TIMEOUT_S
             while machine_id not in self.connected_daemons():
@@ -144,7 +176,8 @@ class Cluster:
         return process
 
     def cli(self, *args: str, timeout_s: float = 60) -> subprocess.CompletedProcess:
-        return subprocess.run([dora_executable() or "dora", *args], capture_output=True, text=True, env=self.env(), timeout=timeout_s,
+        on = self.seal.on(self.seal.cli_machine) if self.seal else []
+        return subprocess.run([*on, dora_executable() or "dora", *args], capture_output=True, text=True, env=self.env(), timeout=timeout_s,
                               cwd=self.work_dir)
 
     def connected_daemons(self) -> list[str]:
