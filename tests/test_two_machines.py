@@ -221,7 +221,7 @@ def printed_steps(output: str) -> dict[str, list[str]]:
     steps: dict[str, list[str]] = {}
     current = ""
     for line in (line.strip() for line in output.splitlines()):
-        if line.startswith("# machine '") and "(" in line:
+        if line.startswith("# machine '") and "tunnel" in line:
             current = line.split("'")[1]
         elif line.startswith("# then"):
             current = "then"

@@ -54,6 +54,9 @@ TEXT = {
         "copy": "把 {file} 拷到这台机器(仅此一台)",
         "token": "令牌:协调器写在机器 {arm!r} 的 ~/.config/dora/.dora-token;在这里 export DORA_AUTH_TOKEN=...",
         "then": "然后(任意一台、带令牌):",
+        "machine": "机器 {name!r}({address},隧道 {tunnel}):",
+        "no_address": "无地址",
+        "prompt_on": "机器 {name!r}:",
     },
     "en": {
         "coordinator": "coordinator on {addr}:{port}, token authentication on",
@@ -70,6 +73,9 @@ TEXT = {
         "token": "the token: the coordinator writes it on machine {arm!r}, to ~/.config/dora/.dora-token; "
                  "export DORA_AUTH_TOKEN=... here",
         "then": "then, on any of them with the token:",
+        "machine": "machine {name!r} ({address}, tunnel {tunnel}):",
+        "no_address": "no address",
+        "prompt_on": "machine {name!r}:",
     },
 }
 
@@ -232,7 +238,7 @@ def _write_placed_dataflow(args: argparse.Namespace) -> int:
         except SealError as error:
             print(f"so101 cluster-dataflow: --sealed: {error}", file=sys.stderr)
             return 2
-        if missing_tools():  # the files are written; here is only the arm's or the laptop's WireGuard missing
+        if missing_tools():  # `wg` made the keys; wg-quick or WireGuard itself is missing, and each machine needs them
             print(f"so101 cluster-dataflow: note: {INSTALL_HINT} (on each machine)", flush=True)
     args.output.write_text(text, encoding="utf-8")
     print(TEXT[args.lang]["wrote"].format(output=args.output, name=DATAFLOW_NAME))
@@ -246,8 +252,9 @@ def sealed_steps(machines: list[Machine], files: list[Path], dataflow: Path, lan
     text = TEXT[lang]
     lines = [text["sealed"].format(folder=files[0].parent)]
     for index, (machine, wireguard_file) in enumerate(zip(machines, files)):
-        lines += ["", f"  # machine {machine.name!r} ({machine.lab_address or 'no address'}, tunnel "
-                      f"{machine.tunnel_address}): {text['copy'].format(file=wireguard_file.name)}",
+        head = text["machine"].format(name=machine.name, address=machine.lab_address or text["no_address"],
+                                      tunnel=machine.tunnel_address)
+        lines += ["", f"  # {head} {text['copy'].format(file=wireguard_file.name)}",
                   f"  sudo wg-quick up ./{wireguard_file.name}"]
         if index == 0:
             lines.append("  " + " ".join(coordinator_command(machine)))
@@ -256,5 +263,5 @@ def sealed_steps(machines: list[Machine], files: list[Path], dataflow: Path, lan
         lines.append("  " + " ".join(daemon_command(machine, machines)))
     lines += ["", "  # " + text["then"],
               f"  DORA_COORDINATOR_ADDR={machines[0].tunnel_address} dora start {dataflow} --name {DATAFLOW_NAME} --detach",
-              f"  # machine {PROMPT_MACHINE!r}: python nodes/keyboard_control.py"]
+              f"  # {text['prompt_on'].format(name=PROMPT_MACHINE)} python nodes/keyboard_control.py"]
     return "\n".join(lines)
