@@ -128,12 +128,12 @@ def test_each_nodes_page_has_its_settings_table_and_its_dataflow_entry():
 
 def test_each_body_page_names_every_setting_of_its_node():
     """A body node's page covers the shared loop's settings (NodeSettings) too, in its table or, for the real
-    arm, in the table of what each one does there."""
+    arm, in the arm node's table of what each one does there."""
     for body in BODIES:
         _, class_paths = NODE_PAGES[BODIES[body].node_file.name]
         covered = {each.env_var for path in class_paths for each in declared(hooks().settings_class(path))}
         if body == "real":
-            covered |= set(re.findall(r"`(SO101_\w+)`", page_text("bodies/real-arm.md").split("| On the real arm |")[1]
+            covered |= set(re.findall(r"`(SO101_\w+)`", page_text("nodes/arm.md").split("| On the real arm |")[1]
                                       .split("\n\n")[0]))
         assert covered == {setting.env_var for setting in node_settings(body)}, body
 
