@@ -18,6 +18,8 @@ from so101.bodies.settings import (
     NodeSettings,
     PyBulletSettings,
 )
+from so101.cameras.settings import RealCameraSettings
+from so101.dataset.settings import RecorderSettings
 from so101.runtime.settings import Setting, declared
 from so101.tasks.settings import ExpertSettings
 from tests.helpers.dataflow import ROOT
@@ -80,6 +82,14 @@ def test_the_arm_settings_read_every_variable():
     (PyBulletSettings, {"SO101_SERVO_ZETA": "nan"}, "SO101_SERVO_ZETA='nan' is not a number >= 0"),
     (MuJoCoSettings, {"SO101_MUJOCO_DAMPING": "soft"}, "SO101_MUJOCO_DAMPING='soft' is not a number >= 0"),
     (ExpertSettings, {"SO101_EXPERT_MISSES": "1.5"}, "SO101_EXPERT_MISSES=1.5 is not a share from 0 to 1"),
+    (RealCameraSettings, {"CAPTURE_PATH": "0", "SO101_CAMERA_FPS": "241"},
+     "SO101_CAMERA_FPS=241 is not a frame rate from 1 to 240 per second"),
+    (RealCameraSettings, {"CAPTURE_PATH": "0", "SO101_CAMERA_FPS": "0"},
+     "SO101_CAMERA_FPS=0 is not a frame rate from 1 to 240 per second"),
+    (RecorderSettings, {"SO101_RECORD_DIR": "d", "SO101_RECORD_FPS": "1001"},
+     "SO101_RECORD_FPS=1001 is not a frame rate from 1 to 1000 per second"),
+    (RecorderSettings, {"SO101_RECORD_DIR": "d", "SO101_RECORD_FPS": "thirty"},
+     "SO101_RECORD_FPS='thirty' is not a whole number >= 0"),
     (ArmSettings, {"SO101_PORT": "p", "SO101_CALIBRATION": "c", "SO101_TORQUE_LIMIT": "120"},
      "SO101_TORQUE_LIMIT=120 is above 100 (a percentage of the servo's maximum)"),
     (ArmSettings, {"SO101_PORT": "p", "SO101_CALIBRATION": "c", "SO101_JOINT_SIGNS": "1,1"},
@@ -93,6 +103,13 @@ def test_a_bad_value_is_one_line_naming_it(settings_class, environ, message):
         settings_class.from_environ(environ)
     assert message in str(raised.value) and "\n" not in str(raised.value)
 
+
+
+def test_each_frame_rate_keeps_its_own_highest():
+    """One reader (so101/runtime/settings.py), two bounds: a camera asks at most 240 per second, a recording 1000."""
+    assert RealCameraSettings.from_environ({"CAPTURE_PATH": "0", "SO101_CAMERA_FPS": "240"}).fps == 240
+    assert RecorderSettings.from_environ({"SO101_RECORD_DIR": "d", "SO101_RECORD_FPS": "1000"}).fps == 1000
+    assert RecorderSettings.from_environ({"SO101_RECORD_DIR": "d", "SO101_RECORD_FPS": "1"}).fps == 1
 
 
 # Each node file -> its reference page in docs/nodes/ and the settings classes its table is made from.

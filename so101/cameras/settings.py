@@ -9,7 +9,7 @@ from typing import Mapping
 
 from so101.cameras.sources import CAMERA_NAMES, DEFAULT_CAMERA_FPS, capture_source
 from so101.runtime.settings import (
-    EnvironSettings, Setting, read_choice, read_image_size, read_whole_number, setting,
+    EnvironSettings, Setting, read_choice, read_fps, read_image_size, setting,
 )
 
 ENCODINGS = ("rgb8", "bgr8")  # the recorder and the policy read rgb8
@@ -30,13 +30,6 @@ def read_optional_pixels(environ: Mapping[str, str], declared_setting: Setting) 
     return int(raw)
 
 
-def read_fps(environ: Mapping[str, str], declared_setting: Setting) -> int:
-    fps = read_whole_number(environ, declared_setting)
-    if not 1 <= fps <= 240:
-        raise ValueError(f"{declared_setting.env_var}={fps} is not a frame rate from 1 to 240 per second")
-    return fps
-
-
 @dataclass(frozen=True)
 class RealCameraSettings(EnvironSettings):
     """nodes/real_camera.py."""
@@ -55,7 +48,7 @@ class RealCameraSettings(EnvironSettings):
         "SO101_CAMERA_SIZE", "", "WIDTHxHEIGHT asked of a device (the pictures are scaled from it to IMAGE_WIDTH x "
         "IMAGE_HEIGHT, the same shape); empty = that size", read_image_size)
     fps: int = setting("SO101_CAMERA_FPS", str(DEFAULT_CAMERA_FPS), "frames per second asked of a device "
-                       "(a file plays at its own)", read_fps)
+                       "(a file plays at its own)", read_fps(240))
 
     def __post_init__(self) -> None:
         if (self.width is None) != (self.height is None):

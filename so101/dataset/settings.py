@@ -5,7 +5,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Mapping
 
 from so101.assets import ASSETS_ENV_VAR
 from so101.bodies.looks import DEFAULT_LOOKS, LOOKS_CHOICES
@@ -17,18 +16,11 @@ from so101.dataset.recording import CAMERA_LOST_CHOICES
 from so101.observe import ALL_OBSERVED, OBSERVE_ENV_VAR, Observed, parse_observed
 from so101.cameras.sources import parse_real_cameras
 from so101.runtime.settings import (
-    EnvironSettings, Setting, read_choice, read_file_path, read_image_size, read_optional_path, read_parsed,
+    EnvironSettings, read_choice, read_file_path, read_fps, read_image_size, read_optional_path, read_parsed,
     read_whole_number, setting,
 )
 
 DEFAULT_IMAGE_SIZE = "320x240"
-
-
-def read_fps(environ: Mapping[str, str], declared_setting: Setting) -> int:
-    fps = read_whole_number(environ, declared_setting)
-    if not 1 <= fps <= 1000:
-        raise ValueError(f"{declared_setting.env_var}={fps} is not a frame rate from 1 to 1000 per second")
-    return fps
 
 
 @dataclass(frozen=True)
@@ -38,7 +30,7 @@ class RecorderSettings(EnvironSettings):
     root: Path = setting(
         "SO101_RECORD_DIR", "", "the dataset's folder: made if missing, appended to if it is one", read_file_path,
         required="(so101 teleop --record DIR, or the dataflow's env:) to the dataset's folder")
-    fps: int = setting("SO101_RECORD_FPS", str(DEFAULT_FPS), "frames per second", read_fps)
+    fps: int = setting("SO101_RECORD_FPS", str(DEFAULT_FPS), "frames per second", read_fps(1000))
     image_size: tuple[int, int] | None = setting(
         "SO101_RECORD_IMAGE_SIZE", DEFAULT_IMAGE_SIZE,
         "WIDTHxHEIGHT of the `image` input's pictures, stored as video; empty = no video (the `image` input unconnected)",

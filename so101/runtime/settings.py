@@ -114,6 +114,16 @@ def read_whole_number(environ: Mapping[str, str], declared_setting: Setting) -> 
     return int(raw)
 
 
+def read_fps(highest: int) -> Callable[[Mapping[str, str], Setting], int]:
+    """A frame rate, a whole number from 1 to `highest` per second."""
+    def read(environ: Mapping[str, str], declared_setting: Setting) -> int:
+        fps = read_whole_number(environ, declared_setting)
+        if not 1 <= fps <= highest:
+            raise ValueError(f"{declared_setting.env_var}={fps} is not a frame rate from 1 to {highest} per second")
+        return fps
+    return read
+
+
 def parse_image_size(text: str, env_var: str = "image size") -> tuple[int, int] | None:
     """"WIDTHxHEIGHT" -> (width, height); "" -> None (no pictures)."""
     raw = text.strip().lower()
