@@ -1,5 +1,7 @@
 """What a V4L2 device says it offers, asked with the kernel's own ioctls (linux/videodev2.h): its
-name and, per pixel format, its frame sizes and their frame rates. Linux only; stdlib only."""
+name and, per pixel format, its frame sizes and their frame rates. Linux only; stdlib only.
+linuxpy 0.25 (PyPI's V4L2 bindings) was not used: it is GPL-3.0-or-later, which this Apache-2.0 project
+would take on by importing it, and its listing skips stepwise sizes and drops pixel formats its enum lacks."""
 
 from __future__ import annotations
 
