@@ -25,6 +25,8 @@ One run on one machine measures:
      page, viewers elsewhere and browsers on this machine (`--web`: this alone).
   14. the Gymnasium environment (bench/gym_bench.py, `--gym` alone): steps a second of one
      environment and of an async vector of two, without pictures and with both cameras.
+  15. a policy's frame -> action round trip in lockstep (bench/round_trip_bench.py, `--round-trip` alone),
+     with the policy on the body's daemon and on another daemon of a cluster.
 It prints a table and writes the figures, the targets and the machine to a JSON file.
 Timings are wall-clock on a shared machine: the load average is recorded with them.
 """
@@ -40,7 +42,7 @@ import subprocess
 import sys
 import tempfile
 import time
-from pathlib import Path
+from pathlib import Path, PurePath
 from typing import Callable
 
 if __package__ in (None, ""):  # run as a script (python bench/run_bench.py): the checkout holds `bench`
@@ -51,7 +53,7 @@ from bench.common import (  # noqa: E402
     target_lines, target_row, tick_figures, tick_records,
 )
 from so101.bodies.registry import BODIES  # noqa: E402
-from so101.runtime.argtypes import image_size, number  # noqa: E402
+from so101.runtime.argtypes import image_size, number, whole_number  # noqa: E402
 from so101.dataset.settings import DEFAULT_IMAGE_SIZE  # noqa: E402
 from so101.runtime.display import DisplayError, display_available, virtual_display  # noqa: E402
 from so101.runtime.dataflow import ROOT, TICK_PERIOD_S  # noqa: E402
@@ -66,7 +68,8 @@ DEFAULT_OUT = {"pybullet": ROOT / "bench" / "results" / "latest.json", "mujoco":
                "demos": ROOT / "bench" / "results" / "latest-demos.json",
                "demos-mujoco": ROOT / "bench" / "results" / "latest-demos-mujoco.json",
                "gym": ROOT / "bench" / "results" / "latest-gym.json",
-               "gym-mujoco": ROOT / "bench" / "results" / "latest-gym-mujoco.json"}
+               "gym-mujoco": ROOT / "bench" / "results" / "latest-gym-mujoco.json",
+               "round-trip": ROOT / "bench" / "results" / "latest-round-trip.json"}
 # The engine's own call for one 4 ms tick, as the table names it.
 RAW_STEP_LABEL = {"pybullet": "raw stepSimulation, DIRECT", "mujoco": "raw mj_step x 2 (one 4 ms tick)"}
 
@@ -541,6 +544,28 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--gym", action="store_true",
                         help="measure only the Gymnasium environment (so101/CubeToBox-v0, in process): steps a second of "
                         "one environment and of an async vector of two, without pictures and with both cameras")
+    parser.add_argument("--round-trip", action="store_true",
+                        help="measure only a policy's frame -> action round trip in lockstep (so101 eval's run), the "
+                        "policy on the body's daemon, then on another daemon: on 127.0.0.1, or on the cluster "
+                        "--coordinator names")
+    parser.add_argument("--policy", type=Path, default=None, metavar="DIR",
+                        help="--round-trip: the policy (default: the tiny ACT in tests/data/policy_act_tiny)")
+    parser.add_argument("--policy-python", type=Path, default=None, metavar="PY",
+                        help="--round-trip: the Python that runs it (default: so101 policy-env's; with --coordinator, "
+                        "its path on the policy's machine)")
+    parser.add_argument("--episodes", type=whole_number(1, 1000), default=None, metavar="N",
+                        help="--round-trip: episodes each way (default 10; --quick 2)")
+    parser.add_argument("--seed", type=whole_number(0, 2**31), default=1000, metavar="S",
+                        help="--round-trip: the first episode's seed (default 1000)")
+    parser.add_argument("--coordinator", default=None, metavar="ADDR[:PORT]",
+                        help="--round-trip on the dora cluster of this coordinator (its token in DORA_AUTH_TOKEN), with "
+                        "--machine and --policy-machine")
+    parser.add_argument("--machine", default=None, metavar="ID",
+                        help="--coordinator: this machine's daemon, where the body runs, and the policy the first time")
+    parser.add_argument("--policy-machine", default=None, metavar="NAME",
+                        help="--coordinator: the daemon the policy runs on the second time")
+    parser.add_argument("--root", type=PurePath, default=None, metavar="FOLDER",
+                        help="--coordinator: the project's folder on the policy's machine (default: this checkout's)")
     parser.add_argument("--image-size", type=image_size, default=DEFAULT_IMAGE_SIZE, metavar="WxH",
                         help=f"--cameras, --demos, --gym: the pictures' size (default {DEFAULT_IMAGE_SIZE})")
     parser.add_argument("--out", type=Path, default=None,
@@ -554,6 +579,24 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 _positive_seconds = number(lambda value: 0 < value <= 3600, "a number of seconds above 0 and at most 3600")
 
 
+def round_trip_place(args: argparse.Namespace):
+    """--round-trip's cluster (None: a loopback one of its own), or what is wrong with its options, in one line."""
+    from so101.launch.on_cluster import cluster_place
+
+    own = [option for option, value in (("--policy", args.policy), ("--policy-python", args.policy_python),
+                                        ("--episodes", args.episodes), ("--coordinator", args.coordinator),
+                                        ("--machine", args.machine), ("--policy-machine", args.policy_machine),
+                                        ("--root", args.root)) if value is not None]
+    if own and not args.round_trip:
+        return f"{', '.join(own)}: --round-trip's options; they go with --round-trip"
+    if not args.round_trip:
+        return None
+    place = cluster_place(args, "the body runs")
+    if place is not None and not isinstance(place, str) and place.policy_machine is None:
+        return "--round-trip on a cluster needs --policy-machine NAME: the daemon to run the policy on, against --machine's"
+    return place
+
+
 def main(argv=None) -> int:
     return run(parse_args(argv))
 
@@ -562,10 +605,10 @@ def run(args: argparse.Namespace) -> int:
     """The benchmark for parsed options (`so101 bench` calls this)."""
     # Here, not at the top: every `so101` command builds this parser, and these two bring the
     # serial bus, the fake arm and the cluster (about 0.1 s of imports) that only a run needs.
-    from bench import cluster_bench, real_bench
+    from bench import cluster_bench, real_bench, round_trip_bench
 
     tables = {"real": real_bench.table, "cluster": cluster_bench.table, "web": alone_table, "cameras": alone_table,
-              "demos": alone_table, "gym": alone_table}
+              "demos": alone_table, "gym": alone_table, "round-trip": round_trip_bench.table}
     if args.show is not None:
         try:
             shown = json.loads(args.show.read_text(encoding="utf-8"))
@@ -583,9 +626,17 @@ def run(args: argparse.Namespace) -> int:
     else:
         settings = dict(duration_s=args.duration, fast_s=5.0, fast_steps=[1, 10, 100], raw_steps=40000, node_ticks=10000, after_sleep_steps=1000)
     kind = ("cluster" if args.cluster else "web" if args.web else "cameras" if args.cameras else "demos" if args.demos
-            else "gym" if args.gym else args.body)
+            else "gym" if args.gym else "round-trip" if args.round_trip else args.body)
+    place = round_trip_place(args)
+    if isinstance(place, str):
+        print(f"so101 bench: {place}", file=sys.stderr)
+        return 2
     try:
-        if args.cluster:
+        if args.round_trip:
+            result = round_trip_bench.run_round_trip_benchmark(
+                args.policy or round_trip_bench.DEFAULT_POLICY, args.policy_python,
+                args.episodes or (2 if args.quick else 10), args.seed, 4.0 if args.quick else None, place)
+        elif args.cluster:
             result = cluster_bench.run_cluster_benchmark(settings["duration_s"])
         elif args.web:
             result = run_web_only(settings["duration_s"], args.body, browsers=not args.quick)

@@ -44,7 +44,7 @@ DORA_MODULES = {
 }
 # These start dora's daemons with ports of their own (--local-listen-port, which `dora daemon` honours
 # and `dora run` does not): without namespaces, beside the dora group, one test at a time among themselves.
-OWN_PORT_MODULES = {"test_cluster"}
+OWN_PORT_MODULES = {"test_cluster", "test_policy_elsewhere"}
 MAX_WORKERS = 4
 
 

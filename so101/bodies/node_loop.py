@@ -198,7 +198,9 @@ def run_body_node(body: Body, node: Node, settings: NodeSettings, identity: str,
     events: Iterable[Event] = (fast_events(cast(Polled, node)) if fast_steps
                                else until_closed(node, "task_cmd") if lockstep_fps else node)
     # (start ns, end ns, physics steps so far) of each tick, in time.monotonic_ns, when asked for;
-    # None costs nothing per tick.
+    # None costs nothing per tick. In lockstep, of each frame answered: (its first part going out the first
+    # time, the joint_cmd that answers it in, its episode: resets so far), the driver's round trip, a loss and
+    # the runner's `again` included (so101 bench --round-trip); episode 0 is the body's start, before any reset.
     tick_log: array[int] | None = array("q") if settings.tick_log_path else None
     tick_clock = TickClock(tick_s)
     # Counted in physics steps, so fast mode (several steps per tick) keeps the simulated rate.
@@ -216,6 +218,7 @@ def run_body_node(body: Body, node: Node, settings: NodeSettings, identity: str,
     # In lockstep, an episode over (success, or its last frame) holds still until a reset: every
     # episode then ends at the same frame, however late the runner's reset comes.
     episode_over = False
+    frame_out: tuple[FrameTag | None, int] = (None, 0)  # in lockstep: the frame now, when it began to go out (ns)
 
     def pictures(angles_deg: AnglesDeg, width: int, height: int, wrist: bool) -> tuple[RgbImage, RgbImage | None]:
         """The body as it stands, drawn by `cameras` (front, and the wrist's where asked and a task has it)."""
@@ -224,7 +227,9 @@ def run_body_node(body: Body, node: Node, settings: NodeSettings, identity: str,
 
     def publish(tag: FrameTag | None = None) -> None:
         """joint_state and gripper_state, the task's outputs, and in lockstep the frame's pictures."""
-        nonlocal episode_over
+        nonlocal episode_over, frame_out
+        if tag is not None and tag != frame_out[0]:  # the first time (not `again`'s)
+            frame_out = (tag, time.monotonic_ns())
         tags = tag.metadata() if tag is not None else {}
         angles_deg = body.joint_angles_deg()
         # None: the real arm's read failed this tick; publishing nothing beats stale angles.
@@ -304,6 +309,8 @@ def run_body_node(body: Body, node: Node, settings: NodeSettings, identity: str,
                 elif event["id"] == "joint_cmd":
                     if lockstep_fps and (episode_over or not answers(frame_tag(event.get("metadata")), now)):
                         continue  # sent for a frame before a reset, or past the episode's end: it is over
+                    if lockstep_fps and tick_log is not None:
+                        tick_log.extend((frame_out[1], time.monotonic_ns(), now.episode))
                     decoded = decode_joint_cmd(event["value"], joint_targets_deg)
                     if decoded.targets_deg is None:  # what arrived is not a command: decoded.error says why
                         logger.warning(text["rejected"].format(error=decoded.error))

@@ -89,7 +89,8 @@ class NodeSettings(EnvironSettings):
         "SO101_FAST_STEPS", "0", "N > 0: fast mode (no wall-clock pacing, N steps per published state; see the benchmark)",
         read_whole_number)
     tick_log_path: str = setting(
-        "SO101_TICK_LOG", "", "a file for per-tick timings and step counts (used by `so101 bench`)", read_text)
+        "SO101_TICK_LOG", "", "a file for per-tick timings and step counts; in lockstep, each frame's round trip to "
+        "its joint_cmd and its episode (used by `so101 bench`)", read_text)
     lang: str = setting(LANG_ENV_VAR, DEFAULT_LANGUAGE, "log language, `zh` or `en`", read_language)
     task: str = setting(
         "SO101_TASK", "", "a task's scene on the floor (`cube_to_box`; simulations only); empty = the arm alone",

@@ -19,7 +19,8 @@ from pathlib import Path
 
 from so101.observe import OBSERVE_HELP
 from so101.runtime.argtypes import add_camera_size_option, observed_list
-from so101.launch.lockstep import add_common_arguments, cluster_place, expert_driver, fail, flows_for, log_place, refuse_real, run_flows, work_folder
+from so101.launch.lockstep import add_common_arguments, expert_driver, fail, flows_for, log_place, refuse_real, run_flows, work_folder
+from so101.launch.on_cluster import cluster_place
 from so101.dataset.settings import DEFAULT_IMAGE_SIZE
 from so101.runtime.lockstep import DEFAULT_LOCKSTEP_FPS
 from so101.tasks.episodes import Outcome
@@ -50,7 +51,7 @@ def run(args: argparse.Namespace) -> int:
     refusal = refuse_real("demos", args.body)
     if refusal:
         return fail(refusal)
-    place = cluster_place(args)
+    place = cluster_place(args, "the runners keep the episodes")
     if isinstance(place, str):
         return fail(f"so101 demos: {place}")
     root = args.dataset.expanduser().resolve()

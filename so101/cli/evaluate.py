@@ -9,7 +9,8 @@ run by the Python of a policy environment: `so101 policy-env`, or `--policy-pyth
 draws the pictures the policy sees, and in lockstep inference costs no simulated time.
 `--video DIR` keeps each episode's front camera as an mp4 (seed_S.mp4), to see why an episode
 failed. `--workers K` runs K dataflows at once, each on
-its share of the seeds; the lines still come in seed order.
+its share of the seeds; the lines still come in seed order. On a cluster (`--coordinator`, `--machine`),
+`--policy-machine NAME` runs every worker's policy on daemon NAME and its body and runner on this machine's.
 """
 
 from __future__ import annotations
@@ -20,9 +21,9 @@ from pathlib import Path
 from so101.policy.settings import torch_device
 from so101.runtime.argtypes import add_camera_size_option
 from so101.launch.lockstep import (
-    Driver, add_common_arguments, cluster_place, expert_driver, fail, flows_for, log_place, refuse_real, run_flows,
-    work_folder,
+    Driver, add_common_arguments, expert_driver, fail, flows_for, log_place, refuse_real, run_flows, work_folder,
 )
+from so101.launch.on_cluster import add_policy_machine_argument, cluster_place
 from so101.dataset.settings import DEFAULT_IMAGE_SIZE
 from so101.policy.environment import default_dir, python_in
 from so101.runtime.dataflow import POLICY_NODE_FILE
@@ -42,6 +43,7 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
     parser.add_argument("--policy-device", type=torch_device, default="cpu", metavar="DEVICE",
                         help="--policy: the torch device it runs on: cpu (default), cuda or mps")
     add_common_arguments(parser)
+    add_policy_machine_argument(parser)
     parser.add_argument("--video", type=Path, default=None, metavar="DIR",
                         help="keep each episode's front camera as an mp4 in DIR (drawn every frame: slower)")
     add_camera_size_option(parser, DEFAULT_IMAGE_SIZE, "--video's picture size, and a policy that sees gets its cameras' "
@@ -52,7 +54,9 @@ def run(args: argparse.Namespace) -> int:
     refusal = refuse_real("eval", args.body)
     if refusal:
         return fail(refusal)
-    place = cluster_place(args)
+    if args.policy_machine and args.policy is None:
+        return fail(f"so101 eval: --policy-machine {args.policy_machine} places the policy: it goes with --policy DIR")
+    place = cluster_place(args, "the runners keep the episodes")
     if isinstance(place, str):
         return fail(f"so101 eval: {place}")
     video = str(args.video.expanduser().resolve()) if args.video is not None else ""
@@ -76,6 +80,8 @@ def run(args: argparse.Namespace) -> int:
     flows = flows_for(args, work, driver, pictures, picture_size, lambda folder: {"SO101_VIDEO_DIR": video})
     who = ("the expert" if args.expert else f"the policy in {args.policy}" if args.policy is not None
            else "idle (the arm held at home)")
+    if args.policy_machine:
+        who += f" on machine {args.policy_machine!r}"
     print(f"eval: {args.task} on {args.body}, {who}, seeds {args.seed}..{args.seed + args.episodes - 1}, "
           f"time limit {args.time_limit:g} s, {args.workers} worker{'s' if args.workers > 1 else ''} "
           f"(logs: {log_place(args, work)})", flush=True)
@@ -97,7 +103,8 @@ def policy_driver(args: argparse.Namespace) -> tuple[Driver, tuple[int, int] | N
     from so101.tasks import task_named
 
     try:
-        chosen = choose_policy(args.policy, args.policy_python, args.task, task_named(args.task).object_state_names)
+        chosen = choose_policy(args.policy, args.policy_python, args.task, task_named(args.task).object_state_names,
+                               python_elsewhere=args.policy_machine is not None)
     except ValueError as error:
         return str(error)
     for line in chosen.notes():

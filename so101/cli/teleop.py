@@ -24,6 +24,10 @@ episodes in DIR as a LeRobot dataset.
 `--body real --camera front=SOURCE --camera wrist=SOURCE` gives the real arm eyes: one real camera node
 per camera (so101.launch.real_cameras), recorded as observation.images.front and .wrist and seen by a
 policy that sees.
+
+`--coordinator ADDR[:PORT] --machine HERE` runs the dataflow on a dora cluster someone runs (`dora start`),
+every node on this machine's daemon HERE, the prompt joined through it; `--policy-machine NAME` runs the
+policy node on daemon NAME instead, under its --policy-python there (docs/loop/policy-elsewhere.md).
 """
 
 from __future__ import annotations
@@ -31,7 +35,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-from pathlib import Path
+from pathlib import Path, PurePath
 
 from so101.bodies.looks import DEFAULT_LOOKS, LOOKS_CHOICES
 from so101.bodies.registry import BODIES, BodyKind
@@ -46,12 +50,13 @@ from so101.policy.settings import torch_device
 from so101.observe import OBSERVE_ENV_VAR, OBSERVE_HELP, Observed, observed_for
 from so101.cameras.sources import DEFAULT_CAMERA_FPS, DEFAULT_CAMERA_SIZE, parse_camera_option
 from so101.dataset.recording import CAMERA_LOST_CHOICES
+from so101.launch.on_cluster import add_policy_machine_argument, cluster_place
 from so101.launch.real_cameras import add_real_cameras, checked_cameras, policy_picture_problem
 from so101.runtime.argtypes import (
     add_camera_size_option, add_language_option, image_size, observed_list, parsed_by, whole_number,
 )
 from so101.runtime.dataflow import (
-    LEADER_READY_MARKS, LOADED_MARKS, POLICY_READY_MARKS, PROMPT_NODE_FILE, WEB_VIEW_MARKS, dataflow_copy,
+    LEADER_READY_MARKS, LOADED_MARKS, POLICY_READY_MARKS, PROMPT_NODE_FILE, ROOT, WEB_VIEW_MARKS, dataflow_copy,
     with_camera, with_expert, with_leader, with_policy, with_recorder, with_task,
 )
 from so101.runtime.lockstep import DEFAULT_LOCKSTEP_FPS
@@ -104,14 +109,27 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
                         help="--policy: the Python that runs it, with LeRobot (default: so101 policy-env's)")
     parser.add_argument("--policy-device", type=torch_device, metavar="DEVICE", default="cpu",
                         help="--policy: the torch device it runs on: cpu (default), cuda or mps")
+    parser.add_argument("--coordinator", default=None, metavar="ADDR[:PORT]",
+                        help="run on the dora cluster of this coordinator (its token in DORA_AUTH_TOKEN, as for "
+                             "`dora start`), with --machine: every node on this machine's daemon")
+    parser.add_argument("--machine", default=None, metavar="ID",
+                        help="with --coordinator: the machine id of this machine's daemon, which the prompt joins "
+                             "through (dora's default local port, or SO101_DAEMON_PORT)")
+    parser.add_argument("--root", type=PurePath, default=None, metavar="FOLDER",
+                        help="with --policy-machine: the project's folder on the policy's machine (default: this "
+                             "checkout's)")
+    add_policy_machine_argument(parser)
     add_web_arguments(parser)
     add_log_option(parser)
 
 
 def run(args: argparse.Namespace) -> int:
     text = TEXT[args.lang]
-    problem = task_problem(args, BODIES[args.body])
-    if problem:
+    place = cluster_place(args, "the body and the prompt run")
+    problem = task_problem(args, BODIES[args.body]) or (place if isinstance(place, str) else None)
+    if args.policy_machine and args.policy is None:
+        problem = f"--policy-machine {args.policy_machine} places the policy: it goes with --policy DIR"
+    if problem or isinstance(place, str):
         print(f"so101 teleop: {problem}", file=sys.stderr)
         return 2
     launch = prepare(args, "teleop")
@@ -172,8 +190,13 @@ def run(args: argparse.Namespace) -> int:
     web_line = add_web_view(args, descriptor, launch.body, "teleop")
     if web_line:
         ready_marks += (WEB_VIEW_MARKS,)
-    print(text["starting"].format(mode=launch.mode, log=launch.log), flush=True)
-    return run_beside(launch, descriptor, PROMPT_NODE_FILE, text, ready_marks, web_line)
+    if place is None:
+        print(text["starting"].format(mode=launch.mode, log=launch.log), flush=True)
+    else:
+        policy = text["policy_there"].format(machine=place.policy_machine) if place.policy_machine else ""
+        print(text["starting_cluster"].format(coordinator=f"{place.coordinator_addr}:{place.coordinator_port}",
+                                              mode=launch.mode, here=place.here, policy=policy, log=launch.log), flush=True)
+    return run_beside(launch, descriptor, PROMPT_NODE_FILE, text, ready_marks, web_line, place)
 
 
 def add_policy(descriptor: dict, body: BodyKind, args: argparse.Namespace) -> str | None:
@@ -183,7 +206,8 @@ def add_policy(descriptor: dict, body: BodyKind, args: argparse.Namespace) -> st
 
     names = task_named(args.task).object_state_names if args.task else ()
     try:
-        chosen = choose_policy(args.policy, args.policy_python, args.task, names)
+        chosen = choose_policy(args.policy, args.policy_python, args.task, names,
+                               python_elsewhere=args.policy_machine is not None)
     except ValueError as error:
         return str(error)
     if chosen.picture_size is not None:  # the camera node draws what it sees, at the rate it learned from
@@ -222,7 +246,8 @@ def finish_policy(descriptor: dict, body: BodyKind, args: argparse.Namespace, ch
            "SO101_POLICY_CAMERAS": ",".join(real_cameras)}
     if not args.task:
         del env["SO101_TASK"]
-    with_policy(descriptor, body.node_id, chosen.inputs, env, str(chosen.python))
+    root = args.root if args.policy_machine and args.root else ROOT  # the project's folder on the policy's machine
+    with_policy(descriptor, body.node_id, chosen.inputs, env, str(chosen.python), root)
 
 
 def add_leader(descriptor: dict, body: BodyKind, port: str | None, calibration_file: Path | None,

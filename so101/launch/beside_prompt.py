@@ -3,7 +3,9 @@
 Their options (the body, the task, the browser view, the log), the launch those options choose,
 checked before anything starts, and `run_beside`: `dora run` in the background (so101.runtime.dora_run),
 then a node in the foreground (the prompt, the replay) once the dataflow is ready, and the dataflow
-stopped when that node ends, whatever ends it (quit, Ctrl-C, a closed terminal).
+stopped when that node ends, whatever ends it (quit, Ctrl-C, a closed terminal). On a cluster someone runs
+(`so101 teleop --coordinator`: so101.launch.on_cluster), `dora start --attach` instead, every node on this
+machine's daemon but the policy, where --policy-machine says, and the prompt joins through this machine's daemon.
 """
 
 from __future__ import annotations
@@ -18,10 +20,15 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from so101.bodies.registry import BODIES, DEFAULT_BODY, BodyKind, body_node_env
+from so101.launch.on_cluster import ClusterPlace, joined_cluster, placed
 from so101.runtime.argtypes import whole_number
-from so101.runtime.dataflow import LEADER_READY_MARKS, LOADED_MARKS, PROMPT_NODE_FILE, ROOT, with_web_view, write_dataflow
+from so101.runtime.cluster import ClusterError
+from so101.runtime.dataflow import (
+    LEADER_READY_MARKS, LOADED_MARKS, POLICY_NODE_ID, PROMPT_NODE_FILE, ROOT, with_web_view, write_dataflow,
+)
 from so101.runtime.display import MODES, resolve_mode
 from so101.runtime.dora_run import Dataflow, log_tail, port_held_problem, refusal as refusal_in
+from so101.runtime.dora_start import AttachedDataflow
 from so101.runtime.processes import DAEMON_PORT_TAKEN_MARK
 from so101.runtime.venv import dora_executable, env_with_bin_first
 from so101.runtime.versions import dora_version_problem
@@ -36,6 +43,9 @@ START_TIMEOUT_S = 90.0
 TEXT = {
     "zh": {
         "starting": "启动数据流(dora run,{mode} 模式),日志写入 {log}",
+        "starting_cluster": "在协调器 {coordinator} 的集群上启动数据流(dora start,{mode} 模式):机器 {here!r} 上运行身体和"
+        "键盘控制{policy},日志写入 {log}",
+        "policy_there": ",机器 {machine!r} 上运行策略",
         "ready": "仿真已就绪,启动键盘控制",
         "ready_real": "机械臂已就绪(已上扭矩),启动键盘控制",
         "ready_leader": "主臂已就绪:移动主臂,身体跟随",
@@ -49,6 +59,9 @@ TEXT = {
     },
     "en": {
         "starting": "starting the dataflow (dora run, {mode} mode), log in {log}",
+        "starting_cluster": "starting the dataflow on the cluster of the coordinator at {coordinator} (dora start, "
+        "{mode} mode): the body and the prompt on machine {here!r}{policy}, log in {log}",
+        "policy_there": ", the policy on machine {machine!r}",
         "ready": "simulation ready, starting the keyboard prompt",
         "ready_real": "the arm is ready (torque on), starting the keyboard prompt",
         "ready_leader": "the leader is ready: move it and the body follows",
@@ -186,7 +199,8 @@ def prepare(args: argparse.Namespace, command: str, node_file: Path = PROMPT_NOD
     except ValueError as error:
         print(f"so101 {command}: {error}", file=sys.stderr)
         return None
-    port_problem = port_held_problem(TEXT[args.lang]["port_held"])
+    # On a cluster this machine's daemon holds the port, and the prompt joins through it.
+    port_problem = port_held_problem(TEXT[args.lang]["port_held"]) if getattr(args, "coordinator", None) is None else None
     if port_problem:
         print(f"so101 {command}: {port_problem}", file=sys.stderr)
         return None
@@ -195,13 +209,32 @@ def prepare(args: argparse.Namespace, command: str, node_file: Path = PROMPT_NOD
 
 
 def run_beside(launch: Launch, descriptor: dict, node_file: Path, text: dict[str, str],
-               ready_marks: tuple[tuple[str, ...], ...] = (LOADED_MARKS,), also_say: str = "") -> int:
+               ready_marks: tuple[tuple[str, ...], ...] = (LOADED_MARKS,), also_say: str = "",
+               place: ClusterPlace | None = None) -> int:
     """`dora run` of `descriptor` in the background, then `node_file` (a dynamic node) in the
     foreground once the log has one line of each of `ready_marks` (the body's, the leader's); the
-    dataflow stops when that node exits; `also_say` is printed once it is ready. Returns its exit code."""
+    dataflow stops when that node exits; `also_say` is printed once it is ready. Returns its exit code.
+    On the cluster at `place`: `dora start --attach`, every node on this machine's daemon but the policy
+    (on place.policy_machine, if it names one); the dynamic node joins through this machine's daemon
+    (dora's default local port, or SO101_DAEMON_PORT)."""
     with tempfile.TemporaryDirectory(prefix="so101-teleop-") as work_dir:
-        copy = write_dataflow(descriptor, Path(work_dir) / "dataflow.yml")
-        dataflow = Dataflow(copy, launch.log, launch.env, ready_marks)
+        dataflow: Dataflow | AttachedDataflow
+        if place is None:
+            dataflow = Dataflow(write_dataflow(descriptor, Path(work_dir) / "dataflow.yml"), launch.log, launch.env,
+                                ready_marks)
+        else:
+            try:
+                cluster, _ = joined_cluster(place, Path(work_dir) / "cluster")
+            except ClusterError as error:
+                print(f"so101 teleop: {error}", file=sys.stderr, flush=True)
+                return 1
+            elsewhere, hints = {}, {}
+            if place.policy_machine:
+                elsewhere[POLICY_NODE_ID] = place.policy_machine
+                policy = next(node for node in descriptor["nodes"] if node["id"] == POLICY_NODE_ID)
+                hints[POLICY_NODE_ID] = f"is {policy['path']} there, and {policy['args']}?"
+            copy = write_dataflow(placed(descriptor, place.here, elsewhere), Path(work_dir) / "dataflow.yml")
+            dataflow = AttachedDataflow(cluster, copy, f"teleop-{os.getpid()}", launch.log, ready_marks, hints)
         ready_line = ("ready_leader" if LEADER_READY_MARKS in ready_marks else "ready" if launch.body.simulated
                       else "ready_real")
         return _run_node(dataflow, node_file, launch.env, text, launch.log, ready_line, also_say)
@@ -234,7 +267,7 @@ def _show(line: str) -> None:
         pass
 
 
-def _run_node(dataflow: Dataflow, node_file: Path, env: dict[str, str], text: dict, log: Path, ready_line: str,
+def _run_node(dataflow: Dataflow | AttachedDataflow, node_file: Path, env: dict[str, str], text: dict, log: Path, ready_line: str,
               also_say: str = "") -> int:
     # dora runs in a session of its own and gets no hang-up from the terminal: teleop must stop it.
     signal.signal(signal.SIGHUP, _hang_up)
@@ -250,6 +283,10 @@ def _run_node(dataflow: Dataflow, node_file: Path, env: dict[str, str], text: di
         if ready and DAEMON_PORT_TAKEN_MARK in log.read_text(encoding="utf-8", errors="replace"):
             problem = port_held_problem(text["port_held"]) or DAEMON_PORT_TAKEN_MARK
             print(f"so101 teleop: {problem}", file=sys.stderr, flush=True)
+            return 1
+        failure = dataflow.failure() if isinstance(dataflow, AttachedDataflow) and not ready else None
+        if failure:  # a daemon could not start a node: dora's line, not its backtrace
+            print(f"so101 teleop: {failure}", file=sys.stderr, flush=True)
             return 1
         if not ready:
             message = (text["exited"].format(code=dataflow.process.returncode, log=log) if ready is False

@@ -21,15 +21,16 @@ import signal
 import subprocess
 import sys
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path, PurePath
 from typing import Callable
 
 from so101.bodies.looks import DEFAULT_LOOKS, LOOKS_CHOICES
 from so101.bodies.registry import BODIES, SIMULATED_BODIES, BodyKind
+from so101.launch.on_cluster import ClusterPlace, joined_cluster
 from so101.runtime.argtypes import add_language_option, number, whole_number
 from so101.runtime.dataflow import EXPERT_NODE_FILE, ROOT, node_launch, write_dataflow
-from so101.runtime.dora_run import Dataflow, port_held_problem, refusal
+from so101.runtime.dora_run import REFUSAL, Dataflow, port_held_problem, refusal
 from so101.runtime.lockstep import DEFAULT_LOCKSTEP_FPS
 from so101.tasks import TASKS
 from so101.tasks.episodes import DEFAULT_TIME_LIMIT_S, EpisodeClock, Outcome, read_outcomes, seeds_for, split_seeds
@@ -67,12 +68,12 @@ def add_common_arguments(parser: argparse.ArgumentParser) -> None:
                              "order (default 1)")
     parser.add_argument("--coordinator", default=None, metavar="ADDR[:PORT]",
                         help="run on the dora cluster of this coordinator (its token in DORA_AUTH_TOKEN, as for "
-                             "`dora start`): each worker's body and expert on its machines in turn")
+                             "`dora start`): each worker's body and driver on its machines in turn")
     parser.add_argument("--machine", default=None, metavar="ID",
                         help="with --coordinator: the machine id of this machine's daemon, where the episodes' runners "
                              "run and keep what they write")
     parser.add_argument("--root", type=PurePath, default=None, metavar="FOLDER",
-                        help="with --coordinator: the project's folder on the cluster's machines (default: this "
+                        help="with --coordinator: the project's folder on the cluster's other machines (default: this "
                              "checkout's, the same path everywhere)")
     add_language_option(parser, "the nodes' logs")
     parser.add_argument("--log", type=Path, default=None, metavar="FILE",
@@ -109,6 +110,17 @@ class Flow:
     lang: str
     pictures: tuple[str, ...] = ()  # the body's picture outputs: "image", "wrist_image"
     picture_size: str = ""  # WIDTHxHEIGHT
+    body_env: dict[str, str] = field(default_factory=dict)  # more of the body's settings (so101 bench: its tick log)
+
+
+@dataclass(frozen=True)
+class Placement:
+    """Where one lockstep run's nodes go on a cluster: the machine ids of the body's daemon, the
+    runner's (this machine's: it writes the results here) and the driver's."""
+
+    body: str
+    runner: str
+    driver: str
 
 
 def queued(source: str) -> dict:
@@ -137,18 +149,23 @@ def flows_for(args: argparse.Namespace, work: Path, driver: Driver | None, pictu
     return flows
 
 
-def lockstep_dataflow(flow: Flow, placement: tuple[str, str] | None = None, root: PurePath = ROOT) -> dict:
+def lockstep_dataflow(flow: Flow, placement: Placement | None = None, root: PurePath = ROOT) -> dict:
     """The dataflow's descriptor: the body, the driver and the runner, every node's path absolute
-    under `root` (the project's folder on the machines that run them); with a `placement`
-    (body machine, runner machine), the body and the driver on the first daemon, the runner, who
-    writes the results, on the second."""
+    under `root` (the project's folder on the machines that run them); with a `placement`, each on
+    its daemon, and the nodes on the runner's (this machine's) under this checkout's folder."""
     body_id, driver = flow.body.node_id, flow.driver
+    machine_of = ({body_id: placement.body, "episodes": placement.runner,
+                   **({driver.node_id: placement.driver} if driver else {})} if placement else {})
+
+    def under(node_id: str) -> PurePath:
+        return ROOT if placement is not None and machine_of[node_id] == placement.runner else root
+
     fps = DEFAULT_LOCKSTEP_FPS
     last_frame = EpisodeClock(fps, float(flow.runner_env["SO101_TIME_LIMIT_S"])).limit_frames
     frame_outputs = [*BODY_FRAME_OUTPUTS, *flow.pictures]
     runner_inputs = {output: queued(f"{body_id}/{output}") for output in frame_outputs}
     nodes = [{
-        "id": body_id, **node_launch(flow.body.node_file, root), "restart_policy": "never",
+        "id": body_id, **node_launch(flow.body.node_file, under(body_id)), "restart_policy": "never",
         # The driver answers the body itself; the runner, beside the loop, only ends episodes (task_cmd).
         "inputs": {"joint_cmd": queued(f"{driver.node_id}/joint_cmd" if driver else "episodes/joint_cmd"),
                    "task_cmd": queued("episodes/task_cmd")},
@@ -156,39 +173,26 @@ def lockstep_dataflow(flow: Flow, placement: tuple[str, str] | None = None, root
         "env": {"SO101_MODE": "direct", "SO101_LANG": flow.lang, "SO101_TASK": flow.runner_env["SO101_TASK"],
                 "SO101_SEED": flow.runner_env["SO101_SEED"], "SO101_LOCKSTEP_FPS": str(fps),
                 "SO101_EPISODE_FRAMES": str(last_frame), "SO101_LOCKSTEP_PICTURES": flow.picture_size,
-                **{key: value for key, value in flow.runner_env.items() if key == "SO101_LOOKS"}},
+                **{key: value for key, value in flow.runner_env.items() if key == "SO101_LOOKS"}, **flow.body_env},
     }]
     if driver is not None:
         runner_inputs["action"] = queued(f"{driver.node_id}/joint_cmd")
         nodes.append({
             "id": driver.node_id, "restart_policy": "never",
-            **node_launch(driver.node_file, root, driver.python),
+            **node_launch(driver.node_file, under(driver.node_id), driver.python),
             "inputs": {name: queued(f"{body_id}/{name}") for name in driver.inputs if name in frame_outputs},
             "outputs": ["joint_cmd"],
             "env": {"SO101_LANG": flow.lang, "SO101_LOCKSTEP_FPS": str(fps), **driver.env},
         })
     nodes.append({
-        "id": "episodes", **node_launch(EPISODES_NODE_FILE, root), "restart_policy": "never",
+        "id": "episodes", **node_launch(EPISODES_NODE_FILE, under("episodes")), "restart_policy": "never",
         "inputs": runner_inputs, "outputs": ["task_cmd"] if driver else ["joint_cmd", "task_cmd"],
         "env": {"SO101_LANG": flow.lang, "SO101_LOCKSTEP_FPS": str(fps),
                 **({} if driver else {"SO101_IDLE": "1"}), **flow.runner_env},
     })
     if placement is not None:
-        nodes = [{"deploy": {"machine": placement[node["id"] == "episodes"]}, **node} for node in nodes]
+        nodes = [{"deploy": {"machine": machine_of[str(node["id"])]}, **node} for node in nodes]
     return {"nodes": nodes}
-
-
-def cluster_place(args: argparse.Namespace) -> ClusterPlace | str | None:
-    """The cluster that --coordinator, --machine and --root name; None for none; what is wrong, in one line."""
-    if args.coordinator is None:
-        return "--machine and --root go with --coordinator ADDR[:PORT]" if args.machine or args.root else None
-    if not args.machine:
-        return ("--coordinator needs --machine ID: the machine id of this machine's daemon, where the runners keep "
-                "the episodes")
-    addr, _, port = args.coordinator.rpartition(":") if ":" in args.coordinator else (args.coordinator, "", "6013")
-    if not addr or not port.isdigit() or not 0 < int(port) < 65536:
-        return f"--coordinator {args.coordinator!r} is not ADDR[:PORT] (e.g. 192.168.1.10 or 192.168.1.10:6013)"
-    return ClusterPlace(addr, int(port), args.machine, args.root or ROOT)
 
 
 def log_place(args: argparse.Namespace, work: Path) -> Path:
@@ -239,53 +243,47 @@ class _OneRun:
         self.dataflow.stop()
 
 
-@dataclass(frozen=True)
-class ClusterPlace:
-    """A dora cluster someone runs (`--coordinator`): where its coordinator is, the machine id of
-    this machine's daemon (`--machine`: the runners run there and keep the results here), and the
-    project's folder on every machine (`--root`)."""
-
-    coordinator_addr: str
-    coordinator_port: int
-    here: str
-    root: PurePath = ROOT
-
-
 class _Workers:
     """Dataflows started with `dora start` on one coordinator: on this machine, a coordinator and a
     daemon of the run's own, on free ports (so they need no port of the prompt's); on a cluster
-    (`place`), its daemons, each worker's body and expert on the next machine in turn."""
+    (`place`), its daemons, each worker's body and driver on the next machine in turn; with a policy
+    machine, every body on this machine's daemon and every policy on that one."""
 
     def __init__(self, command: str, flows: list[Flow], work: Path, place: ClusterPlace | None):
         from so101.runtime.cluster import Cluster, ClusterError
 
         self.names = [f"{command}-{os.getpid()}-{index}" for index in range(len(flows))]
+        self.uuids: dict[str, str] = {}
+        self.node_ids = [[flow.body.node_id, *([flow.driver.node_id] if flow.driver else []), "episodes"] for flow in flows]
         self.logs = work / "dora" / f"daemon-{WORKERS_MACHINE}"
         root: PurePath = ROOT
         if place is None:
             self.cluster = Cluster(work / "dora", auth=False)
             machines, here = [WORKERS_MACHINE], WORKERS_MACHINE
         else:
-            self.cluster = Cluster.joined(work / "dora", place.coordinator_addr, place.coordinator_port)
-            try:
-                machines = sorted(set(self.cluster.connected_daemons()))
-            except (OSError, subprocess.TimeoutExpired) as error:
-                raise ClusterError(f"the coordinator at {place.coordinator_addr}:{place.coordinator_port} did not "
-                                   f"answer: {error}") from None
-            if place.here not in machines:
-                raise ClusterError(f"no daemon with machine id {place.here!r} on the coordinator at "
-                                   f"{place.coordinator_addr}:{place.coordinator_port} (its daemons: "
-                                   f"{', '.join(machines) or 'none'}; is DORA_AUTH_TOKEN its token?)")
+            self.cluster, machines = joined_cluster(place, work / "dora")
             here, root = place.here, place.root
-        self.placements = [(machines[index % len(machines)], here) for index in range(len(flows))]
+        if place is not None and place.policy_machine is not None:
+            self.placements = [Placement(here, here, place.policy_machine)] * len(flows)
+        else:
+            self.placements = [Placement(machines[index % len(machines)], here, machines[index % len(machines)])
+                               for index in range(len(flows))]
         try:
             if place is None:
                 self.cluster.start_coordinator()
                 self.cluster.start_daemon(WORKERS_MACHINE)
             for name, flow, placement in zip(self.names, flows, self.placements):
                 folder = Path(flow.runner_env["SO101_EPISODES_OUT"]).parent
-                self.cluster.start_dataflow(
-                    write_dataflow(lockstep_dataflow(flow, placement, root), folder / "dataflow.yml"), name)
+                try:
+                    self.cluster.start_dataflow(
+                        write_dataflow(lockstep_dataflow(flow, placement, root), folder / "dataflow.yml"), name)
+                except ClusterError as error:
+                    driver = flow.driver
+                    if driver is None or placement.driver == here or f"node {driver.node_id}" not in str(error):
+                        raise
+                    # Its daemon could not start it: the paths it was given are this machine's guesses at that one's.
+                    raise ClusterError(f"{error} (on machine {placement.driver!r}: is {driver.python or 'python'} "
+                                       f"there, and the project at {root}?)") from None
         except BaseException:
             self.stop()  # the dataflows started before, and a coordinator and daemon of this run's own
             raise
@@ -301,7 +299,21 @@ class _Workers:
                 continue
             if entry.get("name") in self.names:
                 states[entry["name"]] = str(entry.get("status", "")).lower()
+                self.uuids[entry["name"]] = str(entry.get("uuid", ""))
         return states
+
+    def _told_by_coordinator(self, name: str) -> str | None:
+        """A node's refusal in dataflow `name`, from its log as the coordinator streams it (a node on
+        another machine keeps its log there)."""
+        for node_id in self.node_ids[self.names.index(name)]:
+            try:
+                told = self.cluster.cli("logs", self.uuids.get(name) or name, "--node", node_id, timeout_s=20)
+            except subprocess.TimeoutExpired:
+                continue
+            said = REFUSAL.search(told.stdout)
+            if said:
+                return said.group(1)
+        return None
 
     def problem(self) -> str | None:
         """None while every dataflow runs or finished; else the first refusal or failure."""
@@ -310,6 +322,10 @@ class _Workers:
             return None
         for node_log in sorted(self.logs.glob("_work/*/out/*/log_*.jsonl")):
             said = refusal(node_log)
+            if said:
+                return said
+        if not self.logs.is_dir():
+            said = self._told_by_coordinator(failed[0])
             if said:
                 return said
         where = self.logs if self.logs.is_dir() else f"`dora logs {failed[0]} NODE` on the cluster"
@@ -361,10 +377,13 @@ def run_flows(command: str, flows: list[Flow], work: Path, log: Path | None,
         except ClusterError as error:
             return [], str(error)
         if place is not None:
-            for index, (flow, (machine, _)) in enumerate(zip(flows, runs.placements)):
+            for index, (flow, placement) in enumerate(zip(flows, runs.placements)):
                 first = int(flow.runner_env["SO101_SEED"])
                 last = first + int(flow.runner_env["SO101_EPISODES"]) - 1
-                print(f"{command}: worker {index} (seeds {first}..{last}) on machine {machine!r}", flush=True)
+                driver = flow.driver.node_id if flow.driver else ""
+                elsewhere = f", its {driver} on machine {placement.driver!r}" if placement.driver != placement.body else ""
+                print(f"{command}: worker {index} (seeds {first}..{last}) on machine {placement.body!r}{elsewhere}",
+                      flush=True)
     first_seed = next_seed = min(int(flow.runner_env["SO101_SEED"]) for flow in flows)
     waiting: dict[int, tuple[Outcome, int]] = {}
     outcomes: list[Outcome] = []

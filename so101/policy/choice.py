@@ -34,11 +34,14 @@ class ChosenPolicy:
                 "SO101_LOCKSTEP_PICTURES": size}
 
 
-def choose_policy(folder: Path, python: Path | None, task: str | None, names_of_objects: tuple[str, ...]) -> ChosenPolicy:
+def choose_policy(folder: Path, python: Path | None, task: str | None, names_of_objects: tuple[str, ...],
+                  python_elsewhere: bool = False) -> ChosenPolicy:
     """The policy in `folder`, run by `python` (default: so101 policy-env's), on a body that runs `task`
     (None: none) whose object_state has `names_of_objects`; ValueError in one line for a folder that is
     not a policy's, features the dataflow cannot give, or no Python to run it (none there, or one without the
-    dataflow's dora-rs: the node could not even say what is wrong)."""
+    dataflow's dora-rs: the node could not even say what is wrong). `python_elsewhere`: the node runs on
+    another machine of a cluster, and `python` is a path there, taken as written (absolute) and not checked
+    here; the folder is read here, and must be at the same path there."""
     folder = folder.expanduser().resolve()
     inputs, outputs = read_policy_features(folder)
     if task is None and ENVIRONMENT_KEY in inputs:
@@ -47,6 +50,10 @@ def choose_policy(folder: Path, python: Path | None, task: str | None, names_of_
     picture_size = picture_size_of(inputs)
     needed = inputs_for(inputs, outputs, names_of_objects, picture_size)
     chosen = (python or python_in(default_dir())).expanduser()
+    if python_elsewhere:
+        if not chosen.is_absolute():
+            raise ValueError(f"--policy-python {chosen} must be an absolute path on the policy's machine")
+        return ChosenPolicy(folder, chosen, needed, picture_size, unscaled_inputs(folder))
     if not chosen.exists():
         raise ValueError(f"{chosen} does not exist: make the policy environment with `so101 policy-env`, or give "
                          "--policy-python PY (a Python with LeRobot and dora-rs)")
