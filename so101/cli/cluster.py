@@ -29,10 +29,10 @@ from so101.bodies.registry import BODIES, DEFAULT_BODY, body_node_env
 from so101.runtime.argtypes import add_language_option
 from so101.runtime.display import MODES, resolve_mode
 from so101.runtime.cluster import (
-    BODY_MACHINE, DATAFLOW_NAME, PROMPT_MACHINE, Cluster, ClusterError, Seal, cluster_dataflow, one_line,
-    placed_dataflow,
+    BODY_MACHINE, DATAFLOW_NAME, PROMPT_MACHINE, Cluster, ClusterError, cluster_dataflow, one_line, placed_dataflow,
+    sealed_rig,
 )
-from so101.runtime.netns import Rig, rig_problem
+from so101.runtime.netns import rig_problem
 from so101.runtime.dataflow import PROMPT_NODE_FILE, ROOT, dataflow_text
 from so101.runtime.venv import dora_executable, env_with_bin_first
 from so101.runtime.versions import dora_version_problem
@@ -143,20 +143,6 @@ def run(args: argparse.Namespace) -> int:
         return _demo(Path(work_dir), mode, args.lang, args.sealed)
 
 
-def _sealed_rig(work_dir: Path, lang: str) -> tuple[Rig, Seal]:
-    """Machines `arm` and `desk` of network namespaces, each with its WireGuard up from the files
-    `cluster-dataflow --sealed` writes."""
-    rig = Rig([BODY_MACHINE, PROMPT_MACHINE])
-    rig.wire()
-    machines = parse_machines(f"{BODY_MACHINE}={rig.lab_address[BODY_MACHINE]},{PROMPT_MACHINE}", BODY_MACHINE,
-                              (BODY_MACHINE, PROMPT_MACHINE))
-    files = write_wireguard_files(work_dir / "wireguard", machines)
-    for machine, wireguard_file in zip(machines, files):
-        rig.wireguard_up(machine.name, wireguard_file, work_dir)
-    print(TEXT[lang]["sealed_demo"].format(arm=rig.ns[BODY_MACHINE], desk=rig.ns[PROMPT_MACHINE]), flush=True)
-    return rig, Seal(machines, rig.on, PROMPT_MACHINE)
-
-
 def _demo(work_dir: Path, mode: str, lang: str, sealed: bool = False) -> int:
     text = TEXT[lang]
     say = lambda line: print(line, flush=True)  # noqa: E731
@@ -166,7 +152,8 @@ def _demo(work_dir: Path, mode: str, lang: str, sealed: bool = False) -> int:
     try:
         seal = None
         if sealed:
-            rig, seal = _sealed_rig(work_dir, lang)
+            rig, seal = sealed_rig(work_dir, [BODY_MACHINE, PROMPT_MACHINE])
+            say(text["sealed_demo"].format(arm=rig.ns[BODY_MACHINE], desk=rig.ns[PROMPT_MACHINE]))
         cluster = Cluster(work_dir, seal=seal)
         say(text["coordinator"].format(addr=cluster.coordinator_addr, port=cluster.coordinator_port))
         cluster.start_coordinator()

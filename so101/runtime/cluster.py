@@ -24,7 +24,10 @@ from typing import IO, Callable, Protocol
 from so101.runtime.dataflow import ROOT, dataflow_copy, write_dataflow
 from so101.runtime.processes import kill_with_env, running_with_env, stop_process
 from so101.runtime.venv import dora_executable, env_with_bin_first
-from so101.runtime.wireguard import COORDINATOR_PORT, Machine, coordinator_command, daemon_command
+from so101.runtime.netns import Rig
+from so101.runtime.wireguard import (
+    COORDINATOR_PORT, Machine, coordinator_command, daemon_command, parse_machines, write_wireguard_files,
+)
 
 CLUSTER_DATAFLOW = ROOT / "dataflow_cluster.yml"
 DATAFLOW_NAME = "so101"
@@ -71,6 +74,24 @@ class Seal:
 
     def machine(self, name: str) -> Machine:
         return next(machine for machine in self.machines if machine.name == name)
+
+
+def sealed_rig(work_dir: Path, machines: list[str]) -> tuple[Rig, Seal]:
+    """`machines` made of network namespaces on this computer (so101.runtime.netns, as root), the first
+    the coordinator's, each with its WireGuard up from the files `so101 cluster-dataflow --sealed`
+    writes (in work_dir/wireguard). The second is the laptop of the docs' example: it has no address
+    for the others to dial, and the dora CLI runs there. tear_down() the rig when done."""
+    rig = Rig(machines)
+    try:
+        rig.wire()
+        spec = ",".join(name if index == 1 else f"{name}={rig.lab_address[name]}" for index, name in enumerate(machines))
+        sealed = parse_machines(spec, machines[0], tuple(machines))
+        for machine, wireguard_file in zip(sealed, write_wireguard_files(work_dir / "wireguard", sealed)):
+            rig.wireguard_up(machine.name, wireguard_file, work_dir)
+    except BaseException:
+        rig.tear_down()
+        raise
+    return rig, Seal(sealed, rig.on, machines[1])
 
 
 class Cluster:
