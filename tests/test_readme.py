@@ -64,15 +64,16 @@ def test_every_so101_command_in_the_docs_exists():
     assert used <= set(SUBCOMMANDS), used - set(SUBCOMMANDS)
 
 
-@pytest.mark.parametrize("body", ["pybullet", "mujoco", "real", "cluster"])
+@pytest.mark.parametrize("body", ["pybullet", "mujoco", "real", "cluster", "round-trip"])
 def test_the_benchmark_tables_in_the_docs_are_the_latest_results(body):
     import json
 
-    from bench import cluster_bench, real_bench, run_bench
+    from bench import cluster_bench, real_bench, round_trip_bench, run_bench
 
     latest = run_bench.DEFAULT_OUT[body]
     result = json.loads(latest.read_text())
-    table = {"real": real_bench.table, "cluster": cluster_bench.table}.get(body, run_bench.table)
+    table = {"real": real_bench.table, "cluster": cluster_bench.table,
+             "round-trip": round_trip_bench.table}.get(body, run_bench.table)
     shown = "\n".join(("    " + line).rstrip() for line in table(result).splitlines())
     assert shown in DOCS, f"the docs' benchmark figures differ from {latest.name} (so101 bench --show prints them)"
 
