@@ -17,12 +17,17 @@ scores as one beside the body.
 Without --coordinator, a coordinator and two daemons `arm` and `desk` on 127.0.0.1 (loopback: dora's and
 Zenoh's own costs, no network's); with --coordinator ADDR --machine HERE --policy-machine NAME, a cluster
 someone runs (a sealed one included), the body on HERE (this machine), the policy on HERE then on NAME.
+With --sealed, the sealed rig: machines `arm` and `desk` of network namespaces here, WireGuard only between
+them (so101.runtime.cluster.sealed_rig, as root), and this bench run again on `arm` against its coordinator.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
+import subprocess
+import sys
 import tempfile
 import time
 from dataclasses import replace
@@ -151,9 +156,59 @@ def run_round_trip_benchmark(policy: Path, python: Path | None, episodes: int, s
     }
 
 
+def run_sealed_round_trip(options: list[str]) -> dict:
+    """The two runs across the sealed rig: the body on machine `arm`, the policy on `arm` then on `desk`,
+    every message between the two through WireGuard. `options`: the run's own (--policy, --episodes, ...)."""
+    from so101.runtime.cluster import Cluster, ClusterError, sealed_rig
+    from so101.runtime.netns import rig_problem
+    from so101.runtime.wireguard import SealError, missing_tools
+
+    problem = rig_problem() or missing_tools()
+    if problem:
+        raise RoundTripError(f"--sealed: {problem}")
+    with tempfile.TemporaryDirectory(prefix="so101-bench-sealed-") as tmp:
+        work = Path(tmp)
+        rig = cluster = None
+        try:
+            rig, seal = sealed_rig(work, [LOOPBACK_HERE, LOOPBACK_ELSEWHERE])
+            cluster = Cluster(work / "cluster", seal=seal)
+            cluster.start_coordinator()
+            for machine in (LOOPBACK_HERE, LOOPBACK_ELSEWHERE):
+                cluster.start_daemon(machine)
+            result_file = work / "result.json"
+            run = subprocess.Popen(
+                [*rig.on(LOOPBACK_HERE), sys.executable, "-m", "so101.cli", "bench", "--round-trip", *options,
+                 "--coordinator", cluster.coordinator_addr, "--machine", LOOPBACK_HERE,
+                 "--policy-machine", LOOPBACK_ELSEWHERE, "--out", str(result_file)],
+                env=dict(os.environ, DORA_AUTH_TOKEN=cluster.token or ""), stdout=subprocess.PIPE,
+                stderr=subprocess.STDOUT, text=True)
+            assert run.stdout is not None
+            for line in run.stdout:  # its progress, up to its table (printed here, said to be sealed)
+                if not line.strip():
+                    break
+                print(line, end="", flush=True)
+            said = run.stdout.read()
+            if run.wait() != 0:
+                raise RoundTripError(f"the run on machine {LOOPBACK_HERE!r} failed: {said.strip()[-300:]}")
+            result = json.loads(result_file.read_text(encoding="utf-8"))
+        except (ClusterError, SealError) as error:
+            raise RoundTripError(str(error)) from None
+        except subprocess.CalledProcessError as error:  # the rig: `ip` or wg-quick refused
+            raise RoundTripError(f"{' '.join(map(str, error.cmd))} failed: {(error.stderr or '').strip()[-300:]}") from None
+        finally:
+            if cluster is not None:
+                cluster.stop()
+            if rig is not None:
+                rig.tear_down()
+    result["settings"]["sealed"] = True
+    return result
+
+
 def table(result: dict) -> str:
     settings, one, two = result["settings"], result["same_daemon"], result["other_daemon"]
     where = ("on 127.0.0.1 (loopback, not a network)" if settings["cluster"] == "loopback"
+             else f"across WireGuard between two network namespaces of one computer (the coordinator at "
+                  f"{settings['cluster']})" if settings.get("sealed")
              else f"on the cluster of the coordinator at {settings['cluster']}")
 
     def ms(figures: dict | None, keys: tuple[str, ...] = ("p50", "p99")) -> str:

@@ -62,6 +62,7 @@ from so101.stats import summary  # noqa: E402
 DEFAULT_OUT = {"pybullet": ROOT / "bench" / "results" / "latest.json", "mujoco": ROOT / "bench" / "results" / "latest-mujoco.json",
                "real": ROOT / "bench" / "results" / "latest-real.json",
                "cluster": ROOT / "bench" / "results" / "latest-cluster.json",
+               "round-trip-sealed": ROOT / "bench" / "results" / "latest-round-trip-sealed.json",
                "web": ROOT / "bench" / "results" / "latest-web.json",
                "cameras": ROOT / "bench" / "results" / "latest-cameras.json",
                "cameras-mujoco": ROOT / "bench" / "results" / "latest-cameras-mujoco.json",
@@ -566,6 +567,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="--coordinator: the daemon the policy runs on the second time")
     parser.add_argument("--root", type=PurePath, default=None, metavar="FOLDER",
                         help="--coordinator: the project's folder on the policy's machine (default: this checkout's)")
+    parser.add_argument("--sealed", action="store_true",
+                        help="--round-trip across the sealed rig (as root): machines arm and desk of network namespaces "
+                        "on this computer, WireGuard only between them (docs/clusters-sealed.md)")
     parser.add_argument("--image-size", type=image_size, default=DEFAULT_IMAGE_SIZE, metavar="WxH",
                         help=f"--cameras, --demos, --gym: the pictures' size (default {DEFAULT_IMAGE_SIZE})")
     parser.add_argument("--out", type=Path, default=None,
@@ -587,10 +591,15 @@ def round_trip_place(args: argparse.Namespace):
                                         ("--episodes", args.episodes), ("--coordinator", args.coordinator),
                                         ("--machine", args.machine), ("--policy-machine", args.policy_machine),
                                         ("--root", args.root)) if value is not None]
+    if args.sealed:
+        own.append("--sealed")
     if own and not args.round_trip:
         return f"{', '.join(own)}: --round-trip's options; they go with --round-trip"
     if not args.round_trip:
         return None
+    if args.sealed and (args.coordinator or args.machine or args.policy_machine or args.root):
+        return "--round-trip --sealed runs on a cluster of its own: it goes without --coordinator, --machine, " \
+               "--policy-machine and --root"
     place = cluster_place(args, "the body runs")
     if place is not None and not isinstance(place, str) and place.policy_machine is None:
         return "--round-trip on a cluster needs --policy-machine NAME: the daemon to run the policy on, against --machine's"
@@ -608,7 +617,8 @@ def run(args: argparse.Namespace) -> int:
     from bench import cluster_bench, real_bench, round_trip_bench
 
     tables = {"real": real_bench.table, "cluster": cluster_bench.table, "web": alone_table, "cameras": alone_table,
-              "demos": alone_table, "gym": alone_table, "round-trip": round_trip_bench.table}
+              "demos": alone_table, "gym": alone_table, "round-trip": round_trip_bench.table,
+              "round-trip-sealed": round_trip_bench.table}
     if args.show is not None:
         try:
             shown = json.loads(args.show.read_text(encoding="utf-8"))
@@ -626,13 +636,20 @@ def run(args: argparse.Namespace) -> int:
     else:
         settings = dict(duration_s=args.duration, fast_s=5.0, fast_steps=[1, 10, 100], raw_steps=40000, node_ticks=10000, after_sleep_steps=1000)
     kind = ("cluster" if args.cluster else "web" if args.web else "cameras" if args.cameras else "demos" if args.demos
-            else "gym" if args.gym else "round-trip" if args.round_trip else args.body)
+            else "gym" if args.gym else "round-trip-sealed" if args.round_trip and args.sealed
+            else "round-trip" if args.round_trip else args.body)
     place = round_trip_place(args)
     if isinstance(place, str):
         print(f"so101 bench: {place}", file=sys.stderr)
         return 2
     try:
-        if args.round_trip:
+        if args.round_trip and args.sealed:
+            options = [*(["--policy", str(args.policy)] if args.policy else []),
+                       *(["--policy-python", str(args.policy_python)] if args.policy_python else []),
+                       *(["--episodes", str(args.episodes)] if args.episodes else []),
+                       "--seed", str(args.seed), *(["--quick"] if args.quick else [])]
+            result = round_trip_bench.run_sealed_round_trip(options)
+        elif args.round_trip:
             result = round_trip_bench.run_round_trip_benchmark(
                 args.policy or round_trip_bench.DEFAULT_POLICY, args.policy_python,
                 args.episodes or (2 if args.quick else 10), args.seed, 4.0 if args.quick else None, place)

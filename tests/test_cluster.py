@@ -305,3 +305,21 @@ def test_a_daemon_of_another_dora_version_is_named_in_one_line(tmp_path, other_d
         assert prompt_errors.strip() == f"keyboard_control: {problem}"
         assert "cannot start" not in simulation_log
     assert cluster.leftover_processes() == []
+
+
+def test_the_cli_waits_out_the_coordinators_429_and_gives_up_after_its_time(tmp_path, monkeypatch):
+    """dora 1.1's coordinator answers `429 Too Many Requests` to a client off loopback that connects often
+    (seen across the sealed rig's tunnel: 20 connections, then none for over a minute)."""
+    import so101.runtime.cluster as cluster_module
+
+    limited = subprocess.CompletedProcess([], 1, "", "failed to connect to coordinator at 10.101.0.1:6013: HTTP error: "
+                                                     "429 Too Many Requests")
+    answers = [limited, limited, subprocess.CompletedProcess([], 0, "arm-01\n", "")]
+    calls = []
+    monkeypatch.setattr(cluster_module, "RATE_LIMITED_RETRY_S", 0.0)
+    monkeypatch.setattr(cluster_module.subprocess, "run", lambda *args, **kwargs: calls.append(args) or answers.pop(0))
+    cluster = Cluster.joined(tmp_path, "10.101.0.1", 6013)
+    assert cluster.cli("list").stdout == "arm-01\n" and len(calls) == 3
+    monkeypatch.setattr(cluster_module, "RATE_LIMITED_S", 0.0)
+    answers[:] = [limited, limited]
+    assert cluster.cli("list") is limited and len(calls) == 4

@@ -64,7 +64,7 @@ def test_every_so101_command_in_the_docs_exists():
     assert used <= set(SUBCOMMANDS), used - set(SUBCOMMANDS)
 
 
-@pytest.mark.parametrize("body", ["pybullet", "mujoco", "real", "cluster", "round-trip"])
+@pytest.mark.parametrize("body", ["pybullet", "mujoco", "real", "cluster", "round-trip", "round-trip-sealed"])
 def test_the_benchmark_tables_in_the_docs_are_the_latest_results(body):
     import json
 
@@ -73,7 +73,7 @@ def test_the_benchmark_tables_in_the_docs_are_the_latest_results(body):
     latest = run_bench.DEFAULT_OUT[body]
     result = json.loads(latest.read_text())
     table = {"real": real_bench.table, "cluster": cluster_bench.table,
-             "round-trip": round_trip_bench.table}.get(body, run_bench.table)
+             "round-trip": round_trip_bench.table, "round-trip-sealed": round_trip_bench.table}.get(body, run_bench.table)
     shown = "\n".join(("    " + line).rstrip() for line in table(result).splitlines())
     assert shown in DOCS, f"the docs' benchmark figures differ from {latest.name} (so101 bench --show prints them)"
 

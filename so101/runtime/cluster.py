@@ -34,6 +34,7 @@ DATAFLOW_NAME = "so101"
 BODY_MACHINE, PROMPT_MACHINE = "arm", "desk"
 START_TIMEOUT_S = 60.0
 STOP_TIMEOUT_S = 15.0
+RATE_LIMITED_S, RATE_LIMITED_RETRY_S = 120.0, 3.0
 
 
 class PlacedBody(Protocol):
@@ -197,9 +198,17 @@ class Cluster:
         return process
 
     def cli(self, *args: str, timeout_s: float = 60) -> subprocess.CompletedProcess:
+        """The dora CLI against this cluster's coordinator. dora 1.1's coordinator answers a client that
+        is not on loopback `429 Too Many Requests` after about 20 connections, for a while (seen: over
+        a minute): such an answer is tried again, every RATE_LIMITED_RETRY_S, for up to RATE_LIMITED_S."""
         on = self.seal.on(self.seal.cli_machine) if self.seal else []
-        return subprocess.run([*on, dora_executable() or "dora", *args], capture_output=True, text=True, env=self.env(), timeout=timeout_s,
-                              cwd=self.work_dir)
+        deadline = time.monotonic() + RATE_LIMITED_S
+        while True:
+            done = subprocess.run([*on, dora_executable() or "dora", *args], capture_output=True, text=True,
+                                  env=self.env(), timeout=timeout_s, cwd=self.work_dir)
+            if "429 Too Many Requests" not in done.stderr or time.monotonic() > deadline:
+                return done
+            time.sleep(RATE_LIMITED_RETRY_S)
 
     def connected_daemons(self) -> list[str]:
         """The machine ids of the daemons the coordinator lists (`dora cluster status`)."""
