@@ -323,7 +323,7 @@ def test_the_sealed_steps_keep_out_a_rogue_and_a_tap_and_ride_out_dropped_networ
             lab.run(ROGUE, [python, "-c", CONNECT, ",".join(f"{address}:{port}" for address in (arm_ip, tunnel[ARM])
                                                            for port in (COORDINATOR_PORT, ZENOH_PORT))], "rogue-connect"),
             lab.run(ROGUE, [python, str(ZENOH_PEER), everywhere, "replay", str(tmp_path / "cmd.pickle"),
-                            str(tmp_path / "rogue-heard.json"), "8"], "rogue-replay"),
+                            str(tmp_path / "rogue-heard.json"), "5"], "rogue-replay"),
         ]
         rogue_daemon = lab.run(ROGUE, ["dora", "daemon", "--machine-id", ROGUE, "--coordinator-addr", tunnel[ARM],
                                        "--zenoh-no-multicast"], "rogue-daemon", DORA_AUTH_TOKEN=token)
@@ -356,7 +356,7 @@ def test_the_sealed_steps_keep_out_a_rogue_and_a_tap_and_ride_out_dropped_networ
         time.sleep(LONG_DROP_S)
         prompt.type("0 -45", 0.5)
         lab.rig.cable_plugged(DESK, True)
-        time.sleep(15)
+        time.sleep(10)
         prompt.type("state", 0.5)
         prompt.type("quit", 2)
         prompt.process.wait(30)
