@@ -218,7 +218,7 @@ def run_beside(launch: Launch, descriptor: dict, node_file: Path, text: dict[str
     (on place.policy_machine, if it names one); the dynamic node joins through this machine's daemon
     (dora's default local port, or SO101_DAEMON_PORT)."""
     with tempfile.TemporaryDirectory(prefix="so101-teleop-") as work_dir:
-        dataflow: Dataflow | AttachedDataflow
+        dataflow: Dataflow
         if place is None:
             dataflow = Dataflow(write_dataflow(descriptor, Path(work_dir) / "dataflow.yml"), launch.log, launch.env,
                                 ready_marks)
@@ -267,7 +267,7 @@ def _show(line: str) -> None:
         pass
 
 
-def _run_node(dataflow: Dataflow | AttachedDataflow, node_file: Path, env: dict[str, str], text: dict, log: Path, ready_line: str,
+def _run_node(dataflow: Dataflow, node_file: Path, env: dict[str, str], text: dict, log: Path, ready_line: str,
               also_say: str = "") -> int:
     # dora runs in a session of its own and gets no hang-up from the terminal: teleop must stop it.
     signal.signal(signal.SIGHUP, _hang_up)

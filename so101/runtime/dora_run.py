@@ -48,19 +48,21 @@ def refusal(log: Path) -> str | None:
 class Dataflow:
     """`dora run` in its own session (so the terminal's Ctrl-C reaches only the prompt), log to a file."""
 
-    def __init__(self, dataflow: Path, log: Path, env: dict[str, str], ready_marks: tuple[tuple[str, ...], ...]):
+    def __init__(self, dataflow: Path, log: Path, env: dict[str, str], ready_marks: tuple[tuple[str, ...], ...],
+                 dora_args: list[str] | None = None):
+        """`dora_args`: what the dora CLI is asked (default `run DATAFLOW`)."""
         log.parent.mkdir(parents=True, exist_ok=True)
         self.log = log
         self.ready_marks = ready_marks
         self._log_stream = log.open("wb")
         self.process = subprocess.Popen(
-            [dora_executable() or "dora", "run", str(dataflow)], cwd=dataflow.parent,
+            [dora_executable() or "dora", *(dora_args or ["run", str(dataflow)])], cwd=dataflow.parent,
             stdin=subprocess.DEVNULL, stdout=self._log_stream, stderr=subprocess.STDOUT,
             env=env, start_new_session=True,
         )
 
     def wait_ready(self, timeout_s: float) -> bool | None:
-        """True once the simulation is up; False if dora exited first; None on timeout."""
+        """True once the log has a line of each of the ready marks; False if dora exited first; None on timeout."""
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:
             log_text = self.log.read_text(encoding="utf-8", errors="replace")

@@ -8,45 +8,26 @@ from __future__ import annotations
 
 import re
 import subprocess
-import time
 from pathlib import Path
 
 from so101.runtime.cluster import Cluster
+from so101.runtime.dora_run import STOP_TIMEOUT_S, Dataflow
 from so101.runtime.processes import stop_process
-from so101.runtime.venv import dora_executable
 
-STOP_TIMEOUT_S = 20.0
 # The coordinator's line when a daemon could not start its nodes, as the attached CLI streams it.
 SPAWN_FAILED = re.compile(r"spawn failed on daemon `(.+?)-[0-9a-f]{8}-[0-9a-f-]+`: (.*?)\s*$", re.MULTILINE)
 
 
-class AttachedDataflow:
+class AttachedDataflow(Dataflow):
     """`dora start DATAFLOW --name NAME --attach` on `cluster`, its output (the nodes' logs) in `log`;
     `hints`: what to check, by node id, when a daemon cannot start that node."""
 
     def __init__(self, cluster: Cluster, dataflow: Path, name: str, log: Path,
                  ready_marks: tuple[tuple[str, ...], ...], hints: dict[str, str] | None = None):
-        log.parent.mkdir(parents=True, exist_ok=True)
-        self.cluster, self.name, self.log, self.ready_marks = cluster, name, log, ready_marks
+        super().__init__(dataflow, log, cluster.env(), ready_marks,
+                         dora_args=["start", str(dataflow), "--name", name, "--attach"])
+        self.cluster, self.name = cluster, name
         self.hints = hints or {}
-        self._log_stream = log.open("wb")
-        self.process = subprocess.Popen(
-            [dora_executable() or "dora", "start", str(dataflow), "--name", name, "--attach"], cwd=dataflow.parent,
-            stdin=subprocess.DEVNULL, stdout=self._log_stream, stderr=subprocess.STDOUT, env=cluster.env(),
-            start_new_session=True,
-        )
-
-    def wait_ready(self, timeout_s: float) -> bool | None:
-        """True once the log has a line of each of the ready marks; False if the dataflow ended first; None on timeout."""
-        deadline = time.monotonic() + timeout_s
-        while time.monotonic() < deadline:
-            log_text = self.log.read_text(encoding="utf-8", errors="replace")
-            if all(any(mark in log_text for mark in marks) for marks in self.ready_marks):
-                return True
-            if self.process.poll() is not None:
-                return False
-            time.sleep(0.2)
-        return None
 
     def failure(self) -> str | None:
         """Why a daemon could not start the dataflow's nodes, in one line (None: it did not say so)."""
