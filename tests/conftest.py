@@ -22,7 +22,7 @@ pytest.register_assert_rewrite("tests.helpers")
 
 from tests.helpers.network import network_of_its_own  # noqa: E402  (after the line above, to be rewritten)
 # The policy environment and a tiny policy that sees, made once a session for every module that runs a policy.
-from tests.helpers.policies import policy_python, seeing_policy  # noqa: E402,F401
+from tests.helpers.policies import policy_python, seeing_policy, seeing_recipe  # noqa: E402,F401
 
 settings.register_profile("ci", max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 settings.register_profile("soak", max_examples=10_000, deadline=None, suppress_health_check=[HealthCheck.too_slow])

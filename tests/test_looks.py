@@ -9,7 +9,8 @@ import pytest
 
 from so101.bodies.looks import (
     FLOOR_PALETTE, FOV_DEG, FRONT_SHIFT_M, FRONT_TURN_DEG, LIGHT_DIFFUSE, LIGHT_ELEVATION_DEG, OBJECT_PALETTE,
-    WRIST_SHIFT_M, looks_for, looks_metadata, varied_looks,
+    UNSEEN_BEYOND, UNSEEN_FLOOR_PALETTE, UNSEEN_LIGHT_ELEVATION_DEG, UNSEEN_OBJECT_PALETTE, WRIST_SHIFT_M, looks_for,
+    looks_metadata, unseen_looks, varied_looks,
 )
 
 
@@ -38,6 +39,21 @@ def test_looks_stay_within_their_bounds(seed):
     assert abs(looks.front_fov_deg) <= FOV_DEG and abs(looks.wrist_fov_deg) <= FOV_DEG
 
 
+@pytest.mark.parametrize("seed", range(0, 1000, 37))
+def test_unseen_looks_are_none_that_varied_draws(seed):
+    looks = unseen_looks(seed)
+    assert looks == looks_for("unseen", seed) and looks != varied_looks(seed)
+    assert looks.floor_rgba in UNSEEN_FLOOR_PALETTE and looks.floor_rgba not in FLOOR_PALETTE
+    assert all(rgba in UNSEEN_OBJECT_PALETTE and rgba not in OBJECT_PALETTE for rgba in looks.object_rgbas)
+    elevation = math.degrees(math.asin(-looks.light_dir[2]))
+    assert UNSEEN_LIGHT_ELEVATION_DEG[0] - 1e-3 <= elevation <= UNSEEN_LIGHT_ELEVATION_DEG[1] + 1e-3
+    assert not LIGHT_DIFFUSE[0] < looks.light_diffuse < LIGHT_DIFFUSE[1]
+    # Each camera's shift, turn and field of view past varied's spread, and not far past it.
+    for values, spread in ((looks.front_shift_m, FRONT_SHIFT_M), (looks.front_turn_deg, FRONT_TURN_DEG),
+                           ((looks.front_fov_deg, looks.wrist_fov_deg), FOV_DEG), (looks.wrist_shift_m, WRIST_SHIFT_M)):
+        assert all(spread <= abs(value) <= UNSEEN_BEYOND * spread + 1e-6 for value in values), (values, spread)
+
+
 def test_fixed_looks_change_nothing_and_a_dataset_keeps_either_as_json():
     assert looks_for("fixed", 3) is None
     assert looks_metadata("fixed", 3) == {"looks": "fixed"}
@@ -48,7 +64,8 @@ def test_fixed_looks_change_nothing_and_a_dataset_keeps_either_as_json():
 
 
 @pytest.mark.parametrize("mode, seed, message", [
-    ("random", 3, r"^unknown looks 'random'; use one of: fixed, varied$"),
+    ("random", 3, r"^unknown looks 'random'; use one of: fixed, varied, unseen$"),
+    ("unseen", -1, r"^a seed is a whole number >= 0, got -1$"),
     ("varied", -1, r"^a seed is a whole number >= 0, got -1$"),
 ])
 def test_a_bad_mode_or_seed_is_refused_in_one_line(mode, seed, message):

@@ -258,8 +258,16 @@ def test_inference_that_fails_stops_the_node_in_one_line(policy_python):
     assert "[policy] cannot go on: inference failed at frame 0 (seed 3): ValueError: the policy's action is" in stderr
 
 
-def test_eval_scores_a_policy_in_lockstep_episode_by_episode(policy_python):
-    done = subprocess.run([str(SO101), "eval", "--task", "cube_to_box", "--policy", str(TINY_POLICY), "--policy-python",
+@pytest.mark.parametrize("kind, reads", [
+    ("state-only", "observation.environment_state (the simulator's object_state, which a real arm does not have)"),
+    ("recipe", "observation.environment_state (from the perception node, which sees observation.images.front and the "
+               "joints)"),
+])
+def test_eval_scores_a_policy_in_lockstep_episode_by_episode(policy_python, kind, reads, request):
+    """A state policy reads the simulator's objects; a seeing recipe's (so101 learn --sees), the same policy
+    behind its eyes: the body draws their front picture, and the perception node answers each frame."""
+    policy = TINY_POLICY if kind == "state-only" else request.getfixturevalue("seeing_recipe")
+    done = subprocess.run([str(SO101), "eval", "--task", "cube_to_box", "--policy", str(policy), "--policy-python",
                            str(policy_python), "--episodes", "2", "--seed", "5", "--time-limit", "2", "--lang", "en"],
                           capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stdout + done.stderr
@@ -268,14 +276,15 @@ def test_eval_scores_a_policy_in_lockstep_episode_by_episode(policy_python):
     assert lines[0] == ("so101 eval: note: the policy takes observation.environment_state unscaled (its config.json's "
                         "normalization_mapping has no ENV, as ACT's default): docs/loop/policy.md says what that costs "
                         "and how --policy.normalization_mapping scales it")
-    assert lines[1].startswith(f"eval: cube_to_box on pybullet, the policy in {TINY_POLICY}, seeds 5..6")
+    assert lines[1] == f"so101 eval: the policy reads: observation.state, {reads}"
+    assert lines[2].startswith(f"eval: cube_to_box on pybullet, the policy in {policy}, seeds 5..6")
     # 20 steps of training: it drives the arm for the whole time limit, and does not do the task.
-    assert lines[2:5] == ["episode 0 (seed 5): failed (time limit, 2.0 s), 51 frames",
+    assert lines[3:6] == ["episode 0 (seed 5): failed (time limit, 2.0 s), 51 frames",
                           "episode 1 (seed 6): failed (time limit, 2.0 s), 51 frames",
                           "success: 0/2 (0%, 95% CI 0–66%, Wilson), mean time to success none (no success)"]
     # Its chunks are 10 actions: a new one at frames 0, 10, ... 50 of each episode, each timed.
     assert re.fullmatch(r"inference: 12 action chunks, median \d+ ms, 95th percentile \d+ ms, longest \d+ ms \(on cpu\)",
-                        lines[5]), lines[5]
+                        lines[6]), lines[6]
 
 
 def test_a_python_without_lerobot_refuses_the_policy_node_in_one_line(tmp_path):

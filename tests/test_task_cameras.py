@@ -112,3 +112,22 @@ def test_varied_looks_differ_by_seed_and_come_back_with_it():
         assert mean_difference(first[camera], other[camera]) > 3.0
         assert mean_difference(first[camera], plain[camera]) > 3.0
 
+
+
+@pytest.mark.parametrize("seed", [3, 1004])
+def test_the_eyes_geometry_puts_the_cube_where_the_renderer_draws_it(cameras, seed):
+    """so101.perception.geometry's camera is the renderer's: the cube's pixels (the picture with it, less the
+    picture without it) centre on its centre's projection, in either looks (the camera moved and turned)."""
+    from so101.perception.geometry import view_of
+
+    cameras.show_seed(seed)
+    layout = CUBE_TO_BOX.layout(seed)
+    state = [*layout.cube_xyz_m, *layout.cube_quat_xyzw(), *layout.box_xyz_m]
+    angles = (0.0, -100.0, 90.0, 70.0, 0.0, 0.0)  # the jaws above the floor near the base, clear of the sector
+    with_cube, _ = cameras.draw(angles, state, 320, 240, wrist=False)
+    without, _ = cameras.draw(angles, [5.0, 5.0, *state[2:]], 320, 240, wrist=False)
+    rows, columns = np.nonzero(np.abs(with_cube.astype(int) - without.astype(int)).sum(axis=2) > 30)
+    assert len(rows) > 30
+    u, v = view_of(cameras.front_camera(), 320, 240).project([layout.cube_xyz_m])[0]
+    # The centroid of what is seen of the cube: its top face pulls it up (v) by a pixel or two.
+    assert abs(columns.mean() + 0.5 - u) < 1.5 and -3.0 < rows.mean() + 0.5 - v < 1.0, (columns.mean(), rows.mean(), u, v)

@@ -44,6 +44,12 @@ def check_picture(renders: bool, width: int, height: int) -> None:
 # Frames the whole arm from the front-right and a little above, whether it reaches
 # along +x (home) or is panned ±90° toward ∓y.
 DEFAULT_CAMERA = Camera()
+# What a task's episodes see from the front (observation.images.front): the workspace, not the whole
+# arm. A place to reproduce with a tape measure: the lens 38 cm in front of the base's axis (x), 30 cm
+# to its right (y) and 46 cm above the table, aimed 50° down at the table 13 cm in front of the base;
+# 45° of vertical field of view. The cube's sector and the box fill the picture, and from the front
+# right the arm at home hides no cube of the sector (from straight in front it hid 40 of 100).
+TASK_FRONT_CAMERA = Camera(target_xyz_m=(0.13, 0.0, 0.0), distance_m=0.60, yaw_deg=40.0, pitch_deg=-50.0, fov_deg=45.0)
 # What a task's episodes see from the gripper (observation.images.wrist).
 WRIST_CAMERA = WristCamera()
 # Its name among a MuJoCo model's cameras (a task's scene adds it to the gripper).

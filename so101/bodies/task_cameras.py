@@ -18,7 +18,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Callable, Sequence
 
-from so101.bodies.camera import DEFAULT_CAMERA, WRIST_CAMERA, WRIST_CAMERA_NAME, Camera
+from so101.bodies.camera import DEFAULT_CAMERA, TASK_FRONT_CAMERA, WRIST_CAMERA, WRIST_CAMERA_NAME, Camera
 from so101.bodies.looks import DEFAULT_LOOKS, Looks, looks_for
 from so101.bodies.protocol import AnglesDeg, ObjectState, RgbImage, SceneTask
 from so101.bodies.settings import NodeSettings
@@ -74,6 +74,10 @@ class TaskCameras:
                               for root in roots]
         self._floor_geom = int(model.geom("floor").id)
         self._wrist = int(model.camera(WRIST_CAMERA_NAME).id) if task is not None else None
+        # A task's front camera frames its workspace; without a task, the whole arm (so101 snapshot's view).
+        self.fixed_front = TASK_FRONT_CAMERA if task is not None else DEFAULT_CAMERA
+        if task is not None:
+            model.vis.global_.fovy = TASK_FRONT_CAMERA.fov_deg
         self._fixed = (model.light_dir.copy(), model.light_diffuse.copy(), model.geom_rgba.copy(),
                        float(model.vis.global_.fovy), model.cam_pos.copy(), model.cam_fovy.copy())
 
@@ -100,13 +104,14 @@ class TaskCameras:
 
     def front_camera(self) -> Camera:
         """The front camera as this episode's looks place it."""
-        looks = self.looks
+        looks, fixed = self.looks, self.fixed_front
         if looks is None:
-            return DEFAULT_CAMERA
-        target = tuple(float(a + b) for a, b in zip(DEFAULT_CAMERA.target_xyz_m, looks.front_shift_m))
-        return replace(DEFAULT_CAMERA, target_xyz_m=(target[0], target[1], target[2]),
-                       yaw_deg=DEFAULT_CAMERA.yaw_deg + looks.front_turn_deg[0],
-                       pitch_deg=DEFAULT_CAMERA.pitch_deg + looks.front_turn_deg[1])
+            return fixed
+        target = tuple(float(a + b) for a, b in zip(fixed.target_xyz_m, looks.front_shift_m))
+        return replace(fixed, target_xyz_m=(target[0], target[1], target[2]),
+                       yaw_deg=fixed.yaw_deg + looks.front_turn_deg[0],
+                       pitch_deg=fixed.pitch_deg + looks.front_turn_deg[1],
+                       fov_deg=fixed.fov_deg + looks.front_fov_deg)
 
     def draw(self, angles_deg: AnglesDeg | Sequence[float], object_state: ObjectState | Sequence[float], width: int,
              height: int, wrist: bool = True) -> tuple[RgbImage, RgbImage | None]:

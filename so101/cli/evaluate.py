@@ -69,9 +69,9 @@ def run(args: argparse.Namespace) -> int:
         chosen = policy_driver(args)
         if isinstance(chosen, str):
             return fail(f"so101 eval: {chosen}")
-        driver, seen_size = chosen
-        if seen_size is not None:  # the body draws both cameras, at the size the policy learned from
-            pictures, picture_size = ("image", "wrist_image"), seen_size
+        driver, (seen, seen_size) = chosen
+        if seen_size is not None:  # the body draws what the policy (or its eyes) sees, at the size it learned from
+            pictures, picture_size = seen, seen_size
     elif args.policy_python is not None:
         return fail("so101 eval: --policy-python goes with --policy DIR")
     else:
@@ -96,9 +96,9 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def policy_driver(args: argparse.Namespace) -> tuple[Driver, tuple[int, int] | None] | str:
-    """The policy node as the driver, and the size of the pictures it sees (None: none); or what is
-    wrong, in one line (so101.policy.choice)."""
+def policy_driver(args: argparse.Namespace) -> tuple[Driver, tuple[tuple[str, ...], tuple[int, int] | None]] | str:
+    """The policy node as the driver (with the eyes beside it, for a seeing recipe), and the pictures the
+    body draws for them with their size (none: None); or what is wrong, in one line (so101.policy.choice)."""
     from so101.policy.choice import choose_policy
     from so101.tasks import task_named
 
@@ -109,6 +109,8 @@ def policy_driver(args: argparse.Namespace) -> tuple[Driver, tuple[int, int] | N
         return str(error)
     for line in chosen.notes():
         print(f"so101 eval: {line}", flush=True)
+    print(f"so101 eval: {chosen.reads()}", flush=True)
     driver = Driver("policy", POLICY_NODE_FILE, chosen.inputs, chosen.env(args.task, args.policy_device),
-                    python=str(chosen.python))
-    return driver, chosen.picture_size
+                    python=str(chosen.python),
+                    perception_env=chosen.perception_env(args.lang) if chosen.recipe else None)
+    return driver, chosen.body_pictures

@@ -88,8 +88,8 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
     parser.add_argument(
         "--looks", choices=LOOKS_CHOICES, default=DEFAULT_LOOKS,
         help="--task: varied draws the task's cameras as an episode of --seed records them with `--looks varied` "
-        "(that seed's light, colours and camera placement; --yaw, --pitch and --distance do not apply); "
-        "fixed (default): as always",
+        "(that seed's light, colours and camera placement; --yaw, --pitch and --distance do not apply); unseen: "
+        "the held-out looks (beyond varied's palettes and spreads); fixed (default): as always",
     )
     parser.add_argument(
         "--axes", action="store_true",
@@ -250,10 +250,10 @@ def run(args: argparse.Namespace) -> int:
         error = "--camera wrist is a task's camera: add --task cube_to_box"
     elif args.camera == "wrist" and args.axes:
         error = "--axes is drawn for the front camera only"
-    elif args.looks == "varied" and args.task is None:
-        error = "--looks varied is a task's cameras': add --task cube_to_box"
-    elif args.looks == "varied" and args.axes:
-        error = "--axes is drawn on the orbiting camera's picture, not with --looks varied"
+    elif args.looks != "fixed" and args.task is None:
+        error = f"--looks {args.looks} is a task's cameras': add --task cube_to_box"
+    elif args.looks != "fixed" and args.axes:
+        error = f"--axes is drawn on the orbiting camera's picture, not with --looks {args.looks}"
     if error:
         print(f"so101 snapshot: {error}", file=sys.stderr)
         return 2

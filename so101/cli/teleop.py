@@ -57,7 +57,7 @@ from so101.runtime.argtypes import (
 )
 from so101.runtime.dataflow import (
     LEADER_READY_MARKS, LOADED_MARKS, POLICY_READY_MARKS, PROMPT_NODE_FILE, ROOT, WEB_VIEW_MARKS, dataflow_copy,
-    with_camera, with_expert, with_leader, with_policy, with_recorder, with_task,
+    with_camera, with_expert, with_leader, with_perception, with_policy, with_recorder, with_task,
 )
 from so101.runtime.lockstep import DEFAULT_LOCKSTEP_FPS
 from so101.tasks import task_named
@@ -77,8 +77,9 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
         help=f"--record: frames per second (default {DEFAULT_FPS}, LeRobot's)",
     )
     parser.add_argument("--looks", choices=LOOKS_CHOICES, default=DEFAULT_LOOKS,
-                        help="--task --record: the cameras' pictures, fixed (default) or varied (each layout's seed draws "
-                             "its light, floor and object colours and camera placement; the dataset keeps them)")
+                        help="--task --record: the cameras' pictures, fixed (default), varied (each layout's seed draws "
+                             "its light, floor and object colours and camera placement; the dataset keeps them) or "
+                             "unseen (looks held out of varied's palettes and spreads)")
     parser.add_argument("--observe", type=observed_list, default=None, metavar="LIST", help=f"--record: {OBSERVE_HELP}")
     add_camera_size_option(parser, None, "--record: each camera's pictures, stored as video; real cameras are asked "
                                          "for it; `so101 bench --cameras --camera-size WxH` says what a size costs",
@@ -210,25 +211,26 @@ def add_policy(descriptor: dict, body: BodyKind, args: argparse.Namespace) -> st
                                python_elsewhere=args.policy_machine is not None)
     except ValueError as error:
         return str(error)
-    if chosen.picture_size is not None:  # the camera node draws what it sees, at the rate it learned from
-        width, height = chosen.picture_size
+    pictures, seen_size = chosen.body_pictures
+    if seen_size is not None:  # the camera node draws what it (or its eyes) sees, at the rate it learned from
+        width, height = seen_size
         if not body.simulated:  # the real cameras' pictures, scaled to the policy's where the camera's differ
             if not args.cameras:
                 return ("the policy sees cameras, and the real arm has none here: give --camera front=SOURCE "
                         "--camera wrist=SOURCE (`so101 cameras` lists them), or run it on a simulation")
-            problem = policy_picture_problem(chosen.inputs, args.cameras, tuple(args.image_size), chosen.picture_size,
+            problem = policy_picture_problem(pictures, args.cameras, tuple(args.image_size), seen_size,
                                              args.record is not None)
             if problem:
                 return problem
-            if tuple(args.image_size) != chosen.picture_size:
+            if tuple(args.image_size) != seen_size:
                 print(f"so101 teleop: note: the cameras' {args.image_size[0]}x{args.image_size[1]} pictures are "
                       f"scaled to the policy's {width}x{height}", flush=True)
-            add_real_cameras(descriptor, args.cameras, tuple(args.image_size), chosen.picture_size, args.camera_fps)
+            add_real_cameras(descriptor, args.cameras, tuple(args.image_size), seen_size, args.camera_fps)
             finish_policy(descriptor, body, args, chosen, tuple(args.cameras))
             return None
         if not args.task:
             return "the policy sees the task's cameras (the wrist's is drawn for a task's scene): add --task cube_to_box"
-        if args.record is not None and tuple(args.image_size) != chosen.picture_size:
+        if args.record is not None and tuple(args.image_size) != seen_size:
             return (f"the policy sees {width}x{height} pictures, and one camera draws them for the recording too: "
                     f"record at --camera-size {width}x{height}")
         with_camera(descriptor, body.node_id, {"SO101_RECORD_IMAGE_SIZE": f"{width}x{height}"}, DEFAULT_LOCKSTEP_FPS)
@@ -242,12 +244,16 @@ def finish_policy(descriptor: dict, body: BodyKind, args: argparse.Namespace, ch
     one that stops sending stops the policy's drive."""
     for line in chosen.notes():
         print(f"so101 teleop: {line}", flush=True)
+    print(f"so101 teleop: {chosen.reads()}", flush=True)
     env = {**chosen.env(args.task or "", args.policy_device), "SO101_LANG": args.lang,
            "SO101_POLICY_CAMERAS": ",".join(real_cameras)}
     if not args.task:
         del env["SO101_TASK"]
     root = args.root if args.policy_machine and args.root else ROOT  # the project's folder on the policy's machine
     with_policy(descriptor, body.node_id, chosen.inputs, env, str(chosen.python), root)
+    if chosen.recipe is not None:
+        with_perception(descriptor, body.node_id, chosen.perception_env(args.lang), str(chosen.python),
+                        root)
 
 
 def add_leader(descriptor: dict, body: BodyKind, port: str | None, calibration_file: Path | None,

@@ -29,7 +29,9 @@ from so101.bodies.looks import DEFAULT_LOOKS, LOOKS_CHOICES
 from so101.bodies.registry import BODIES, SIMULATED_BODIES, BodyKind
 from so101.launch.on_cluster import ClusterPlace, joined_cluster
 from so101.runtime.argtypes import add_language_option, number, whole_number
-from so101.runtime.dataflow import EXPERT_NODE_FILE, ROOT, node_launch, write_dataflow
+from so101.runtime.dataflow import (
+    EXPERT_NODE_FILE, PERCEPTION_NODE_FILE, PERCEPTION_NODE_ID, ROOT, node_launch, write_dataflow,
+)
 from so101.runtime.dora_run import REFUSAL, Dataflow, port_held_problem, refusal
 from so101.runtime.lockstep import DEFAULT_LOCKSTEP_FPS
 from so101.tasks import TASKS
@@ -61,8 +63,10 @@ def add_common_arguments(parser: argparse.ArgumentParser) -> None:
                         metavar="SHARE", help="the share of episodes whose first grasp the expert puts 30-45 mm beside "
                              "the cube on purpose, so that they show its recovery (default 0)")
     parser.add_argument("--looks", choices=LOOKS_CHOICES, default=DEFAULT_LOOKS,
-                        help="the cameras' pictures: fixed (default, one look) or varied (each episode's seed draws "
-                             "its light, floor and object colours and camera placement; a dataset keeps them by episode)")
+                        help="the cameras' pictures: fixed (default, one look), varied (each episode's seed draws "
+                             "its light, floor and object colours and camera placement; a dataset keeps them by episode) "
+                             "or unseen (looks held out of varied's palettes and spreads, to score eyes on looks they "
+                             "never saw)")
     parser.add_argument("--workers", type=whole_number(1, MAX_WORKERS), default=1, metavar="K",
                         help="dataflows run at once, each on its share of the seeds; the results are merged in seed "
                              "order (default 1)")
@@ -92,6 +96,8 @@ class Driver:
     inputs: tuple[str, ...]
     env: dict[str, str]
     python: str | None = None
+    # The perception node's settings where eyes fill the driver's object_state (a seeing recipe), else None.
+    perception_env: dict[str, str] | None = None
 
 
 def expert_driver(args: argparse.Namespace) -> Driver:
@@ -155,7 +161,8 @@ def lockstep_dataflow(flow: Flow, placement: Placement | None = None, root: Pure
     its daemon, and the nodes on the runner's (this machine's) under this checkout's folder."""
     body_id, driver = flow.body.node_id, flow.driver
     machine_of = ({body_id: placement.body, "episodes": placement.runner,
-                   **({driver.node_id: placement.driver} if driver else {})} if placement else {})
+                   **({driver.node_id: placement.driver, PERCEPTION_NODE_ID: placement.driver} if driver else {})}
+                  if placement else {})
 
     def under(node_id: str) -> PurePath:
         return ROOT if placement is not None and machine_of[node_id] == placement.runner else root
@@ -177,11 +184,19 @@ def lockstep_dataflow(flow: Flow, placement: Placement | None = None, root: Pure
     }]
     if driver is not None:
         runner_inputs["action"] = queued(f"{driver.node_id}/joint_cmd")
+        driver_inputs = {name: queued(f"{body_id}/{name}") for name in driver.inputs if name in frame_outputs}
+        if driver.perception_env is not None:  # the eyes, beside the driver: its object_state is theirs
+            driver_inputs["object_state"] = queued(f"{PERCEPTION_NODE_ID}/object_state")
+            nodes.append({
+                "id": PERCEPTION_NODE_ID, "restart_policy": "never",
+                **node_launch(PERCEPTION_NODE_FILE, under(driver.node_id), driver.python),
+                "inputs": {name: queued(f"{body_id}/{name}") for name in ("image", "joint_state")},
+                "outputs": ["object_state"], "env": {"SO101_LANG": flow.lang, **driver.perception_env},
+            })
         nodes.append({
             "id": driver.node_id, "restart_policy": "never",
             **node_launch(driver.node_file, under(driver.node_id), driver.python),
-            "inputs": {name: queued(f"{body_id}/{name}") for name in driver.inputs if name in frame_outputs},
-            "outputs": ["joint_cmd"],
+            "inputs": driver_inputs, "outputs": ["joint_cmd"],
             "env": {"SO101_LANG": flow.lang, "SO101_LOCKSTEP_FPS": str(fps), **driver.env},
         })
     nodes.append({
@@ -256,7 +271,9 @@ class _Workers:
 
         self.names = [f"{command}-{os.getpid()}-{index}" for index in range(len(flows))]
         self.uuids: dict[str, str] = {}
-        self.node_ids = [[flow.body.node_id, *([flow.driver.node_id] if flow.driver else []), "episodes"] for flow in flows]
+        self.node_ids = [[flow.body.node_id, *([flow.driver.node_id] if flow.driver else []),
+                          *([PERCEPTION_NODE_ID] if flow.driver and flow.driver.perception_env is not None else []),
+                          "episodes"] for flow in flows]
         self.logs = work / "dora" / f"daemon-{WORKERS_MACHINE}"
         # dora 1.1's coordinator lets a client that is not on loopback connect about 20 times, then answers
         # 429 Too Many Requests for a while (seen: a minute): a coordinator elsewhere is asked every 5 s.

@@ -1,6 +1,8 @@
 """A policy folder chosen for a dataflow (`so101 eval --policy`, `so101 teleop --policy`), checked from
 its config.json before anything starts (the node checks again as it loads): what it reads, the size
-of the pictures it sees, and the Python that runs it."""
+of the pictures it sees, and the Python that runs it. A seeing recipe's folder (`so101 learn --sees`:
+so101.perception.recipe) is chosen whole: its state policy, and the eyes that fill the policy's
+object_state from the front picture (the perception node)."""
 
 from __future__ import annotations
 
@@ -8,8 +10,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Mapping
 
-from so101.dataset.features import ENVIRONMENT_KEY
+from so101.dataset.features import ENVIRONMENT_KEY, IMAGE_KEY
+from so101.perception.recipe import Recipe, read_recipe
 from so101.policy.environment import default_dir, dora_problem, python_in
+from so101.tasks import task_named
 from so101.policy.features import inputs_for, picture_size_of, read_policy_features, unscaled_inputs
 
 
@@ -20,6 +24,33 @@ class ChosenPolicy:
     inputs: tuple[str, ...]  # the body's outputs it reads
     picture_size: tuple[int, int] | None  # (width, height) of the cameras it sees; None: none
     unscaled: Mapping[str, str] = field(default_factory=dict)  # input feature -> its type, taken unscaled
+    features: tuple[str, ...] = ()  # its input features, as its config.json names them
+    recipe: Recipe | None = None  # a seeing recipe's: the eyes in front of it
+
+    @property
+    def body_pictures(self) -> tuple[tuple[str, ...], tuple[int, int] | None]:
+        """The pictures the body (or its camera) must draw, and their size: the policy's own, or the eyes'."""
+        if self.recipe is not None:
+            return ("image",), self.recipe.eyes.size
+        return (("image", "wrist_image"), self.picture_size) if self.picture_size else ((), None)
+
+    def reads(self) -> str:
+        """One line: what the policy reads, and where its object_state comes from."""
+        parts = []
+        for name in self.features:
+            if name != ENVIRONMENT_KEY:
+                parts.append(name)
+            elif self.recipe is not None:
+                parts.append(f"{name} (from the perception node, which sees {IMAGE_KEY} and the joints)")
+            else:
+                parts.append(f"{name} (the simulator's object_state, which a real arm does not have)")
+        return "the policy reads: " + ", ".join(parts)
+
+    def perception_env(self, lang: str) -> dict[str, str]:
+        """The perception node's settings (so101.perception.settings.PerceptionSettings); {} without eyes."""
+        if self.recipe is None:
+            return {}
+        return {"SO101_EYES_DIR": str(self.recipe.eyes_dir), "SO101_TASK": self.recipe.task, "SO101_LANG": lang}
 
     def notes(self) -> list[str]:
         """What a user should know before scoring or driving with it, one line each."""
@@ -43,8 +74,12 @@ def choose_policy(folder: Path, python: Path | None, task: str | None, names_of_
     another machine of a cluster, and `python` is a path there, taken as written (absolute) and not checked
     here; the folder is read here, and must be at the same path there."""
     folder = folder.expanduser().resolve()
+    recipe = read_recipe(folder)
+    if recipe is not None:  # its eyes give the object_state, on a real arm too
+        folder = recipe.policy_dir
+        names_of_objects = names_of_objects or task_named(recipe.task).object_state_names
     inputs, outputs = read_policy_features(folder)
-    if task is None and ENVIRONMENT_KEY in inputs:
+    if task is None and ENVIRONMENT_KEY in inputs and recipe is None:
         raise ValueError(f"the policy reads a task's objects ({ENVIRONMENT_KEY}): run it on a simulation with --task "
                          "cube_to_box (the real arm reports no objects)")
     picture_size = picture_size_of(inputs)
@@ -53,11 +88,11 @@ def choose_policy(folder: Path, python: Path | None, task: str | None, names_of_
     if python_elsewhere:
         if not chosen.is_absolute():
             raise ValueError(f"--policy-python {chosen} must be an absolute path on the policy's machine")
-        return ChosenPolicy(folder, chosen, needed, picture_size, unscaled_inputs(folder))
+        return ChosenPolicy(folder, chosen, needed, picture_size, unscaled_inputs(folder), tuple(inputs), recipe)
     if not chosen.exists():
         raise ValueError(f"{chosen} does not exist: make the policy environment with `so101 policy-env`, or give "
                          "--policy-python PY (a Python with LeRobot and dora-rs)")
     problem = dora_problem(chosen)
     if problem:
         raise ValueError(problem)
-    return ChosenPolicy(folder, chosen.absolute(), needed, picture_size, unscaled_inputs(folder))
+    return ChosenPolicy(folder, chosen.absolute(), needed, picture_size, unscaled_inputs(folder), tuple(inputs), recipe)

@@ -12,7 +12,7 @@ from so101.cameras.sources import CAMERA_SILENT_S, parse_real_cameras
 from so101.lang import DEFAULT_LANGUAGE, ENV_VAR as LANG_ENV_VAR, language_from_environ
 from so101.runtime.argtypes import parsed_by
 from so101.runtime.settings import (
-    EnvironSettings, Setting, read_image_size, read_parsed, read_stripped_text, read_whole_number, setting,
+    EnvironSettings, Setting, read_image_size, read_parsed, read_stripped_text, read_threads, setting,
 )
 from so101.tasks import task_named
 
@@ -28,13 +28,6 @@ def read_task_name(environ: Mapping[str, str], declared_setting: Setting) -> str
     except ValueError as error:
         raise ValueError(f"{declared_setting.env_var}: {error}") from None
     return name
-
-
-def read_threads(environ: Mapping[str, str], declared_setting: Setting) -> int:
-    threads = read_whole_number(environ, declared_setting)
-    if not 1 <= threads <= 256:
-        raise ValueError(f"{declared_setting.env_var}={threads} is not a number of threads from 1 to 256")
-    return threads
 
 
 def checked_device(device: str) -> str:

@@ -35,6 +35,9 @@ EXPERT_TICK = "dora/timer/millis/40"
 # `so101 teleop --policy` puts a trained policy between the prompt and the body, run by its own Python;
 # `so101 eval --policy` drives the body with it in lockstep.
 POLICY_NODE_FILE = ROOT / "nodes" / "policy.py"
+# A seeing recipe's eyes (so101.perception): the front picture and the joints in, object_state out, for the policy.
+PERCEPTION_NODE_FILE = ROOT / "nodes" / "perception.py"
+PERCEPTION_NODE_ID = "perception"
 POLICY_NODE_ID = "policy"
 # The policy's pace at the prompt: an action every 40 ms, the rate of the datasets it learns from (25 fps).
 POLICY_TICK = "dora/timer/millis/40"
@@ -345,6 +348,24 @@ def with_policy(descriptor: dict, body_node_id: str, observed: tuple[str, ...], 
               else _queued(f"{body_node_id}/{name}", STATE_QUEUE) for name in observed}
     return _before_body(descriptor, body_node_id, POLICY_NODE_ID, POLICY_NODE_FILE, POLICY_TICK, policy_env, root,
                         {"policy_cmd": {"source": f"{PROMPT_NODE_ID}/policy_cmd", "queue_size": 10}, **inputs}, python)
+
+
+def with_perception(descriptor: dict, body_node_id: str, perception_env: dict[str, str], python: str,
+                    root: PurePath = ROOT) -> dict:
+    """with_policy's dataflow with a seeing recipe's eyes (nodes/perception.py, under the policy environment's
+    `python`) between the front camera and the policy: they take the newest front picture and the body's
+    joints, and the policy's object_state is theirs, not the body's."""
+    pictures = picture_sources(descriptor)
+    node = {
+        "id": PERCEPTION_NODE_ID, **node_launch(PERCEPTION_NODE_FILE, root, python),
+        "inputs": {"image": {"source": pictures["image"], "queue_size": 1},
+                   "joint_state": _queued(f"{body_node_id}/joint_state", STATE_QUEUE)},
+        "outputs": ["object_state"], "env": perception_env,
+    }
+    policy = _node(descriptor, POLICY_NODE_ID)
+    _retarget(policy, "object_state", f"{PERCEPTION_NODE_ID}/object_state")
+    descriptor["nodes"].insert(descriptor["nodes"].index(policy), node)
+    return descriptor
 
 
 def body_task(descriptor: dict, body_node_id: str) -> str:

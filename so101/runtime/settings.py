@@ -159,3 +159,11 @@ def read_parsed(parse: Callable[[str], Any]) -> Callable[[Mapping[str, str], Set
         except ValueError as error:
             raise ValueError(f"{declared_setting.env_var}: {error}") from None
     return read
+
+
+def read_threads(environ: Mapping[str, str], declared_setting: Setting) -> int:
+    """PyTorch's threads for a node: a whole number from 1 to 256."""
+    threads = read_whole_number(environ, declared_setting)
+    if not 1 <= threads <= 256:
+        raise ValueError(f"{declared_setting.env_var}={threads} is not a number of threads from 1 to 256")
+    return threads

@@ -66,3 +66,29 @@ def seeing_policy(policy_python, tmp_path_factory) -> Path:
                           capture_output=True, text=True, timeout=600, env={**os.environ, "HF_HUB_OFFLINE": "1"})
     assert done.returncode == 0, done.stderr[-3000:]
     return out / "checkpoints" / "last" / "pretrained_model"
+
+
+RECIPE_EYES_SIZE = (32, 24)  # the tiny recipe's eyes: their pictures' (width, height)
+
+
+@pytest.fixture(scope="session")
+def seeing_recipe(policy_python, tmp_path_factory) -> Path:
+    """A tiny seeing recipe, as `so101 learn --sees` writes one: tests/data/policy_act_tiny as its state
+    policy, and eyes of untrained weights that see 32x24 pictures (made in the policy environment, where
+    PyTorch is). It covers the wiring: the eyes' object_state, not the simulator's, reaches the policy."""
+    import shutil
+
+    from so101.perception.eyes import EYES_FACTS, default_eyes_facts
+    from so101.perception.recipe import EYES_DIR, POLICY_DIR, write_recipe
+    from so101.runtime.dataflow import ROOT
+
+    folder = tmp_path_factory.mktemp("recipe")
+    shutil.copytree(ROOT / "tests" / "data" / "policy_act_tiny", folder / POLICY_DIR)
+    (folder / EYES_DIR).mkdir()
+    made = subprocess.run([str(policy_python), "-c", "import sys, torch; from so101.perception.net import EyesNet; "
+                           "torch.manual_seed(0); torch.save({'state_dict': EyesNet().state_dict()}, sys.argv[1])",
+                           str(folder / EYES_DIR / "eyes.pt")], capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert made.returncode == 0, made.stderr[-2000:]
+    (folder / EYES_DIR / EYES_FACTS).write_text(default_eyes_facts(RECIPE_EYES_SIZE, {"steps": 0}).as_json())
+    write_recipe(folder, {"recipe": "eyes + state policy", "task": "cube_to_box"})
+    return folder

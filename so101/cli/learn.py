@@ -1,0 +1,227 @@
+"""`so101 learn OUT --task cube_to_box [--sees]`: from nothing to a trained policy, in one command.
+
+The recipe, each stage said with its time as it ends:
+1. demonstrations: `so101 demos` (the scripted expert, the simulator's state, no pictures);
+2. with `--sees`, pictures for the eyes: thousands of front pictures drawn from those demonstrations'
+   frames, each in varied looks with its answers (so101.perception.pictures), and a few held out;
+3. training, the two at once, one PyTorch thread each: LeRobot's `lerobot-train` makes a state policy
+   of the demonstrations (in the policy environment), and with `--sees` the eyes learn to find the
+   cube, the box and the gripper's tip in the pictures (so101.perception.training);
+4. the folder: OUT/policy (the state policy), and with `--sees` OUT/eyes and so101_recipe.json, which
+   `so101 eval --policy OUT` and `so101 teleop --policy OUT` run whole: the perception node fills the
+   policy's object_state from the front picture and the joints, never from the simulator.
+The last line printed is the folder to give `--policy`. Ctrl-C stops it, keeping the stages that
+finished; run the same command again to resume from there. A folder learned with other options is
+refused in one line.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Callable
+
+from so101.bodies.registry import SIMULATED_BODIES
+from so101.perception.recipe import EYES_DIR, POLICY_DIR, write_recipe
+from so101.policy.environment import OFFLINE, default_dir, python_in
+from so101.runtime.argtypes import whole_number
+from so101.runtime.dataflow import ROOT
+from so101.tasks import TASKS
+
+STATE_FILE = "so101_learn.json"
+HELD_OUT_SEED = 900_000  # the held-out pictures' demonstrations: layouts no score uses
+# The state policy's recipe (docs/loop/policy.md): a small ACT on the joints and the objects' state.
+STATE_POLICY_ARGS = (
+    "--policy.type=act", "--policy.device=cpu", "--policy.push_to_hub=false", "--policy.dim_model=128",
+    "--policy.n_heads=4", "--policy.dim_feedforward=512", "--policy.n_encoder_layers=2", "--policy.n_decoder_layers=1",
+    "--policy.use_vae=false", "--policy.chunk_size=20", "--policy.n_action_steps=20", "--policy.optimizer_lr=3e-4",
+    '--policy.normalization_mapping={"VISUAL": "MEAN_STD", "STATE": "MEAN_STD", "ENV": "MEAN_STD", "ACTION": "MEAN_STD"}',
+    "--batch_size=64", "--num_workers=0", "--seed=1", "--wandb.enable=false",
+)
+ONE_THREAD = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+
+
+def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
+    parser.add_argument("out", type=Path, metavar="OUT", help="the folder to learn into: new, or one this command began")
+    parser.add_argument("--task", choices=sorted(TASKS), required=True, help="the task to learn")
+    parser.add_argument("--sees", action="store_true",
+                        help="a policy that sees: eyes taught by the simulator in front of the state policy (the "
+                             "policy then reads no simulator state); without it, a state policy that reads the "
+                             "simulator's object_state")
+    parser.add_argument("--body", choices=SIMULATED_BODIES, default="pybullet", help="the simulator (default pybullet)")
+    parser.add_argument("--episodes", type=whole_number(10, 100_000), default=300, metavar="N",
+                        help="demonstrations (default 300)")
+    parser.add_argument("--pictures", type=whole_number(100, 1_000_000), default=30_000, metavar="N",
+                        help="--sees: pictures drawn for the eyes (default 30000; 1.7 GB of memory at 160x120)")
+    parser.add_argument("--eyes-steps", type=whole_number(1, 1_000_000), default=3000, metavar="N",
+                        help="--sees: the eyes' training steps, of 32 pictures (default 3000)")
+    parser.add_argument("--policy-steps", type=whole_number(1, 1_000_000), default=6500, metavar="N",
+                        help="lerobot-train's steps for the state policy, of 64 frames (default 6500)")
+    parser.add_argument("--policy-python", type=Path, default=None, metavar="PY",
+                        help=f"the policy environment's Python, with LeRobot (default {python_in(default_dir())}, "
+                             "which so101 policy-env makes)")
+
+
+def run(args: argparse.Namespace) -> int:
+    out = args.out.expanduser().resolve()
+    python = (args.policy_python or python_in(default_dir())).expanduser()
+    if not python.exists():
+        return _fail(f"{python} does not exist: make the policy environment with `so101 policy-env`, or give "
+                     "--policy-python PY")
+    trainer = python.parent / "lerobot-train"
+    if not trainer.exists():
+        return _fail(f"{python} has no lerobot-train beside it: give the Python of a policy environment (so101 policy-env)")
+    settings = {"task": args.task, "sees": args.sees, "body": args.body, "episodes": args.episodes,
+                "pictures": args.pictures if args.sees else 0, "eyes_steps": args.eyes_steps if args.sees else 0,
+                "policy_steps": args.policy_steps}
+    state_file = out / STATE_FILE
+    if out.exists() and not state_file.is_file() and any(out.iterdir()):
+        return _fail(f"{out} is not empty and not a folder `so101 learn` began: give a new folder")
+    done: dict[str, float] = {}
+    if state_file.is_file():
+        saved = json.loads(state_file.read_text(encoding="utf-8"))
+        if saved.get("settings") != settings:
+            differ = ", ".join(f"{key} {saved['settings'].get(key)!r} there, {value!r} now"
+                               for key, value in settings.items() if saved.get("settings", {}).get(key) != value)
+            return _fail(f"{out} was learned with other options ({differ}): use those, or another folder")
+        done = dict(saved.get("done", {}))
+    out.mkdir(parents=True, exist_ok=True)
+    work = out / "work"
+    work.mkdir(exist_ok=True)
+    learning = Learning(out, work, settings, done, python)
+    print(f"learn: {args.task} on {args.body}, {'a policy that sees (eyes + state policy)' if args.sees else 'a state policy'}"
+          f", into {out}" + (f"; resuming after: {', '.join(done)}" if done else ""), flush=True)
+    started = time.monotonic()
+    try:
+        learning.stage("demos", lambda: learning.demos(out / "demos", args.episodes, 0))
+        if args.sees:
+            learning.stage("held-out demos", lambda: learning.demos(work / "held-out-demos", 20, HELD_OUT_SEED))
+            learning.stage("pictures", lambda: learning.pictures(args.pictures))
+        learning.stage("training", lambda: learning.train(args.policy_steps, args.eyes_steps if args.sees else 0))
+        learning.stage("folder", lambda: learning.assemble())
+    except KeyboardInterrupt:
+        learning.stop_children()
+        print(f"learn: stopped; the stages done ({', '.join(learning.done) or 'none'}) stay. Run the same command "
+              "again to resume", file=sys.stderr, flush=True)
+        return 130
+    except StageFailed as error:
+        learning.stop_children()
+        return _fail(str(error))
+    print(f"learn: done in {time.monotonic() - started:.0f} s this run "
+          f"({', '.join(f'{name} {seconds:.0f} s' for name, seconds in learning.done.items())}). "
+          f"Score it: so101 eval --task {args.task} --policy {out if args.sees else out / POLICY_DIR} --episodes 50 --seed 1000", flush=True)
+    print(out if args.sees else out / POLICY_DIR, flush=True)
+    return 0
+
+
+class StageFailed(Exception):
+    """A stage's command failed; str() is one line, naming its log."""
+
+
+class Learning:
+    def __init__(self, out: Path, work: Path, settings: dict, done: dict[str, float], python: Path):
+        self.out, self.work, self.settings, self.done, self.python = out, work, settings, done, python
+        self.children: list[subprocess.Popen] = []
+
+    def save(self) -> None:
+        state = {"settings": self.settings, "done": self.done}
+        (self.out / STATE_FILE).write_text(json.dumps(state, indent=1) + "\n", encoding="utf-8")
+
+    def stage(self, name: str, action: Callable[[], None]) -> None:
+        if name in self.done:
+            return
+        print(f"learn: {name}...", flush=True)
+        started = time.monotonic()
+        action()
+        self.done[name] = round(time.monotonic() - started, 1)
+        self.save()
+        print(f"learn: {name} done in {self.done[name]:.0f} s", flush=True)
+
+    def start(self, command: list[str], log: Path, env: dict[str, str] | None = None) -> subprocess.Popen:
+        child = subprocess.Popen(command, stdout=log.open("w"), stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+                                 env={**os.environ, **(env or {})}, cwd=ROOT, start_new_session=True)
+        self.children.append(child)
+        return child
+
+    def wait(self, children: list[tuple[subprocess.Popen, Path, str]]) -> None:
+        for child, log, what in children:
+            if child.wait() != 0:
+                tail = log.read_text(encoding="utf-8", errors="replace").strip().splitlines()[-1:] or ["(no output)"]
+                raise StageFailed(f"{what} failed (exit code {child.returncode}): {tail[0][-300:]} (log: {log})")
+        self.children.clear()
+
+    def stop_children(self) -> None:
+        for child in self.children:
+            if child.poll() is None:
+                os.killpg(child.pid, signal.SIGTERM)
+        for child in self.children:
+            try:
+                child.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                os.killpg(child.pid, signal.SIGKILL)
+        self.children.clear()
+
+    def demos(self, folder: Path, episodes: int, seed: int) -> None:
+        shutil.rmtree(folder, ignore_errors=True)  # a stage that did not finish starts again
+        log = self.work / f"{folder.name}.log"
+        command = [sys.executable, "-m", "so101.cli", "demos", str(folder), "--task", self.settings["task"],
+                   "--body", self.settings["body"], "--episodes", str(episodes), "--seed", str(seed), "--no-video",
+                   "--workers", "2"]
+        self.wait([(self.start(command, log), log, "so101 demos")])
+
+    def pictures(self, count: int) -> None:
+        halves = [count // 2, count - count // 2]
+        children = []
+        for index, part in enumerate(halves):
+            log = self.work / f"pictures-{index}.log"
+            command = [sys.executable, "-m", "so101.perception.draw", str(self.out / "demos"),
+                       str(self.work / f"pictures-{index}.npz"), "--count", str(part), "--seed", str(index + 1)]
+            children.append((self.start(command, log), log, "drawing the pictures"))
+        log = self.work / "pictures-held-out.log"
+        self.wait(children)
+        command = [sys.executable, "-m", "so101.perception.draw", str(self.work / "held-out-demos"),
+                   str(self.work / "pictures-held-out.npz"), "--count", "1500", "--seed", "77"]
+        self.wait([(self.start(command, log), log, "drawing the held-out pictures")])
+
+    def train(self, policy_steps: int, eyes_steps: int) -> None:
+        trained = self.work / "state-policy"
+        shutil.rmtree(trained, ignore_errors=True)
+        log = self.work / "state-policy.log"
+        command = [str(self.python.parent / "lerobot-train"), f"--dataset.repo_id=local/{self.out.name}-demos",
+                   f"--dataset.root={self.out / 'demos'}", *STATE_POLICY_ARGS, f"--steps={policy_steps}",
+                   f"--save_freq={policy_steps}", f"--output_dir={trained}"]
+        children = [(self.start(command, log, {**OFFLINE, **ONE_THREAD}), log, "lerobot-train (the state policy)")]
+        if eyes_steps:
+            eyes_log = self.work / "eyes.log"
+            shutil.rmtree(self.work / EYES_DIR, ignore_errors=True)
+            command = [str(self.python), "-m", "so101.perception.teach", "--pictures",
+                       *(str(self.work / f"pictures-{index}.npz") for index in (0, 1)),
+                       "--held-out", str(self.work / "pictures-held-out.npz"), "--out", str(self.work / EYES_DIR),
+                       "--steps", str(eyes_steps)]
+            children.append((self.start(command, eyes_log, ONE_THREAD), eyes_log, "the eyes' training"))
+        print(f"learn: training; logs: {', '.join(str(log) for _, log, _ in children)}", flush=True)
+        self.wait(children)
+
+    def assemble(self) -> None:
+        for name in (POLICY_DIR, EYES_DIR):
+            shutil.rmtree(self.out / name, ignore_errors=True)
+        shutil.copytree(self.work / "state-policy" / "checkpoints" / "last" / "pretrained_model", self.out / POLICY_DIR)
+        if self.settings["sees"]:
+            shutil.copytree(self.work / EYES_DIR, self.out / EYES_DIR)
+            eyes = json.loads((self.out / EYES_DIR / "eyes.json").read_text(encoding="utf-8"))
+            write_recipe(self.out, {"recipe": "eyes + state policy", "task": self.settings["task"],
+                                    "body": self.settings["body"], "eyes": EYES_DIR, "policy": POLICY_DIR,
+                                    "eyes_held_out": eyes.get("trained", {}).get("held_out", {}),
+                                    "stages_s": self.done})
+
+
+def _fail(message: str) -> int:
+    print(f"so101 learn: {message}", file=sys.stderr, flush=True)
+    return 2

@@ -1,0 +1,37 @@
+"""`python -m so101.perception.draw DATASET OUT.npz`: draw the eyes' training pictures from a dataset's
+frames (so101.perception.pictures), in this project's Python (the renderer is MuJoCo's)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from so101.bodies.looks import LOOKS_CHOICES
+from so101.perception.pictures import draw_pictures, read_frames
+from so101.runtime.argtypes import image_size
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m so101.perception.draw", description=__doc__)
+    parser.add_argument("dataset", type=Path)
+    parser.add_argument("out", type=Path)
+    parser.add_argument("--count", type=int, default=15000)
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--looks", choices=LOOKS_CHOICES, default="varied")
+    parser.add_argument("--size", type=image_size, default=(160, 120))
+    args = parser.parse_args(argv)
+    started = time.monotonic()
+    drawn = draw_pictures(read_frames(args.dataset), args.count, args.seed, tuple(args.size), args.looks)
+    partial = args.out.with_name(args.out.name + ".part.npz")
+    np.savez(partial, **drawn)
+    partial.replace(args.out)  # whole or not at all: a stopped run leaves no half file under the name
+    print(f"pictures: {args.count} drawn in {time.monotonic() - started:.0f} s into {args.out}", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,111 @@
+"""Pictures for the eyes, drawn by the simulator with their answers: where the cube is in the picture
+and in the world, its yaw and height, and where the box and the gripper's tip are in the picture.
+
+The arm's poses and the objects' places come from demonstrations (a dataset with
+`observation.environment_state`: `so101 demos`), so the eyes see the arm as it moves in a task,
+the cube in the jaws included. Each picture draws its own looks (`varied` or `unseen`: so101.bodies.looks)
+from a seed of its own, and a cube still lying where its episode put it moves to another layout's
+place half the time: thousands of layouts for the price of a few hundred demonstrations.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import numpy.typing as npt
+import pyarrow.parquet as pq
+
+from so101.dataset.features import ENVIRONMENT_KEY, STATE_KEY, from_lerobot
+from so101.perception.estimate import BOX_POINT_HEIGHT_M
+from so101.perception.geometry import view_of
+from so101.tasks.cube_to_box import CUBE_TO_BOX
+
+# Looks seeds of training pictures start here: far from any episode seed a score uses.
+LOOKS_SEED_BASE = 5_000_000
+# Layouts a still cube moves to are drawn from seeds at and above this.
+LAYOUT_SEED_BASE = 3_000_000
+# A cube within this of where its episode put it still lies there (the arm has not touched it).
+STILL_M = 0.002
+
+
+def yaw_of(quaternion_xyzw: npt.ArrayLike) -> npt.NDArray[np.float64]:
+    """The yaw (rad) of (N, 4) quaternions: the heading of their x axis in the floor's plane."""
+    q = np.atleast_2d(np.asarray(quaternion_xyzw, dtype=float))
+    x, y, z, w = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    result: npt.NDArray[np.float64] = np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+    return result
+
+
+@dataclass(frozen=True)
+class Frames:
+    """A dataset's frames as the renderer takes them: the six angles (degrees) and the object state."""
+
+    angles_deg: npt.NDArray[np.float64]
+    object_state: npt.NDArray[np.float64]
+    episode: npt.NDArray[np.int64]
+
+    @property
+    def still(self) -> npt.NDArray[np.bool_]:
+        """Frames whose cube lies where its episode's first frame had it."""
+        first = {int(e): i for i, e in reversed(list(enumerate(self.episode)))}
+        start = self.object_state[[first[int(e)] for e in self.episode], :3]
+        moved: npt.NDArray[np.bool_] = np.linalg.norm(self.object_state[:, :3] - start, axis=1) < STILL_M
+        return moved
+
+
+def read_frames(dataset: Path) -> Frames:
+    """The frames of a dataset with the objects' state (`so101 demos` without --observe)."""
+    files = sorted((dataset / "data").glob("chunk-*/*.parquet"))
+    if not files:
+        raise ValueError(f"{dataset} has no data/chunk-*/*.parquet: give a dataset `so101 demos` made")
+    tables = [pq.read_table(file, columns=[STATE_KEY, ENVIRONMENT_KEY, "episode_index"]) for file in files]
+    if any(ENVIRONMENT_KEY not in table.column_names for table in tables):
+        raise ValueError(f"{dataset} holds no {ENVIRONMENT_KEY}: make its demonstrations without --observe")
+    state = np.concatenate([np.stack(table[STATE_KEY].to_numpy(zero_copy_only=False)) for table in tables])
+    objects = np.concatenate([np.stack(table[ENVIRONMENT_KEY].to_numpy(zero_copy_only=False)) for table in tables])
+    episode = np.concatenate([table["episode_index"].to_numpy() for table in tables])
+    return Frames(from_lerobot(state), objects.astype(np.float64), episode.astype(np.int64))
+
+
+def draw_pictures(frames: Frames, count: int, seed: int, size: tuple[int, int], looks: str,
+                  progress: Callable[[int], None] = lambda done: None) -> dict[str, np.ndarray]:
+    """`count` front pictures at `size` (width, height) of frames drawn from `frames` by `seed`, each in
+    looks of its own, with their answers (see the module's doc)."""
+    from so101.bodies.task_cameras import TaskCameras
+    from so101.kinematics import Kinematics
+
+    width, height = size
+    draw = np.random.default_rng(seed)
+    chosen = draw.integers(0, len(frames.angles_deg), count)
+    still = frames.still
+    pictures = np.zeros((count, height, width, 3), dtype=np.uint8)
+    cube_px, box_px, tip_px = np.zeros((count, 2)), np.zeros((count, 2)), np.zeros((count, 2))
+    states, tips = np.zeros((count, 10)), np.zeros((count, 3))
+    with TaskCameras(CUBE_TO_BOX, log=lambda message: None, looks=looks) as cameras, Kinematics() as kinematics:
+        for done, frame in enumerate(chosen):
+            cameras.show_seed(int(draw.integers(LOOKS_SEED_BASE, 2 * LOOKS_SEED_BASE)))
+            state = frames.object_state[frame].copy()
+            if still[frame] and draw.random() < 0.5:
+                layout = CUBE_TO_BOX.layout(int(draw.integers(LAYOUT_SEED_BASE, 2 * LAYOUT_SEED_BASE)))
+                state[0:3], state[3:7] = layout.cube_xyz_m, layout.cube_quat_xyzw()
+            picture, _ = cameras.draw(frames.angles_deg[frame], state, width, height, wrist=False)
+            view = view_of(cameras.front_camera(), width, height)
+            tips[done] = np.asarray(kinematics.tip_mm(frames.angles_deg[frame][:5])) / 1000.0
+            pictures[done], states[done] = picture, state
+            cube_px[done] = view.project([state[0:3]])[0]
+            box_px[done] = view.project([[state[7], state[8], BOX_POINT_HEIGHT_M]])[0]
+            tip_px[done] = view.project([tips[done]])[0]
+            progress(done + 1)
+    return {"pictures": pictures, "cube_px": cube_px, "box_px": box_px, "tip_px": tip_px, "tip_xyz": tips,
+            "object_state": states, "cube_yaw": yaw_of(states[:, 3:7]), "size": np.array(size)}
+
+
+def yaw_mod_quarter(yaw_rad: npt.ArrayLike) -> npt.NDArray[np.float64]:
+    """A cube's yaw folded into [-45°, 45°): it looks the same every quarter turn."""
+    half = math.pi / 4
+    folded: npt.NDArray[np.float64] = (np.asarray(yaw_rad, dtype=float) + half) % (2 * half) - half
+    return folded

@@ -1,0 +1,200 @@
+"""Eyes taught by the simulator (so101.perception): the camera's geometry, the maps read into places, the
+landmarks that cancel a camera placed roughly, a seeing recipe's folder and how the dataflows run it,
+and `so101 learn`'s refusals. The network's training is a documented command, not a test."""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+import subprocess
+import sys
+from pathlib import Path
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from so101.bodies.camera import TASK_FRONT_CAMERA
+from so101.bodies.looks import varied_looks
+from so101.perception.estimate import (
+    KEYPOINTS, LIFT_SCALE_M, STRIDE, Sighting, cube_in_world, kept_state, object_state, read_maps,
+)
+from so101.perception.geometry import view_of
+from so101.tasks import CUBE_TO_BOX
+from tests.helpers.dataflow import SO101
+
+SIZE = (160, 120)
+CUBE, BOX = CUBE_TO_BOX.cube, CUBE_TO_BOX.box
+
+
+def moved(camera, seed):
+    """The task's front camera as `--looks varied` places it for `seed`."""
+    looks = varied_looks(seed)
+    return replace(camera, target_xyz_m=tuple(np.add(camera.target_xyz_m, looks.front_shift_m)),
+                   yaw_deg=camera.yaw_deg + looks.front_turn_deg[0], pitch_deg=camera.pitch_deg + looks.front_turn_deg[1],
+                   fov_deg=camera.fov_deg + looks.front_fov_deg)
+
+
+@pytest.mark.parametrize("camera", [TASK_FRONT_CAMERA, moved(TASK_FRONT_CAMERA, 5)])
+def test_a_point_seen_then_cast_back_to_its_height_is_where_it_was(camera):
+    view = view_of(camera, *SIZE)
+    points = np.array([[0.2, -0.1, 0.0125], [0.16, 0.19, 0.005], [0.1, 0.0, 0.12]])
+    pixels = view.project(points)
+    assert np.all((pixels >= 0) & (pixels <= SIZE)), pixels
+    assert np.allclose(view.on_plane(pixels, points[:, 2]), points, atol=1e-9)
+    assert np.isnan(view.project([view.eye - view.forward])).all()  # behind the camera: no pixel
+
+
+def sighting_of(view, cube_xyz, tip_xyz, lift=0.0, yaw=0.0, sure=1.0):
+    """What perfect eyes would see through `view` (the camera as it really is)."""
+    pixels = view.project([cube_xyz, (*BOX.xy_m, BOX.floor_thickness_m), tip_xyz])
+    return Sighting({name: tuple(pixel) for name, pixel in zip(KEYPOINTS, pixels)}, dict.fromkeys(KEYPOINTS, sure),
+                    yaw, lift)
+
+
+def test_the_box_and_the_tip_cancel_a_camera_placed_a_centimetre_and_two_degrees_off():
+    believed = view_of(TASK_FRONT_CAMERA, *SIZE)
+    bare, corrected, near_tip = [], [], []
+    for seed in range(200):
+        real = view_of(moved(TASK_FRONT_CAMERA, seed), *SIZE)
+        cube = np.array(CUBE_TO_BOX.layout(seed).cube_xyz_m)
+        tip = cube + np.array([0.0, 0.0, 0.03]) if seed % 2 else np.array([0.2, 0.0, 0.15])  # above it, or far
+        sighting = sighting_of(real, cube, tip)
+        bare.append(np.linalg.norm(cube_in_world(sighting, believed, CUBE, BOX, landmarks=False) - cube))
+        corrected.append(np.linalg.norm(cube_in_world(sighting, believed, CUBE, BOX, tip) - cube))
+        if seed % 2:
+            near_tip.append(corrected[-1])
+    assert np.median(bare) > 0.006  # the camera's offset alone: most cubes more than 6 mm off
+    assert np.median(corrected) < 0.0025 and max(near_tip) < 0.003, (np.median(corrected), max(near_tip))
+
+
+def test_a_lifted_cube_is_placed_at_the_height_the_maps_say():
+    view = view_of(TASK_FRONT_CAMERA, *SIZE)
+    held = np.array([0.15, 0.05, CUBE.half_size_m + 0.08])
+    state = object_state(sighting_of(view, held, held, lift=0.08, yaw=math.radians(30)), view, CUBE, BOX, held)
+    assert np.allclose(state[:3], held, atol=1e-9)
+    assert np.allclose(state[3:7], [0, 0, math.sin(math.radians(15)), math.cos(math.radians(15))])
+    assert state[7:] == [*BOX.xy_m, 0.0]  # the box where the task stands it
+
+
+def test_maps_read_into_pixels_a_yaw_and_a_lift():
+    rows, columns = SIZE[1] // STRIDE, SIZE[0] // STRIDE
+    maps = np.zeros((3 * len(KEYPOINTS) + 3, rows, columns), dtype=np.float32)
+    for index, (row, column) in enumerate([(10, 7), (20, 30), (5, 25)]):
+        maps[index, row, column] = 20.0  # a sure peak
+        maps[len(KEYPOINTS) + 2 * index:len(KEYPOINTS) + 2 * index + 2, row, column] = (0.25, -0.5)
+    maps[3 * len(KEYPOINTS):, 10, 7] = (math.cos(4 * 0.3), math.sin(4 * 0.3), 0.05 / LIFT_SCALE_M)
+    sighting = read_maps(maps)
+    assert sighting.pixels["cube"] == ((7 + 0.75) * STRIDE, (10 + 0.0) * STRIDE)
+    assert sighting.pixels["box"] == ((30 + 0.75) * STRIDE, 20 * STRIDE)
+    assert math.isclose(sighting.cube_yaw_rad, 0.3, abs_tol=1e-6) and math.isclose(sighting.cube_lift_m, 0.05, abs_tol=1e-6)
+    assert sighting.sure["cube"] > 0.99
+    maps[0] = 0.0  # a flat map: nowhere in particular
+    assert read_maps(maps).sure["cube"] < 0.01
+
+
+def test_a_cube_the_eyes_are_unsure_of_stays_where_it_was_last_seen():
+    seen, unsure = [0.2] * 10, [0.1] * 10
+    assert kept_state(None, unsure, sure=0.05) == unsure  # nothing seen yet: the best there is
+    assert kept_state(seen, unsure, sure=0.05) == seen
+    assert kept_state(seen, unsure, sure=0.9) == unsure
+
+
+# -- so101 learn's refusals: each one line, before anything is made ------------------------------------------------
+
+def fake_policy_env(tmp_path):
+    """A folder with a `python` and a `lerobot-train` beside it, as a policy environment has (never run here)."""
+    folder = tmp_path / "env" / "bin"
+    folder.mkdir(parents=True)
+    for name in ("python", "lerobot-train"):
+        (folder / name).write_text("#!/bin/sh\nexit 1\n")
+    return folder / "python"
+
+
+@pytest.mark.parametrize("setup, extra, message", [
+    (None, "--policy-python /no/python", "so101 learn: /no/python does not exist: make the policy environment with "
+                                         "`so101 policy-env`, or give --policy-python PY"),
+    ("other files", "", "so101 learn: {out} is not empty and not a folder `so101 learn` began: give a new folder"),
+    ("other options", "", "so101 learn: {out} was learned with other options (body 'mujoco' there, 'pybullet' now): "
+                          "use those, or another folder"),
+])
+def test_learn_refuses_in_one_line_and_touches_nothing(tmp_path, setup, extra, message):
+    out = tmp_path / "out"
+    if setup == "other files":
+        out.mkdir()
+        (out / "mine.txt").write_text("kept")
+    elif setup == "other options":
+        out.mkdir()
+        settings = {"task": "cube_to_box", "sees": True, "body": "mujoco", "episodes": 300, "pictures": 30000,
+                    "eyes_steps": 3000, "policy_steps": 6500}
+        (out / "so101_learn.json").write_text(json.dumps({"settings": settings, "done": {"demos": 180.0}}))
+    before = sorted(path.name for path in out.iterdir()) if out.exists() else None
+    python = extra.split()[-1] if extra else str(fake_policy_env(tmp_path))
+    done = subprocess.run([str(SO101), "learn", str(out), "--task", "cube_to_box", "--sees", "--policy-python", python],
+                          capture_output=True, text=True, timeout=60, stdin=subprocess.DEVNULL)
+    assert done.returncode == 2 and done.stderr.strip() == message.format(out=out.resolve()), done.stderr
+    assert (sorted(path.name for path in out.iterdir()) if out.exists() else None) == before
+
+
+# -- a seeing recipe's folder, and the dataflows that run it ---------------------------------------------------
+
+def recipe_folder(tmp_path):
+    import shutil
+
+    from so101.perception.eyes import default_eyes_facts
+    from so101.perception.recipe import write_recipe
+    from tests.helpers.dataflow import ROOT
+
+    folder = tmp_path / "recipe"
+    shutil.copytree(ROOT / "tests" / "data" / "policy_act_tiny", folder / "policy")
+    (folder / "eyes").mkdir()
+    (folder / "eyes" / "eyes.pt").write_bytes(b"weights")
+    (folder / "eyes" / "eyes.json").write_text(default_eyes_facts((64, 48), {}).as_json())
+    write_recipe(folder, {"recipe": "eyes + state policy", "task": "cube_to_box"})
+    return folder, sys.executable
+
+
+def test_a_recipe_runs_its_policy_behind_the_eyes_and_the_policy_reads_no_simulator_state(tmp_path):
+    from so101.launch.lockstep import Driver, Flow, lockstep_dataflow
+    from so101.bodies.registry import BODIES
+    from so101.policy.choice import choose_policy
+    from so101.runtime.dataflow import POLICY_NODE_FILE
+
+    folder, python = recipe_folder(tmp_path)
+    chosen = choose_policy(folder, Path(python), None, ())  # no --task: the real arm's case
+    assert chosen.folder == folder / "policy" and chosen.inputs == ("joint_state", "gripper_state", "object_state")
+    assert chosen.body_pictures == (("image",), (64, 48))
+    assert chosen.reads() == ("the policy reads: observation.state, observation.environment_state (from the perception "
+                              "node, which sees observation.images.front and the joints)")
+    assert chosen.perception_env("en") == {"SO101_EYES_DIR": str(folder / "eyes"), "SO101_TASK": "cube_to_box",
+                                           "SO101_LANG": "en"}
+    driver = Driver("policy", POLICY_NODE_FILE, chosen.inputs, {}, python, chosen.perception_env("en"))
+    flow = Flow(BODIES["pybullet"], driver, {"SO101_TASK": "cube_to_box", "SO101_SEED": "0", "SO101_TIME_LIMIT_S": "2"},
+                "en", ("image",), "64x48")
+    nodes = {node["id"]: node for node in lockstep_dataflow(flow)["nodes"]}
+    assert nodes["perception"]["inputs"]["image"]["source"] == "simulation/image"
+    assert nodes["perception"]["inputs"]["joint_state"]["source"] == "simulation/joint_state"
+    assert nodes["policy"]["inputs"]["object_state"]["source"] == "perception/object_state"
+    assert all(spec["source"] != "simulation/object_state" for spec in nodes["policy"]["inputs"].values())
+
+
+@pytest.mark.parametrize("damage, message", [
+    ("no eyes", "holds no eyes.pt: give the folder `so101 learn` wrote"),
+    ("no policy", "is a recipe without its policy (policy/config.json): `so101 learn` did not finish; run it again to resume"),
+    ("bad recipe", "so101_recipe.json is not a recipe file"),
+])
+def test_an_incomplete_recipe_is_refused_in_one_line(tmp_path, damage, message):
+    import shutil
+
+    from so101.policy.choice import choose_policy
+
+    folder, python = recipe_folder(tmp_path)
+    if damage == "no eyes":
+        (folder / "eyes" / "eyes.pt").unlink()
+    elif damage == "no policy":
+        shutil.rmtree(folder / "policy")
+    else:
+        (folder / "so101_recipe.json").write_text("{")
+    with pytest.raises(ValueError, match=re.escape(message)):
+        choose_policy(folder, Path(python), "cube_to_box", CUBE_TO_BOX.object_state_names)
