@@ -145,6 +145,17 @@ def made_node(node_id: str) -> str:
                        {"SO101_POLICY_DIR": "DIR", "SO101_POLICY_DEVICE": "cpu", "SO101_TASK": "cube_to_box",
                         "SO101_LOCKSTEP_PICTURES": "", "SO101_LANG": "en"},
                        policy_python(), root=root)),
+        "perception": ("so101 teleop --task cube_to_box --policy DIR (a seeing recipe)",
+                       lambda: dataflow.with_perception(
+                           dataflow.with_policy(
+                               dataflow.with_camera(dataflow.with_task(fresh(), body, "cube_to_box", 0), body,
+                                                    {"SO101_RECORD_IMAGE_SIZE": "160x120"}, 25, root=root),
+                               body, ("joint_state", "gripper_state", "object_state"),
+                               {"SO101_POLICY_DIR": "DIR/policy", "SO101_POLICY_DEVICE": "cpu",
+                                "SO101_TASK": "cube_to_box", "SO101_LOCKSTEP_PICTURES": "", "SO101_LANG": "en"},
+                               policy_python(), root=root),
+                           body, {"SO101_EYES_DIR": "DIR/eyes", "SO101_TASK": "cube_to_box", "SO101_LANG": "en"},
+                           policy_python(), root=root)),
     }
     if node_id == "episodes":
         return eval_dataflow()

@@ -167,8 +167,9 @@ def main() -> int:
     answered: LastAnswer[tuple[list[float], dict[str, float]]] = LastAnswer()  # lockstep
     latest: dict[str, Any] = {}  # at the prompt: the newest of each input the policy needs
     driving = False  # at the prompt: `on` came, and nothing has stopped it since
-    # The real cameras it sees, by their picture input; when each one's newest picture came (monotonic).
-    watched = {PICTURE_OF_CAMERA[name]: name for name in settings.real_cameras if PICTURE_OF_CAMERA[name] in needed}
+    # The real cameras it sees, by their picture input (its own, or its eyes': a seeing recipe's policy takes
+    # the front picture only to watch it); when each one's newest picture came (monotonic).
+    watched = {PICTURE_OF_CAMERA[name]: name for name in settings.real_cameras}
     arrived_s: dict[str, float] = {}
 
     def silent() -> tuple[str, float] | None:
@@ -217,8 +218,9 @@ def main() -> int:
                 episode = tag.episode
                 node.send_output("joint_cmd", pa.array(targets_deg, type=pa.float64()),
                                  {**tag.metadata(), STREAM_KEY: 1, **timing})
-            elif input_id in needed:
-                latest[input_id] = value.to_numpy(zero_copy_only=False)
+            elif input_id in needed or input_id in watched:
+                if input_id in needed:
+                    latest[input_id] = value.to_numpy(zero_copy_only=False)
                 if input_id in watched:
                     arrived_s[watched[input_id]] = time.monotonic()
             elif input_id == "typed_cmd":

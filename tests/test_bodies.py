@@ -21,9 +21,9 @@ from tests.helpers.dataflow import ROOT
 
 def test_every_body_node_is_registered():
     # The nodes that are not bodies: the prompt, recording's and replay's, the leader arm, the web view, the
-    # expert, the episodes' runner, the trained policy and the real arm's USB cameras.
+    # expert, the episodes' runner, the trained policy, its eyes and the real arm's USB cameras.
     others = {"keyboard_control.py", "recorder.py", "camera.py", "replay.py", "leader_node.py", "web_view.py",
-              "expert.py", "episodes.py", "policy.py", "real_camera.py"}
+              "expert.py", "episodes.py", "policy.py", "perception.py", "real_camera.py"}
     node_files = sorted(path for path in (ROOT / "nodes").glob("*.py") if path.name not in others)
     assert node_files == sorted(body.node_file for body in BODIES.values())
     assert DEFAULT_BODY == "pybullet"  # the course's choice

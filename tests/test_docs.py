@@ -75,7 +75,7 @@ def test_the_dataflow_entries_are_the_files_and_the_commands_own():
     entry = yaml.safe_load(made.removeprefix("```yaml\n").removesuffix("\n```"))["nodes"]
     described = yaml.safe_load((ROOT / "dataflow.yml").read_text(encoding="utf-8"))["nodes"]
     assert entry == [node for node in described if node["id"] == "simulation"]
-    for node_id in ("recorder", "camera", "expert", "web_view", "replay", "policy", "episodes"):
+    for node_id in ("recorder", "camera", "expert", "web_view", "replay", "policy", "perception", "episodes"):
         made = hooks().made_node(node_id)
         nodes = yaml.safe_load(made.removeprefix("```yaml\n").removesuffix("\n```"))["nodes"]
         node = next(each for each in nodes if each["id"] == node_id)

@@ -18,7 +18,7 @@ import pytest
 from so101.bodies.camera import TASK_FRONT_CAMERA
 from so101.bodies.looks import varied_looks
 from so101.perception.estimate import (
-    KEYPOINTS, LIFT_SCALE_M, STRIDE, Sighting, cube_in_world, kept_state, object_state, read_maps,
+    KEYPOINTS, LIFT_SCALE_M, STRIDE, CubeFilter, Sighting, cube_in_world, object_state, read_maps,
 )
 from so101.perception.geometry import view_of
 from so101.tasks import CUBE_TO_BOX
@@ -94,11 +94,32 @@ def test_maps_read_into_pixels_a_yaw_and_a_lift():
     assert read_maps(maps).sure["cube"] < 0.01
 
 
-def test_a_cube_the_eyes_are_unsure_of_stays_where_it_was_last_seen():
-    seen, unsure = [0.2] * 10, [0.1] * 10
-    assert kept_state(None, unsure, sure=0.05) == unsure  # nothing seen yet: the best there is
-    assert kept_state(seen, unsure, sure=0.05) == seen
-    assert kept_state(seen, unsure, sure=0.9) == unsure
+def cube_at(x, yaw_deg=0.0):
+    half = math.radians(yaw_deg) / 2
+    return [x, 0.1, 0.0125, 0.0, 0.0, math.sin(half), math.cos(half), *BOX.xy_m, 0.0]
+
+
+def test_the_cube_is_the_median_of_the_newest_sightings_held_while_unsure_and_followed_when_it_moves():
+    cube = CubeFilter()
+    assert cube.add(cube_at(0.20), sure=0.05)[0] == 0.20  # nothing seen yet: the best there is
+    for x in (0.201, 0.199, 0.260, 0.200):  # one picture's outlier is out-voted
+        sent = cube.add(cube_at(x, yaw_deg=40.0), sure=0.9)
+    assert math.isclose(sent[0], 0.2, abs_tol=0.0015) and sent[7:] == [*BOX.xy_m, 0.0]
+    assert math.isclose(2 * math.atan2(sent[5], sent[6]), math.radians(40.0), abs_tol=1e-6)
+    assert cube.add(cube_at(0.5), sure=0.05) == sent  # the arm hides it: held
+    for x in (0.35, 0.351):  # lifted away: followed at once, not averaged with where it lay
+        sent = cube.add(cube_at(x), sure=0.9)
+    assert math.isclose(sent[0], 0.3505, abs_tol=1e-9)
+    cube.reset()
+    assert cube.state() is None
+
+
+def test_a_yaw_near_the_fold_is_averaged_across_it():
+    cube = CubeFilter()
+    for yaw in (44.0, -44.0, 45.0 - 0.5):  # the same cube: 44° and -44° are 2° apart, a quarter turn on
+        sent = cube.add(cube_at(0.2, yaw), sure=0.9)
+    yaw = math.degrees(2 * math.atan2(sent[5], sent[6]))
+    assert abs(abs(yaw) - 45.0) < 1.5, yaw
 
 
 # -- so101 learn's refusals: each one line, before anything is made ------------------------------------------------

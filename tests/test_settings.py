@@ -128,6 +128,7 @@ NODE_PAGES = {
     "expert.py": ("expert.md", ["so101.tasks.settings:ExpertSettings"]),
     "episodes.py": ("episodes.md", ["so101.tasks.settings:EpisodeSettings"]),
     "policy.py": ("policy.md", ["so101.policy.settings:PolicySettings"]),
+    "perception.py": ("perception.md", ["so101.perception.settings:PerceptionSettings"]),
 }
 
 

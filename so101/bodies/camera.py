@@ -23,14 +23,13 @@ class Camera:
 
 @dataclass(frozen=True)
 class WristCamera:
-    """A camera fixed to the gripper: beside the jaws, 6 cm out to their side, looking at the point
-    between their tips, the moving jaw at the picture's top. In the frame of the URDF's
-    `gripper_link` (the MJCF's body `gripper`, the same frame), metres."""
+    """A camera fixed to the gripper, in the frame of the URDF's `gripper_link` (the MJCF's body
+    `gripper`, the same frame), metres; by default where the SO-101 wrist mount holds it (WRIST_CAMERA)."""
 
-    eye_m: tuple[float, float, float] = (0.012, 0.06, -0.015)
-    target_m: tuple[float, float, float] = (0.012, 0.0, -0.10)
-    up: tuple[float, float, float] = (1.0, 0.0, 0.0)
-    fov_deg: float = 70.0
+    eye_m: tuple[float, float, float] = (0.0025, 0.0683, -0.0043)
+    target_m: tuple[float, float, float] = (0.0025, 0.0260, -0.0949)
+    up: tuple[float, float, float] = (0.0, 0.906, -0.423)
+    fov_deg: float = 62.0
 
 
 def check_picture(renders: bool, width: int, height: int) -> None:
@@ -50,7 +49,16 @@ DEFAULT_CAMERA = Camera()
 # 45° of vertical field of view. The cube's sector and the box fill the picture, and from the front
 # right the arm at home hides no cube of the sector (from straight in front it hid 40 of 100).
 TASK_FRONT_CAMERA = Camera(target_xyz_m=(0.13, 0.0, 0.0), distance_m=0.60, yaw_deg=40.0, pitch_deg=-50.0, fov_deg=45.0)
-# What a task's episodes see from the gripper (observation.images.wrist).
+# What a task's episodes see from the gripper (observation.images.wrist): where the SO-101 hex-nut
+# wrist mount for a 32x32 mm UVC module (SO-ARM100 repository, Optional/SO101_Wrist_Cam_Hex-Nut_Mount_
+# 32x32_UVC_Module) holds its camera. That mount screws (two M3, 8.1 mm apart, into the wrist roll
+# follower's two hex-nut recesses) onto the follower's flat face at y = +24 mm, with its 3.4 mm pin in
+# the servo-screw hole at x = -8.8, z = -13.2 mm. Its camera plate, 4.2 mm thick, holds the board on
+# four M2 holes 27 mm apart, centred at x = 2.5, y = 73.3, z = 6.6 mm (the board's face). The lens looks
+# through the plate along (0, -0.423, -0.906): tipped 25° from the jaws' -z toward them. The eye is
+# put 12 mm along that axis from the board (a guess at where an M12 lens's optics sit, ±5 mm). Up points
+# away from the gripper, so the jaws come in from the picture's bottom (the board could be turned in
+# 90° steps). 62° vertical field of view: 90° diagonal at 4:3, a wide lens assumed.
 WRIST_CAMERA = WristCamera()
 # Its name among a MuJoCo model's cameras (a task's scene adds it to the gripper).
 WRIST_CAMERA_NAME = "wrist"

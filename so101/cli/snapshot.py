@@ -278,7 +278,7 @@ def run(args: argparse.Namespace) -> int:
             ):
                 break
         reached_deg = sim.joint_angles_deg()
-        if args.looks == "varied":  # drawn as an episode's cameras draw it (so101.bodies.task_cameras)
+        if args.looks != "fixed":  # drawn as an episode's cameras draw it (so101.bodies.task_cameras)
             from so101.bodies.task_cameras import TaskCameras
 
             with TaskCameras(task, log=lambda message: None, looks=args.looks) as cameras:

@@ -245,6 +245,8 @@ def finish_policy(descriptor: dict, body: BodyKind, args: argparse.Namespace, ch
     for line in chosen.notes():
         print(f"so101 teleop: {line}", flush=True)
     print(f"so101 teleop: {chosen.reads()}", flush=True)
+    if chosen.recipe is not None:  # the cameras its eyes see: the front one
+        real_cameras = tuple(name for name in real_cameras if name == "front")
     env = {**chosen.env(args.task or "", args.policy_device), "SO101_LANG": args.lang,
            "SO101_POLICY_CAMERAS": ",".join(real_cameras)}
     if not args.task:
@@ -253,7 +255,7 @@ def finish_policy(descriptor: dict, body: BodyKind, args: argparse.Namespace, ch
     with_policy(descriptor, body.node_id, chosen.inputs, env, str(chosen.python), root)
     if chosen.recipe is not None:
         with_perception(descriptor, body.node_id, chosen.perception_env(args.lang), str(chosen.python),
-                        root)
+                        root, watched_by_policy=bool(real_cameras))
 
 
 def add_leader(descriptor: dict, body: BodyKind, port: str | None, calibration_file: Path | None,

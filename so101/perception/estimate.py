@@ -108,9 +108,39 @@ def object_state(sighting: Sighting, view: View, cube: Cube, box: Box, tip_m: Se
 
 # Below this share at its peak, the cube's map is not trusted (the arm hides it, or it left the picture).
 CUBE_SURE = 0.2
+# The newest this many sure sightings make the cube's place (their median: one picture's outlier is
+# out-voted), unless the newest is farther than FILTER_JUMP_M from it: then the cube moved (the jaws
+# lifted it), and the place starts again from there.
+FILTER_FRAMES = 7
+FILTER_JUMP_M = 0.02
 
 
-def kept_state(last: list[float] | None, seen: list[float], sure: float) -> list[float]:
-    """The object_state to send: what the eyes see now, or, while they are unsure of the cube (`sure`,
-    its map's peak share, below CUBE_SURE), where it was last seen."""
-    return seen if sure >= CUBE_SURE or last is None else last
+class CubeFilter:
+    """The object_state to send, from each picture's: the median of the newest sure ones, held where it
+    was while the eyes are unsure of the cube (see CUBE_SURE, FILTER_FRAMES, FILTER_JUMP_M)."""
+
+    def __init__(self) -> None:
+        self._seen: list[list[float]] = []
+
+    def reset(self) -> None:
+        self._seen.clear()
+
+    def state(self) -> list[float] | None:
+        if not self._seen:
+            return None
+        seen = np.asarray(self._seen)
+        centre = np.median(seen[:, :3], axis=0)
+        quarter_turns = 4 * np.arctan2(seen[:, 5], seen[:, 6]) * 2  # each level quaternion's yaw, times 4
+        yaw = math.atan2(float(np.median(np.sin(quarter_turns))), float(np.median(np.cos(quarter_turns)))) / 4
+        return [*(float(value) for value in centre), 0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2), *self._seen[-1][7:]]
+
+    def add(self, seen: list[float], sure: float) -> list[float]:
+        """The state to send after a picture whose object_state is `seen` and cube map's peak share `sure`."""
+        if sure >= CUBE_SURE or not self._seen:
+            now = self.state()
+            if now is not None and math.dist(now[:3], seen[:3]) > FILTER_JUMP_M:
+                self._seen.clear()
+            self._seen = [*self._seen[-(FILTER_FRAMES - 1):], list(seen)]
+        state = self.state()
+        assert state is not None
+        return state

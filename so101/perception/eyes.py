@@ -14,7 +14,7 @@ import numpy as np
 import numpy.typing as npt
 
 from so101.bodies.camera import TASK_FRONT_CAMERA, Camera
-from so101.perception.estimate import Sighting, kept_state, object_state, read_maps
+from so101.perception.estimate import CubeFilter, Sighting, object_state, read_maps
 from so101.perception.geometry import view_of
 from so101.tasks.objects import SceneFacts
 
@@ -55,8 +55,9 @@ def default_eyes_facts(size: tuple[int, int], trained: dict[str, Any]) -> EyesFa
 
 
 class Eyes:
-    """Loaded eyes: `see(picture, arm_deg)` -> (object_state, sighting). Keeps the cube where it last
-    saw it while its map is unsure (`reset` forgets it: a new episode)."""
+    """Loaded eyes: `see(picture, arm_deg)` -> (object_state, sighting), the cube's place the median of the
+    newest sightings, held while its map is unsure (so101.perception.estimate.CubeFilter; `reset` forgets
+    them: a new episode)."""
 
     def __init__(self, folder: Path, task: SceneFacts, threads: int = 1):
         import torch
@@ -77,10 +78,10 @@ class Eyes:
         self._kinematics = Kinematics()
         self._task = task
         self.view = view_of(self.facts.camera, *self.facts.size)
-        self._last: list[float] | None = None
+        self._filter = CubeFilter()
 
     def reset(self) -> None:
-        self._last = None
+        self._filter.reset()
 
     def see(self, picture: npt.NDArray[np.uint8], arm_deg: Sequence[float]) -> tuple[list[float], Sighting]:
         width, height = self.facts.size
@@ -91,8 +92,7 @@ class Eyes:
         sighting = read_maps(maps)
         tip_m = np.asarray(self._kinematics.tip_mm(list(arm_deg)[:5])) / 1000.0
         seen = object_state(sighting, self.view, self._task.cube, self._task.box, tip_m)
-        self._last = kept_state(self._last, seen, sighting.sure["cube"])
-        return list(self._last), sighting
+        return self._filter.add(seen, sighting.sure["cube"]), sighting
 
     def close(self) -> None:
         self._kinematics.close()

@@ -3,9 +3,10 @@ and in the world, its yaw and height, and where the box and the gripper's tip ar
 
 The arm's poses and the objects' places come from demonstrations (a dataset with
 `observation.environment_state`: `so101 demos`), so the eyes see the arm as it moves in a task,
-the cube in the jaws included. Each picture draws its own looks (`varied` or `unseen`: so101.bodies.looks)
-from a seed of its own, and a cube still lying where its episode put it moves to another layout's
-place half the time: thousands of layouts for the price of a few hundred demonstrations.
+the cube in the jaws included; half the pictures from frames whose cube still lies where it started.
+Each picture draws its own looks (`varied` or `unseen`: so101.bodies.looks) from a seed of its own,
+and a cube still lying where its episode put it moves to another layout's place half the time:
+thousands of layouts for the price of a few hundred demonstrations.
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ LOOKS_SEED_BASE = 5_000_000
 LAYOUT_SEED_BASE = 3_000_000
 # A cube within this of where its episode put it still lies there (the arm has not touched it).
 STILL_M = 0.002
+STILL_SHARE = 0.5  # the pictures drawn from such frames, on top of their share of the rest
 
 
 def yaw_of(quaternion_xyzw: npt.ArrayLike) -> npt.NDArray[np.float64]:
@@ -80,8 +82,12 @@ def draw_pictures(frames: Frames, count: int, seed: int, size: tuple[int, int], 
 
     width, height = size
     draw = np.random.default_rng(seed)
-    chosen = draw.integers(0, len(frames.angles_deg), count)
     still = frames.still
+    # Half the pictures from frames whose cube still lies where it started: where the policy reads it most
+    # (its first plan, the approach), and where a cube may move to any layout's place.
+    still_frames = np.flatnonzero(still)
+    chosen = np.where(draw.random(count) < STILL_SHARE, still_frames[draw.integers(0, len(still_frames), count)],
+                      draw.integers(0, len(frames.angles_deg), count))
     pictures = np.zeros((count, height, width, 3), dtype=np.uint8)
     cube_px, box_px, tip_px = np.zeros((count, 2)), np.zeros((count, 2)), np.zeros((count, 2))
     states, tips = np.zeros((count, 10)), np.zeros((count, 3))

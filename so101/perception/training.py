@@ -136,6 +136,9 @@ def train_eyes(train: dict[str, np.ndarray], held_out: dict[str, np.ndarray] | N
             line = f"eyes: step {step}/{steps}, loss {loss.item():.3f}, {time.monotonic() - started:.0f} s"
             if held_out is not None and (step % 1000 == 0 or step == steps):
                 line += ", held out: " + ", ".join(f"{key} {value:.2f}" for key, value in check(net, held_out).items())
+            if step % 1000 == 0 and step < steps:  # for the curve of success against training
+                (out / "steps").mkdir(parents=True, exist_ok=True)
+                torch.save({"state_dict": net.state_dict(), "channels": list(CHANNELS)}, out / "steps" / f"eyes-{step}.pt")
             say(line)
     out.mkdir(parents=True, exist_ok=True)
     result = check(net, held_out) if held_out is not None else {}

@@ -351,10 +351,11 @@ def with_policy(descriptor: dict, body_node_id: str, observed: tuple[str, ...], 
 
 
 def with_perception(descriptor: dict, body_node_id: str, perception_env: dict[str, str], python: str,
-                    root: PurePath = ROOT) -> dict:
+                    root: PurePath = ROOT, watched_by_policy: bool = False) -> dict:
     """with_policy's dataflow with a seeing recipe's eyes (nodes/perception.py, under the policy environment's
     `python`) between the front camera and the policy: they take the newest front picture and the body's
-    joints, and the policy's object_state is theirs, not the body's."""
+    joints, and the policy's object_state is theirs, not the body's. `watched_by_policy` (a real camera):
+    the policy takes the front picture too, to stop when it goes silent (SO101_POLICY_CAMERAS)."""
     pictures = picture_sources(descriptor)
     node = {
         "id": PERCEPTION_NODE_ID, **node_launch(PERCEPTION_NODE_FILE, root, python),
@@ -364,6 +365,8 @@ def with_perception(descriptor: dict, body_node_id: str, perception_env: dict[st
     }
     policy = _node(descriptor, POLICY_NODE_ID)
     _retarget(policy, "object_state", f"{PERCEPTION_NODE_ID}/object_state")
+    if watched_by_policy:
+        policy["inputs"]["image"] = {"source": pictures["image"], "queue_size": 1}
     descriptor["nodes"].insert(descriptor["nodes"].index(policy), node)
     return descriptor
 
