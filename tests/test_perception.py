@@ -147,8 +147,8 @@ def test_learn_refuses_in_one_line_and_touches_nothing(tmp_path, setup, extra, m
         (out / "mine.txt").write_text("kept")
     elif setup == "other options":
         out.mkdir()
-        settings = {"task": "cube_to_box", "sees": True, "body": "mujoco", "episodes": 300, "pictures": 30000,
-                    "eyes_steps": 3000, "policy_steps": 6500}
+        settings = {"task": "cube_to_box", "sees": True, "body": "mujoco", "episodes": 300, "pictures": 40000,
+                    "eyes_steps": 4000, "policy_steps": 6500, "seed": 1}
         (out / "so101_learn.json").write_text(json.dumps({"settings": settings, "done": {"demos": 180.0}}))
     before = sorted(path.name for path in out.iterdir()) if out.exists() else None
     python = extra.split()[-1] if extra else str(fake_policy_env(tmp_path))

@@ -43,7 +43,7 @@ STATE_POLICY_ARGS = (
     "--policy.n_heads=4", "--policy.dim_feedforward=512", "--policy.n_encoder_layers=2", "--policy.n_decoder_layers=1",
     "--policy.use_vae=false", "--policy.chunk_size=20", "--policy.n_action_steps=20", "--policy.optimizer_lr=3e-4",
     '--policy.normalization_mapping={"VISUAL": "MEAN_STD", "STATE": "MEAN_STD", "ENV": "MEAN_STD", "ACTION": "MEAN_STD"}',
-    "--batch_size=64", "--num_workers=0", "--seed=1", "--wandb.enable=false",
+    "--batch_size=64", "--num_workers=0", "--wandb.enable=false",
 )
 ONE_THREAD = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 
@@ -64,6 +64,9 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
                         help="--sees: the eyes' training steps, of 32 pictures (default 4000)")
     parser.add_argument("--policy-steps", type=whole_number(1, 1_000_000), default=6500, metavar="N",
                         help="lerobot-train's steps for the state policy, of 64 frames (default 6500)")
+    parser.add_argument("--seed", type=whole_number(0, 2**31 - 1), default=1, metavar="S",
+                        help="the training seed of the state policy and the eyes (default 1); a score moves with it "
+                             "(docs/experiments/eyes-taught-by-the-simulator.md)")
     parser.add_argument("--policy-python", type=Path, default=None, metavar="PY",
                         help=f"the policy environment's Python, with LeRobot (default {python_in(default_dir())}, "
                              "which so101 policy-env makes)")
@@ -80,13 +83,18 @@ def run(args: argparse.Namespace) -> int:
         return _fail(f"{python} has no lerobot-train beside it: give the Python of a policy environment (so101 policy-env)")
     settings = {"task": args.task, "sees": args.sees, "body": args.body, "episodes": args.episodes,
                 "pictures": args.pictures if args.sees else 0, "eyes_steps": args.eyes_steps if args.sees else 0,
-                "policy_steps": args.policy_steps}
+                "policy_steps": args.policy_steps, "seed": args.seed}
     state_file = out / STATE_FILE
     if out.exists() and not state_file.is_file() and any(out.iterdir()):
         return _fail(f"{out} is not empty and not a folder `so101 learn` began: give a new folder")
     done: dict[str, float] = {}
     if state_file.is_file():
-        saved = json.loads(state_file.read_text(encoding="utf-8"))
+        try:
+            saved = json.loads(state_file.read_text(encoding="utf-8"))
+        except ValueError:
+            saved = None
+        if not isinstance(saved, dict) or not isinstance(saved.get("settings"), dict):
+            return _fail(f"{state_file} is not a file `so101 learn` wrote: give a new folder")
         if saved.get("settings") != settings:
             differ = ", ".join(f"{key} {saved['settings'].get(key)!r} there, {value!r} now"
                                for key, value in settings.items() if saved.get("settings", {}).get(key) != value)
@@ -104,7 +112,8 @@ def run(args: argparse.Namespace) -> int:
         if args.sees:
             learning.stage("held-out demos", lambda: learning.demos(work / "held-out-demos", 20, HELD_OUT_SEED))
             learning.stage("pictures", lambda: learning.pictures(args.pictures))
-        learning.stage("training", lambda: learning.train(args.policy_steps, args.eyes_steps if args.sees else 0))
+        learning.stage("training", lambda: learning.train(args.policy_steps, args.eyes_steps if args.sees else 0,
+                                                          args.seed))
         learning.stage("folder", lambda: learning.assemble())
     except KeyboardInterrupt:
         learning.stop_children()
@@ -158,14 +167,19 @@ class Learning:
         self.children.clear()
 
     def stop_children(self) -> None:
-        for child in self.children:
-            if child.poll() is None:
-                os.killpg(child.pid, signal.SIGTERM)
-        for child in self.children:
-            try:
-                child.wait(timeout=20)
-            except subprocess.TimeoutExpired:
-                os.killpg(child.pid, signal.SIGKILL)
+        """Each stage's command stopped as Ctrl-C stops it (so101 demos stops its dataflows), then harder."""
+        for stop, wait_s in ((signal.SIGINT, 30), (signal.SIGTERM, 10), (signal.SIGKILL, 5)):
+            running = [child for child in self.children if child.poll() is None]
+            for child in running:
+                try:
+                    os.killpg(child.pid, stop)
+                except ProcessLookupError:
+                    pass
+            for child in running:
+                try:
+                    child.wait(timeout=wait_s)
+                except subprocess.TimeoutExpired:
+                    pass
         self.children.clear()
 
     def demos(self, folder: Path, episodes: int, seed: int) -> None:
@@ -190,12 +204,12 @@ class Learning:
                    str(self.work / "pictures-held-out.npz"), "--count", "1500", "--seed", "77"]
         self.wait([(self.start(command, log), log, "drawing the held-out pictures")])
 
-    def train(self, policy_steps: int, eyes_steps: int) -> None:
+    def train(self, policy_steps: int, eyes_steps: int, seed: int) -> None:
         trained = self.work / "state-policy"
         shutil.rmtree(trained, ignore_errors=True)
         log = self.work / "state-policy.log"
         command = [str(self.python.parent / "lerobot-train"), f"--dataset.repo_id=local/{self.out.name}-demos",
-                   f"--dataset.root={self.out / 'demos'}", *STATE_POLICY_ARGS, f"--steps={policy_steps}",
+                   f"--dataset.root={self.out / 'demos'}", *STATE_POLICY_ARGS, f"--seed={seed}", f"--steps={policy_steps}",
                    f"--save_freq={policy_steps}", f"--output_dir={trained}"]
         children = [(self.start(command, log, {**OFFLINE, **ONE_THREAD}), log, "lerobot-train (the state policy)")]
         if eyes_steps:
@@ -204,9 +218,10 @@ class Learning:
             command = [str(self.python), "-m", "so101.perception.teach", "--pictures",
                        *(str(self.work / f"pictures-{index}.npz") for index in (0, 1)),
                        "--held-out", str(self.work / "pictures-held-out.npz"), "--out", str(self.work / EYES_DIR),
-                       "--steps", str(eyes_steps)]
+                       "--steps", str(eyes_steps), "--seed", str(seed)]
             children.append((self.start(command, eyes_log, ONE_THREAD), eyes_log, "the eyes' training"))
-        print(f"learn: training; logs: {', '.join(str(log) for _, log, _ in children)}", flush=True)
+        print(f"learn: the state policy{' and the eyes' if eyes_steps else ''} at once, logs: "
+              f"{', '.join(str(log) for _, log, _ in children)}", flush=True)
         self.wait(children)
 
     def assemble(self) -> None:

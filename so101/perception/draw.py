@@ -27,7 +27,7 @@ def main(argv: list[str] | None = None) -> int:
     started = time.monotonic()
     drawn = draw_pictures(read_frames(args.dataset), args.count, args.seed, tuple(args.size), args.looks)
     partial = args.out.with_name(args.out.name + ".part.npz")
-    np.savez(partial, **drawn)
+    np.savez(partial, **drawn)  # type: ignore[arg-type]  # numpy's stub reads a keyword as allow_pickle
     partial.replace(args.out)  # whole or not at all: a stopped run leaves no half file under the name
     print(f"pictures: {args.count} drawn in {time.monotonic() - started:.0f} s into {args.out}", flush=True)
     return 0

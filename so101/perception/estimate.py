@@ -78,7 +78,7 @@ def cube_in_world(sighting: Sighting, view: View, cube: Cube, box: Box, tip_m: S
     centre: npt.NDArray[np.float64] = view.on_plane([sighting.pixels["cube"]], cube.half_size_m + sighting.cube_lift_m)[0]
     if not landmarks:
         return centre
-    known = {"box": (*box.xy_m, BOX_POINT_HEIGHT_M)}
+    known: dict[str, tuple[float, ...]] = {"box": (*box.xy_m, BOX_POINT_HEIGHT_M)}
     if tip_m is not None:
         known["tip"] = tuple(float(value) for value in tip_m)
     cube_px = np.asarray(sighting.pixels["cube"])

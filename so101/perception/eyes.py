@@ -90,7 +90,7 @@ class Eyes:
         with self._torch.inference_mode():
             maps = self._net(self._torch.from_numpy(np.ascontiguousarray(picture)).permute(2, 0, 1)[None])[0].numpy()
         sighting = read_maps(maps)
-        tip_m = np.asarray(self._kinematics.tip_mm(list(arm_deg)[:5])) / 1000.0
+        tip_m = [coordinate / 1000.0 for coordinate in self._kinematics.tip_mm(list(arm_deg)[:5])]
         seen = object_state(sighting, self.view, self._task.cube, self._task.box, tip_m)
         return self._filter.add(seen, sighting.sure["cube"]), sighting
 

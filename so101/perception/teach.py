@@ -15,6 +15,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, required=True, help="the eyes' folder to write (eyes.pt, eyes.json)")
     parser.add_argument("--steps", type=int, default=3000)
     parser.add_argument("--threads", type=int, default=1)
+    parser.add_argument("--seed", type=int, default=1)
     args = parser.parse_args(argv)
     import torch
 
@@ -22,7 +23,7 @@ def main(argv: list[str] | None = None) -> int:
 
     torch.set_num_threads(args.threads)
     held_out = load_pictures([args.held_out]) if args.held_out else None
-    result = train_eyes(load_pictures(args.pictures), held_out, args.out, args.steps,
+    result = train_eyes(load_pictures(args.pictures), held_out, args.out, args.steps, seed=args.seed,
                         say=lambda line: print(line, flush=True))
     print("eyes: held out: " + ", ".join(f"{key} {value:.2f}" for key, value in result.items()), flush=True)
     return 0
