@@ -161,12 +161,15 @@ def servo_positions(arm) -> list[int]:
     return [arm.physical_position(servo) for servo in range(1, 7)]
 
 
+@pytest.mark.parametrize("kind", ["seeing_policy", "seeing_recipe"])
 def test_a_policy_that_sees_drives_the_emulated_arm_from_file_cameras_within_its_limits_and_stops_with_a_camera(
-        tmp_path, policy_python, seeing_policy):
-    """`so101 teleop --body real --camera ... --policy DIR`: the cameras' 64x48 files scaled to the policy's 32x24.
+        tmp_path, policy_python, kind, request):
+    """`so101 teleop --body real --camera ... --policy DIR`: the cameras' 64x48 files scaled to the policy's 32x24
+    (a seeing recipe's: its eyes', which fill the policy's object_state from the front camera; no --task).
     The policy drives; the front camera vanishes mid-drive and the policy stops, said in one line, the arm held;
     `policy on` is refused until the camera is back, and drives again once it is. Every goal the emulated bus was
     sent kept the joint limits and the speed limit, and torque is off at the end."""
+    seeing_policy = request.getfixturevalue(kind)
     width, height = (2 * side for side in SEEN_SIZE)
     front = write_numbered_video(tmp_path / "front.mp4", 1000, width=width, height=height)
     wrist = write_numbered_video(tmp_path / "wrist.mp4", 1000, width=width, height=height)
