@@ -60,7 +60,7 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
                         help="demonstrations (default 300)")
     parser.add_argument("--pictures", type=whole_number(100, 1_000_000), default=40_000, metavar="N",
                         help="--sees: pictures drawn for the eyes (default 40000; 2.3 GB of memory at 160x120)")
-    parser.add_argument("--eyes-steps", type=whole_number(1, 1_000_000), default=4000, metavar="N",
+    parser.add_argument("--eyes-steps", type=whole_number(10, 1_000_000), default=4000, metavar="N",
                         help="--sees: the eyes' training steps, of 32 pictures (default 4000)")
     parser.add_argument("--policy-steps", type=whole_number(1, 1_000_000), default=6500, metavar="N",
                         help="lerobot-train's steps for the state policy, of 64 frames (default 6500)")

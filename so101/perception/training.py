@@ -120,7 +120,9 @@ def train_eyes(train: dict[str, np.ndarray], held_out: dict[str, np.ndarray] | N
     picker = np.random.default_rng(seed)
     net = EyesNet()
     optimizer = torch.optim.AdamW(net.parameters(), lr=lr, weight_decay=1e-4)
-    schedule = torch.optim.lr_scheduler.OneCycleLR(optimizer, max_lr=lr, total_steps=steps, pct_start=0.05)
+    # A warm-up of 5% of the steps (at least two: OneCycleLR divides by the warm-up's length less one).
+    schedule = torch.optim.lr_scheduler.OneCycleLR(optimizer, max_lr=lr, total_steps=steps,
+                                                   pct_start=min(0.5, max(0.05, 2.5 / steps)))
     width, height = (int(v) for v in train["size"])
     grid = (height // STRIDE, width // STRIDE)
     started = time.monotonic()
