@@ -332,17 +332,16 @@ def test_the_prompt_says_how_to_ask_the_policy_and_without_one_how_to_start_it()
 
 
 @pytest.mark.skipif(__import__("shutil").which("tmux") is None, reason="tmux is not installed (.ci/run installs it)")
-@pytest.mark.parametrize("kind", ["state-only", "seeing", "recipe"])
+@pytest.mark.parametrize("kind", ["state-only", "seeing"])
 def test_at_the_prompt_the_policy_drives_and_a_typed_command_takes_over(tmp_path, policy_python, kind, request):
     """The state-only policy reads the body's objects; the one that sees, the camera node's two pictures
-    (drawn at 25 a second, the rate it learned from); a seeing recipe's, the perception node's object_state
-    from the camera node's front picture: `policy on` starts only once all it reads has come."""
+    (drawn at 25 a second, the rate it learned from): `policy on` starts only once all it reads has come.
+    (A seeing recipe at the prompt: tests/test_real_cameras.py, on the emulated arm.)"""
     import time
 
     from tests.helpers.terminal import start_teleop
 
-    fixture = {"seeing": "seeing_policy", "recipe": "seeing_recipe"}
-    policy = TINY_POLICY if kind == "state-only" else request.getfixturevalue(fixture[kind])
+    policy = TINY_POLICY if kind == "state-only" else request.getfixturevalue("seeing_policy")
     terminal, _, _ = start_teleop(tmp_path, "en", extra=f"--task cube_to_box --seed 3 --policy {policy} "
                                                          f"--policy-python {policy_python}", HF_HUB_OFFLINE="1")
     try:
