@@ -25,8 +25,8 @@ import numpy.typing as npt
 from so101.perception.geometry import View
 from so101.tasks.objects import Box, Cube
 
-STRIDE = 4  # picture pixels per cell (so101.perception.net.STRIDE; net imports torch)
-KEYPOINTS = ("cube", "box", "tip")  # so101.perception.net.KEYPOINTS: the heat maps' order
+STRIDE = 4  # picture pixels per cell of the maps 
+KEYPOINTS = ("cube", "box", "tip")  # the heat maps' order
 LIFT_SCALE_M = 0.1  # the lift channel: the cube centre's height above lying on the floor, in these
 BOX_POINT_HEIGHT_M = Box().floor_thickness_m  # the box's point the eyes find: its floor's top face's centre
 # A landmark this many pixels from the cube counts half as much as one on it.

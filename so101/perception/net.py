@@ -11,8 +11,8 @@ from __future__ import annotations
 import torch
 from torch import nn
 
-STRIDE = 4  # picture pixels per cell of the maps
-KEYPOINTS = ("cube", "box", "tip")
+from so101.perception.estimate import KEYPOINTS  # the maps' order, read there without torch
+
 CHANNELS = (*KEYPOINTS, *(f"{name}_{axis}" for name in KEYPOINTS for axis in ("du", "dv")), "cos4yaw", "sin4yaw", "lift")
 
 

@@ -14,9 +14,9 @@ import torch.nn.functional as F
 
 from so101.bodies.camera import TASK_FRONT_CAMERA
 from so101.perception.eyes import EYES_FACTS, EYES_WEIGHTS, default_eyes_facts
-from so101.perception.estimate import LIFT_SCALE_M, cube_in_world, read_maps
+from so101.perception.estimate import KEYPOINTS, LIFT_SCALE_M, STRIDE, cube_in_world, read_maps
 from so101.perception.geometry import view_of
-from so101.perception.net import CHANNELS, KEYPOINTS, STRIDE, EyesNet
+from so101.perception.net import CHANNELS, EyesNet
 from so101.perception.pictures import yaw_mod_quarter
 from so101.tasks.cube_to_box import CUBE_TO_BOX
 
