@@ -67,7 +67,7 @@ def main() -> int:
     try:
         settings = CameraSettings.from_environ(os.environ)
         cameras = TaskCameras(task_named(settings.task) if settings.task else None, settings.assets_dir,
-                              log=lambda line: None, looks=settings.looks)
+                              log=lambda line: None, looks=settings.looks, poses=settings.camera_poses)
         width, height = settings.image_size or (0, 0)
         cameras.draw(HOME_POSE_DEG, [], width, height)  # a renderer that cannot work says so now, in one line
     except (ValueError, ModelFilesError, DisplayError, RuntimeError) as error:

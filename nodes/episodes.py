@@ -54,6 +54,7 @@ from so101.runtime.lockstep import (  # noqa: E402
     AGAIN_WORD, INFERENCE_MS_KEY, NOT_WRITTEN_KEY, FrameParts, FrameTag, frame_tag,
 )
 from so101.runtime.logs import send_diagnostics_to  # noqa: E402
+from so101.bodies.camera_file import cameras_metadata  # noqa: E402
 from so101.bodies.looks import looks_metadata  # noqa: E402
 from so101.tasks import task_named  # noqa: E402
 from so101.tasks.episodes import EpisodeClock, Outcome, seeds_for  # noqa: E402
@@ -97,6 +98,7 @@ def main() -> int:
     idle = settings.idle
     # The pictures it waits for: those written, and the front one for --video's mp4s.
     written = {"image": IMAGE_KEY in video_sizes, "wrist_image": WRIST_IMAGE_KEY in video_sizes}
+    recorded = tuple(name for name, input_id in (("front", "image"), ("wrist", "wrist_image")) if written[input_id])
     pictures = tuple(input_id for input_id in ("image", "wrist_image") if settings.image_size and (
         (writer is not None and written[input_id]) or (input_id == "image" and settings.video_dir is not None)))
     observation = ("joint_state", "gripper_state", "object_state", "task_status", *pictures)
@@ -126,8 +128,10 @@ def main() -> int:
         recorder = writer.start_episode(task.instruction) if writer is not None else None
         if recorder is not None:
             recorder.seed = seeds[index]
-            if settings.image_size:  # the pictures' looks, by episode: a dataset says what it showed
+            if settings.image_size:  # the pictures' looks, by episode: a dataset says what it showed, and from where
                 recorder.looks = looks_metadata(settings.looks, seeds[index])
+                recorder.cameras = cameras_metadata(settings.camera_poses, settings.looks, seeds[index], recorded,
+                                                    settings.image_size)
         if settings.video_dir is not None and settings.image_size:
             width, height = settings.image_size
             video = StreamingEncoder(settings.video_dir / f"seed_{seeds[index]}.mp4",

@@ -45,7 +45,7 @@ def main() -> int:
     send_diagnostics_to("stdout")
     try:
         settings = PerceptionSettings.from_environ(os.environ)
-        eyes = Eyes(settings.eyes_dir, task_named(settings.task), settings.threads)
+        eyes = Eyes(settings.eyes_dir, task_named(settings.task), settings.threads, settings.camera_poses.get("front"))
     except (ValueError, OSError) as error:
         return cannot_start(error, NODE_ID)
     width, height = eyes.facts.size

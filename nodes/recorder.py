@@ -92,6 +92,7 @@ def main() -> int:
     reports: queue.Queue[str] = queue.Queue()  # lines from the save thread, sent from this one
     recording = Recording(writer, str(settings.root), settings.fps, settings.lang,
                           needs_image=settings.image_size is not None, say=reports.put, task=task, looks=settings.looks,
+                          camera_poses=settings.camera_poses, image_size=settings.image_size,
                           observed=settings.observed, wrist=wrist,
                           camera_lost=settings.camera_lost if settings.real_cameras else "",
                           log=lambda line: logger.info("[recorder] %s", line))

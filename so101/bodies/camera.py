@@ -7,18 +7,39 @@ loading PyBullet.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 
 @dataclass(frozen=True)
 class Camera:
-    """A camera orbiting `target_xyz_m`, in PyBullet's yaw/pitch terms (degrees)."""
+    """A camera orbiting `target_xyz_m`, in PyBullet's yaw/pitch terms (degrees); `fov_deg` the vertical
+    field of view; `roll_deg` turns it about its line of sight (a real camera's tilt; the simulator's are level)."""
 
     target_xyz_m: tuple[float, float, float] = (0.1, -0.05, 0.12)
     distance_m: float = 0.65
     yaw_deg: float = 35.0
     pitch_deg: float = -25.0
     fov_deg: float = 50.0
+    roll_deg: float = 0.0
+
+    def axes(self) -> tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...], tuple[float, ...]]:
+        """(eye, forward, right, up) in the base's frame, as MuJoCo's free camera draws it (azimuth yaw + 90°,
+        elevation pitch), then turned by roll_deg about forward (up toward right when positive)."""
+        azimuth, elevation = math.radians(self.yaw_deg + 90.0), math.radians(self.pitch_deg)
+        forward = (math.cos(elevation) * math.cos(azimuth), math.cos(elevation) * math.sin(azimuth), math.sin(elevation))
+        eye = tuple(t - self.distance_m * f for t, f in zip(self.target_xyz_m, forward))
+        level = math.hypot(forward[0], forward[1])
+        right = (forward[1] / level, -forward[0] / level, 0.0)  # forward x +z, made unit
+        up = _cross(right, forward)
+        roll = math.radians(self.roll_deg)
+        rolled_right = tuple(r * math.cos(roll) - u * math.sin(roll) for r, u in zip(right, up))
+        rolled_up = tuple(u * math.cos(roll) + r * math.sin(roll) for r, u in zip(right, up))
+        return eye, forward, rolled_right, rolled_up
+
+
+def _cross(a: tuple[float, ...], b: tuple[float, ...]) -> tuple[float, float, float]:
+    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
 
 
 @dataclass(frozen=True)

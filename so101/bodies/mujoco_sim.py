@@ -173,6 +173,22 @@ class SO101MuJoCo:
     def render_rgb(self, width: int = 640, height: int = 480, camera: Camera | WristCamera = DEFAULT_CAMERA) -> RgbImage:
         """The scene as an RGB image, uint8 of shape (height, width, 3), drawn offscreen from `camera`
         (the orbiting one, or the one on the gripper: a task's scene has it)."""
+        self._render_setup(width, height, camera, segmentation=False)
+        return np.array(self._renderer.render(), dtype=np.uint8)
+
+    def render_geoms(self, width: int, height: int, camera: Camera | WristCamera = DEFAULT_CAMERA) -> npt.NDArray[np.int32]:
+        """Which geom each pixel shows, int32 of shape (height, width), -1 where none: render_rgb's picture
+        as MuJoCo's segmentation draws it (a camera's fit compares the arm's outline with a picture's)."""
+        self._render_setup(width, height, camera, segmentation=True)
+        self._renderer.enable_segmentation_rendering()
+        try:
+            drawn = self._renderer.render()
+        finally:
+            self._renderer.disable_segmentation_rendering()
+        ids = np.asarray(drawn[:, :, 0], dtype=np.int32)
+        return np.where(np.asarray(drawn[:, :, 1]) == int(mujoco.mjtObj.mjOBJ_GEOM), ids, -1).astype(np.int32)
+
+    def _render_setup(self, width: int, height: int, camera: Camera | WristCamera, segmentation: bool) -> None:
         check_picture(self.renders, width, height)
         if isinstance(camera, WristCamera) and self.scene is None:
             raise ValueError("the wrist camera is a task's: start the simulation with a task")
@@ -195,7 +211,7 @@ class SO101MuJoCo:
                     self._renderer.scene.flags[flag] = False
         if isinstance(camera, WristCamera):
             self._renderer.update_scene(self.data, WRIST_CAMERA_NAME)
-            return np.array(self._renderer.render(), dtype=np.uint8)
+            return
         view = mujoco.MjvCamera()
         view.lookat[:] = camera.target_xyz_m
         view.distance = camera.distance_m
@@ -203,7 +219,10 @@ class SO101MuJoCo:
         view.azimuth = camera.yaw_deg + 90.0
         view.elevation = camera.pitch_deg
         self._renderer.update_scene(self.data, view)
-        return np.array(self._renderer.render(), dtype=np.uint8)
+        if camera.roll_deg:  # the free camera is level: its up turned about its line of sight
+            _, _, _, up = camera.axes()
+            for eye in self._renderer.scene.camera:
+                eye.up[:] = up
 
     # -- life cycle ------------------------------------------------------------------
     def drawn_scene(self) -> Any:

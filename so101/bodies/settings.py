@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Mapping, Self
 
 from so101.assets import ASSETS_ENV_VAR
+from so101.bodies.camera_file import CAMERA_POSES_ENV_VAR, CAMERA_POSES_HELP, CameraFile, parse_camera_poses
 from so101.bodies.looks import DEFAULT_LOOKS, LOOKS_CHOICES
 from so101.bodies.pd_servo import DEFAULT_DAMPING_RATIO
 from so101.feetech.calibration import parse_joint_signs
@@ -22,7 +23,7 @@ from so101.runtime.display import MODE_ENV_VAR
 from so101.lang import DEFAULT_LANGUAGE, ENV_VAR as LANG_ENV_VAR, language_from_environ
 from so101.runtime.settings import (
     EnvironSettings, Setting, parse_number, read_choice, read_image_size, read_number, read_optional_number, read_optional_path,
-    read_file_path, read_stripped_text, read_text, read_whole_number, setting,
+    read_file_path, read_parsed, read_stripped_text, read_text, read_whole_number, setting,
 )
 from so101.runtime.lockstep import steps_per_frame
 from so101.runtime.versions import spawning_daemon_version_problem
@@ -107,6 +108,8 @@ class NodeSettings(EnvironSettings):
     looks: str = setting(
         "SO101_LOOKS", DEFAULT_LOOKS, "in lockstep with pictures: `fixed` (the pictures as always) or `varied` (each "
         "episode's seed draws its light, colours and camera placement: so101/bodies/looks.py)", read_choice(LOOKS_CHOICES))
+    camera_poses: dict[str, CameraFile] = setting(
+        CAMERA_POSES_ENV_VAR, "", CAMERA_POSES_HELP, read_parsed(parse_camera_poses))
     lockstep_episode_frames: int = setting(
         "SO101_EPISODE_FRAMES", "0",
         "N > 0: in lockstep, an episode's last frame is at most N; after it, or after a frame whose `task_status` "

@@ -14,11 +14,11 @@ from __future__ import annotations
 
 import ctypes
 import os
-from dataclasses import replace
 from pathlib import Path
 from typing import Callable, Sequence
 
-from so101.bodies.camera import DEFAULT_CAMERA, TASK_FRONT_CAMERA, WRIST_CAMERA, WRIST_CAMERA_NAME, Camera
+from so101.bodies.camera import DEFAULT_CAMERA, WRIST_CAMERA, WRIST_CAMERA_NAME, Camera
+from so101.bodies.camera_file import CameraFile, drawn_front, fixed_cameras, wrist_placement
 from so101.bodies.looks import DEFAULT_LOOKS, Looks, looks_for
 from so101.bodies.protocol import AnglesDeg, ObjectState, RgbImage, SceneTask
 from so101.bodies.settings import NodeSettings
@@ -55,7 +55,8 @@ class TaskCameras:
     "fixed": the pictures as they always were, whatever the seed."""
 
     def __init__(self, task: SceneTask | None, assets_dir: Path | str | None = None,
-                 log: Callable[[str], None] = print, looks: str = DEFAULT_LOOKS):
+                 log: Callable[[str], None] = print, looks: str = DEFAULT_LOOKS,
+                 poses: dict[str, CameraFile] | None = None):
         # MuJoCo's body as a model to draw: posed by hand, never stepped.
         from so101.bodies.mujoco_sim import SO101MuJoCo
 
@@ -74,10 +75,16 @@ class TaskCameras:
                               for root in roots]
         self._floor_geom = int(model.geom("floor").id)
         self._wrist = int(model.camera(WRIST_CAMERA_NAME).id) if task is not None else None
-        # A task's front camera frames its workspace; without a task, the whole arm (so101 snapshot's view).
-        self.fixed_front = TASK_FRONT_CAMERA if task is not None else DEFAULT_CAMERA
+        # A task's front camera frames its workspace, where `poses` (camera files) put it or where the
+        # simulator's own stands; without a task, the whole arm (so101 snapshot's view).
+        self.poses = dict(poses or {})
+        front, wrist = fixed_cameras(self.poses)
+        self.fixed_front = front if task is not None else DEFAULT_CAMERA
         if task is not None:
-            model.vis.global_.fovy = TASK_FRONT_CAMERA.fov_deg
+            model.vis.global_.fovy = front.fov_deg
+        if self._wrist is not None and "wrist" in self.poses:
+            pos, quat = wrist_placement(wrist)
+            model.cam_pos[self._wrist], model.cam_quat[self._wrist], model.cam_fovy[self._wrist] = pos, quat, wrist.fov_deg
         self._fixed = (model.light_dir.copy(), model.light_diffuse.copy(), model.geom_rgba.copy(),
                        float(model.vis.global_.fovy), model.cam_pos.copy(), model.cam_fovy.copy())
 
@@ -104,14 +111,7 @@ class TaskCameras:
 
     def front_camera(self) -> Camera:
         """The front camera as this episode's looks place it."""
-        looks, fixed = self.looks, self.fixed_front
-        if looks is None:
-            return fixed
-        target = tuple(float(a + b) for a, b in zip(fixed.target_xyz_m, looks.front_shift_m))
-        return replace(fixed, target_xyz_m=(target[0], target[1], target[2]),
-                       yaw_deg=fixed.yaw_deg + looks.front_turn_deg[0],
-                       pitch_deg=fixed.pitch_deg + looks.front_turn_deg[1],
-                       fov_deg=fixed.fov_deg + looks.front_fov_deg)
+        return drawn_front(self.fixed_front, self.looks)
 
     def draw(self, angles_deg: AnglesDeg | Sequence[float], object_state: ObjectState | Sequence[float], width: int,
              height: int, wrist: bool = True) -> tuple[RgbImage, RgbImage | None]:
@@ -122,7 +122,10 @@ class TaskCameras:
             scene.show_object_state([float(value) for value in object_state])
         # After the objects: posing recomputes the kinematics of both.
         self._model.show_pose_deg([float(angle) for angle in angles_deg])
-        front = self._model.render_rgb(width, height, self.front_camera())
+        front_camera = self.front_camera()
+        if scene is not None:  # MuJoCo's free camera takes its field of view from the model
+            self._model.model.vis.global_.fovy = front_camera.fov_deg
+        front = self._model.render_rgb(width, height, front_camera)
         return front, self._model.render_rgb(width, height, WRIST_CAMERA) if wrist and scene is not None else None
 
     def close(self) -> None:
@@ -142,7 +145,7 @@ def node_cameras(task: SceneTask | None, settings: NodeSettings, assets_dir: Pat
     cannot work stops the node in one line before it joins."""
     if settings.lockstep_pictures is None and not settings.image_hz > 0:
         return None
-    cameras = TaskCameras(task, assets_dir, log, settings.looks)
+    cameras = TaskCameras(task, assets_dir, log, settings.looks, settings.camera_poses)
     cameras.show_seed(settings.seed)
     from so101.robot import HOME_POSE_DEG
 

@@ -41,6 +41,7 @@ from so101.bodies.looks import DEFAULT_LOOKS, LOOKS_CHOICES
 from so101.bodies.registry import BODIES, BodyKind
 from so101.dataset.features import DEFAULT_FPS, video_keys_and_sizes
 from so101.dataset.settings import DEFAULT_IMAGE_SIZE
+from so101.launch.camera_poses import add_camera_pose_option, draw_from_poses
 from so101.launch.beside_prompt import (
     TEXT, add_body_arguments, add_log_option, add_task_arguments, add_web_arguments, add_web_view, prepare, run_beside,
     task_problem,
@@ -56,7 +57,8 @@ from so101.runtime.argtypes import (
     add_camera_size_option, add_language_option, image_size, observed_list, parsed_by, whole_number,
 )
 from so101.runtime.dataflow import (
-    LEADER_READY_MARKS, LOADED_MARKS, POLICY_READY_MARKS, PROMPT_NODE_FILE, ROOT, WEB_VIEW_MARKS, dataflow_copy,
+    CAMERA_NODE_ID, LEADER_READY_MARKS, LOADED_MARKS, PERCEPTION_NODE_ID, POLICY_READY_MARKS, PROMPT_NODE_FILE, ROOT,
+    WEB_VIEW_MARKS, dataflow_copy,
     with_camera, with_expert, with_leader, with_perception, with_policy, with_recorder, with_task,
 )
 from so101.runtime.lockstep import DEFAULT_LOCKSTEP_FPS
@@ -81,6 +83,7 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
                              "its light, floor and object colours and camera placement; the dataset keeps them) or "
                              "unseen (looks held out of varied's palettes and spreads)")
     parser.add_argument("--observe", type=observed_list, default=None, metavar="LIST", help=f"--record: {OBSERVE_HELP}")
+    add_camera_pose_option(parser)
     add_camera_size_option(parser, None, "--record: each camera's pictures, stored as video; real cameras are asked "
                                          "for it; `so101 bench --cameras --camera-size WxH` says what a size costs",
                            default_text=f"{DEFAULT_IMAGE_SIZE} on a simulation, {DEFAULT_CAMERA_SIZE} for real cameras")
@@ -188,6 +191,11 @@ def run(args: argparse.Namespace) -> int:
             print(f"so101 teleop: {problem}", file=sys.stderr)
             return 2
     add_real_cameras(descriptor, cameras, args.image_size, args.image_size, args.camera_fps)  # seen in the web view
+    if args.camera_poses and not (launch.body.simulated and args.task is not None and draw_from_poses(
+            descriptor, args.camera_poses, (CAMERA_NODE_ID, "recorder", PERCEPTION_NODE_ID))):
+        print("so101 teleop: --camera-pose draws a task's simulated cameras: it goes with --task NAME on a simulated "
+              "body, and --record DIR or a --policy that sees", file=sys.stderr)
+        return 2
     web_line = add_web_view(args, descriptor, launch.body, "teleop")
     if web_line:
         ready_marks += (WEB_VIEW_MARKS,)

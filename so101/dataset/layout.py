@@ -75,6 +75,8 @@ class EpisodeSummary:
 SEEDS_KEY = "so101_episode_seeds"
 # Each episode's pictures' looks (so101.bodies.looks: "fixed", or the varied ones drawn), by episode index.
 LOOKS_KEY = "so101_episode_looks"
+# Where each episode's simulated cameras stood (so101.bodies.camera_file: each camera's file, as drawn), a list by episode index.
+CAMERAS_KEY = "so101_episode_cameras"
 
 
 def recorder_features(video_sizes: Mapping[str, tuple[int, int]],

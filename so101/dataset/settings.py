@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from so101.assets import ASSETS_ENV_VAR
+from so101.bodies.camera_file import CAMERA_POSES_ENV_VAR, CAMERA_POSES_HELP, CameraFile, parse_camera_poses
 from so101.bodies.looks import DEFAULT_LOOKS, LOOKS_CHOICES
 from so101.bodies.settings import read_language
 from so101.tasks.settings import read_task
@@ -42,6 +43,8 @@ class RecorderSettings(EnvironSettings):
     looks: str = setting(
         "SO101_LOOKS", DEFAULT_LOOKS, "the pictures' looks, as the camera draws them (`fixed` or `varied`): each "
         "episode's, from the seed its layout starts from, is kept in info.json", read_choice(LOOKS_CHOICES))
+    camera_poses: dict[str, CameraFile] = setting(
+        CAMERA_POSES_ENV_VAR, "", CAMERA_POSES_HELP, read_parsed(parse_camera_poses))
     observed: Observed = setting(
         OBSERVE_ENV_VAR, str(ALL_OBSERVED), "what the frames show, from state,environment,front,wrist (so101.observe), "
         "as far as the body has it: without a task no environment or wrist, without video no camera",
@@ -69,6 +72,8 @@ class CameraSettings(EnvironSettings):
     looks: str = setting(
         "SO101_LOOKS", DEFAULT_LOOKS, "`fixed`, or `varied`: each layout's seed (from `task_status`) draws the pictures' "
         "light, colours and camera placement (so101/bodies/looks.py)", read_choice(LOOKS_CHOICES))
+    camera_poses: dict[str, CameraFile] = setting(
+        CAMERA_POSES_ENV_VAR, "", CAMERA_POSES_HELP, read_parsed(parse_camera_poses))
 
 
 @dataclass(frozen=True)

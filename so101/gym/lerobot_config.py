@@ -44,6 +44,7 @@ class SO101CubeToBoxEnv(EnvConfig):
     observation_width: int = DEFAULT_CAMERA_SIZE[0]
     observation_height: int = DEFAULT_CAMERA_SIZE[1]
     looks: str = "fixed"
+    camera_pose: str = ""  # "front=FILE[,wrist=FILE]": the simulated cameras drawn from camera files
     render_mode: str = "rgb_array"
     features: dict[str, PolicyFeature] = field(default_factory=lambda: {
         ACTION: PolicyFeature(type=FeatureType.ACTION, shape=(len(ACTUATED_JOINTS),))})
@@ -72,6 +73,7 @@ class SO101CubeToBoxEnv(EnvConfig):
 
     @property
     def gym_kwargs(self) -> dict:
-        return {"body": self.body, "obs_type": self.obs_type, "looks": self.looks, "render_mode": self.render_mode,
+        return {"body": self.body, "obs_type": self.obs_type, "looks": self.looks, "camera_pose": self.camera_pose,
+                "render_mode": self.render_mode,
                 "camera_size": (self.observation_width, self.observation_height),
                 "max_episode_steps": self.episode_length}

@@ -13,6 +13,7 @@ import numpy as np
 import numpy.typing as npt
 from gymnasium import spaces
 
+from so101.bodies.camera_file import CAMERA_NAMES as CAMERA_FILE_NAMES, CameraFile, CameraFileError, camera_file_from, read_camera_file
 from so101.bodies.looks import LOOKS_CHOICES
 from so101.bodies.registry import SIMULATED_BODIES
 from so101.dataset.features import joint_targets_deg, to_lerobot
@@ -51,6 +52,29 @@ def check_obs_type(obs_type: object) -> str:
 
 def check_looks(looks: object) -> str:
     return check_choice("looks", looks, LOOKS_CHOICES)
+
+
+def check_camera_pose(camera_pose: object) -> dict[str, CameraFile]:
+    """`camera_pose`: where the simulated cameras stand, as {name: camera file's path, or its fields}, or the
+    text "front=FILE,wrist=FILE" (LeRobot's --env.camera_pose); None or "" for the simulator's own."""
+    if camera_pose is None or camera_pose == "":
+        return {}
+    if isinstance(camera_pose, str):
+        pairs = [part.partition("=") for part in camera_pose.split(",")]
+        if not all(equals and name and path for name, equals, path in pairs):
+            raise ValueError(f"camera_pose={camera_pose!r} is not NAME=FILE[,NAME=FILE] (e.g. front=my_front.json)")
+        camera_pose = {name.strip(): path.strip() for name, _, path in pairs}
+    if not isinstance(camera_pose, dict):
+        raise ValueError(f"camera_pose={camera_pose!r} is not a map from a camera's name to its camera file")
+    poses = {}
+    for name, given in camera_pose.items():
+        if name not in CAMERA_FILE_NAMES:
+            raise ValueError(f"camera_pose: unknown camera {name!r}; the simulated ones are: {', '.join(CAMERA_FILE_NAMES)}")
+        try:
+            poses[name] = camera_file_from(given, name) if isinstance(given, dict) else read_camera_file(given, name)
+        except CameraFileError as error:
+            raise ValueError(f"camera_pose {name}: {error}") from None
+    return poses
 
 
 def check_render_mode(render_mode: object) -> str | None:

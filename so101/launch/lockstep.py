@@ -25,8 +25,10 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path, PurePath
 from typing import Callable
 
+from so101.bodies.camera_file import CAMERA_POSES_ENV_VAR
 from so101.bodies.looks import DEFAULT_LOOKS, LOOKS_CHOICES
 from so101.bodies.registry import BODIES, SIMULATED_BODIES, BodyKind
+from so101.launch.camera_poses import add_camera_pose_option, camera_poses_env
 from so101.launch.on_cluster import ClusterPlace, joined_cluster
 from so101.runtime.argtypes import add_language_option, number, whole_number
 from so101.runtime.dataflow import (
@@ -67,6 +69,7 @@ def add_common_arguments(parser: argparse.ArgumentParser) -> None:
                              "its light, floor and object colours and camera placement; a dataset keeps them by episode) "
                              "or unseen (looks held out of varied's palettes and spreads, to score eyes on looks they "
                              "never saw)")
+    add_camera_pose_option(parser)
     parser.add_argument("--workers", type=whole_number(1, MAX_WORKERS), default=1, metavar="K",
                         help="dataflows run at once, each on its share of the seeds; the results are merged in seed "
                              "order (default 1)")
@@ -150,6 +153,8 @@ def flows_for(args: argparse.Namespace, work: Path, driver: Driver | None, pictu
                "SO101_LOCKSTEP_PICTURES": size, **runner_env(folder)}
         if size and args.looks != DEFAULT_LOOKS:  # the body draws them, the runner keeps them in the dataset
             env["SO101_LOOKS"] = args.looks
+        if size:  # where the cameras stand: the body draws from there, the runner keeps it
+            env.update(camera_poses_env(args.camera_poses))
         flows.append(Flow(BODIES[args.body], driver=driver, runner_env=env, lang=args.lang,
                           pictures=pictures if size else (), picture_size=size))
     return flows
@@ -180,7 +185,8 @@ def lockstep_dataflow(flow: Flow, placement: Placement | None = None, root: Pure
         "env": {"SO101_MODE": "direct", "SO101_LANG": flow.lang, "SO101_TASK": flow.runner_env["SO101_TASK"],
                 "SO101_SEED": flow.runner_env["SO101_SEED"], "SO101_LOCKSTEP_FPS": str(fps),
                 "SO101_EPISODE_FRAMES": str(last_frame), "SO101_LOCKSTEP_PICTURES": flow.picture_size,
-                **{key: value for key, value in flow.runner_env.items() if key == "SO101_LOOKS"}, **flow.body_env},
+                **{key: value for key, value in flow.runner_env.items() if key in ("SO101_LOOKS", CAMERA_POSES_ENV_VAR)},
+                **flow.body_env},
     }]
     if driver is not None:
         runner_inputs["action"] = queued(f"{driver.node_id}/joint_cmd")

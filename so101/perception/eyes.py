@@ -14,6 +14,7 @@ import numpy as np
 import numpy.typing as npt
 
 from so101.bodies.camera import TASK_FRONT_CAMERA, Camera
+from so101.bodies.camera_file import CameraFile, orbit_of
 from so101.perception.estimate import CubeFilter, Sighting, object_state, read_maps
 from so101.perception.geometry import view_of
 from so101.tasks.objects import SceneFacts
@@ -44,7 +45,8 @@ def read_eyes_facts(folder: Path) -> EyesFacts:
         camera = facts["camera"]
         return EyesFacts((int(facts["size"][0]), int(facts["size"][1])),
                          Camera(tuple(float(v) for v in camera["target_xyz_m"]), float(camera["distance_m"]),  # type: ignore[arg-type]
-                                float(camera["yaw_deg"]), float(camera["pitch_deg"]), float(camera["fov_deg"])),
+                                float(camera["yaw_deg"]), float(camera["pitch_deg"]), float(camera["fov_deg"]),
+                                float(camera.get("roll_deg", 0.0))),
                          dict(facts.get("trained") or {}))
     except (OSError, ValueError, KeyError, TypeError, IndexError) as error:
         raise ValueError(f"{folder / EYES_FACTS} is not an eyes' facts file ({type(error).__name__}: {error})") from None
@@ -59,7 +61,7 @@ class Eyes:
     newest sightings, held while its map is unsure (so101.perception.estimate.CubeFilter; `reset` forgets
     them: a new episode)."""
 
-    def __init__(self, folder: Path, task: SceneFacts, threads: int = 1):
+    def __init__(self, folder: Path, task: SceneFacts, threads: int = 1, front: CameraFile | None = None):
         import torch
 
         from so101.kinematics import Kinematics
@@ -77,7 +79,8 @@ class Eyes:
         self._torch = torch
         self._kinematics = Kinematics()
         self._task = task
-        self.view = view_of(self.facts.camera, *self.facts.size)
+        # Where the front camera stands: a camera file's place (a fitted real camera), else the one they learned with.
+        self.view = view_of(orbit_of(front) if front is not None else self.facts.camera, *self.facts.size)
         self._filter = CubeFilter()
 
     def reset(self) -> None:

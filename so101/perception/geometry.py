@@ -2,7 +2,8 @@
 the table. Pure numpy, so the perception node, its training and the tests share one model.
 
 A `Camera` (so101.bodies.camera) orbits its target in PyBullet's yaw/pitch terms; MuJoCo's free
-camera draws it at azimuth yaw + 90° and elevation pitch, with `fov_deg` the vertical field of view.
+camera draws it at azimuth yaw + 90° and elevation pitch, turned by `roll_deg`, with `fov_deg` the vertical
+field of view.
 Pixels: u to the right, v down, (0, 0) the top-left pixel's corner, so a pixel's centre is at +0.5.
 """
 
@@ -64,13 +65,7 @@ class View:
 
 
 def view_of(camera: Camera, width: int, height: int) -> View:
-    """`camera` drawn at `width` x `height` pixels, as MuJoCo's free camera draws it."""
-    azimuth, elevation = math.radians(camera.yaw_deg + 90.0), math.radians(camera.pitch_deg)
-    forward = np.array([math.cos(elevation) * math.cos(azimuth), math.cos(elevation) * math.sin(azimuth),
-                        math.sin(elevation)])
-    eye = np.asarray(camera.target_xyz_m, dtype=float) - camera.distance_m * forward
-    right = np.cross(forward, [0.0, 0.0, 1.0])
-    right /= np.linalg.norm(right)
-    up = np.cross(right, forward)
+    """`camera` drawn at `width` x `height` pixels, as MuJoCo's free camera draws it (turned by its roll)."""
+    eye, forward, right, up = (np.asarray(axis, dtype=float) for axis in camera.axes())
     focal_px = (height / 2) / math.tan(math.radians(camera.fov_deg) / 2)
     return View(eye, forward, right, up, focal_px, width, height)

@@ -13,6 +13,7 @@ import numpy.typing as npt
 
 from so101.bodies import mujoco_model  # noqa: F401  (first: it chooses MuJoCo's OpenGL back end)
 from so101.bodies.camera import WRIST_CAMERA, WRIST_CAMERA_NAME, WristCamera
+from so101.bodies.camera_file import wrist_placement
 from so101.bodies.jaw_pads import JawPad
 from so101.tasks.objects import Layout, SceneFacts
 
@@ -55,15 +56,8 @@ def add_to_spec(spec: Any, task: SceneFacts, pads: tuple[JawPad, ...]) -> None:
 
 def add_wrist_camera(spec: Any, camera: WristCamera) -> None:
     """`camera` as a camera of the gripper's body (MuJoCo's look along their -z, their +y up)."""
-    eye, target, up = (np.asarray(vector, dtype=np.float64) for vector in (camera.eye_m, camera.target_m, camera.up))
-    backward = (eye - target) / np.linalg.norm(eye - target)
-    right = np.cross(up, backward)
-    right /= np.linalg.norm(right)
-    rotation = np.column_stack([right, np.cross(backward, right), backward])
-    quat = np.zeros(4)
-    mujoco.mju_mat2Quat(quat, rotation.ravel())
-    gripper = spec.body(GRIPPER_BODY)
-    gripper.add_camera(name=WRIST_CAMERA_NAME, pos=eye.tolist(), quat=quat.tolist(), fovy=camera.fov_deg)
+    pos, quat = wrist_placement(camera)
+    spec.body(GRIPPER_BODY).add_camera(name=WRIST_CAMERA_NAME, pos=list(pos), quat=list(quat), fovy=camera.fov_deg)
 
 
 class MuJoCoScene:

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Mapping
 
+from so101.bodies.camera_file import CAMERA_POSES_ENV_VAR, CAMERA_POSES_HELP, CameraFile, parse_camera_poses
 from so101.bodies.looks import DEFAULT_LOOKS, LOOKS_CHOICES
 from so101.bodies.settings import read_language, read_lockstep_fps
 from so101.lang import DEFAULT_LANGUAGE, ENV_VAR as LANG_ENV_VAR
@@ -97,6 +98,8 @@ class EpisodeSettings(EnvironSettings):
     looks: str = setting(
         "SO101_LOOKS", DEFAULT_LOOKS, "the pictures' looks, as the body draws them (`fixed` or `varied`): a dataset "
         "keeps each episode's in info.json", read_choice(LOOKS_CHOICES))
+    camera_poses: dict[str, CameraFile] = setting(
+        CAMERA_POSES_ENV_VAR, "", CAMERA_POSES_HELP, read_parsed(parse_camera_poses))
     observed: Observed = setting(
         OBSERVE_ENV_VAR, str(ALL_OBSERVED), "what the written frames show, from state,environment,front,wrist "
         "(so101.observe): state,front,wrist leaves the objects' exact poses out", read_parsed(parse_observed))

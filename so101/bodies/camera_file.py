@@ -1,0 +1,268 @@
+"""Camera files: where a camera stands, as JSON a person can read, edit and measure.
+
+`so101 cameras --default NAME` prints one, `so101 cameras --fit NAME` writes one, and
+`--camera-pose NAME=FILE` draws a task's camera from one. The fields:
+
+- `camera`: "front" (fixed in the base's frame) or "wrist" (fixed to the gripper, in its frame:
+  the URDF's `gripper_link`, the MJCF's body `gripper`);
+- `frame`: "base" or "gripper", which frame the three vectors are in (the camera's own);
+- `position_m`: the lens's centre; `look_at_m`: a point it looks at; `up`: which way the picture's
+  top points (need not be exactly square to the line of sight);
+- `fov_deg`: the vertical field of view; `width`, `height`: the picture's size in pixels;
+- `residual_px` (a fit's): how far, in pixels at that size, the fitted arm's outline lies from the
+  pictures' on average; null for a camera that was not fitted.
+
+A pinhole: the principal point at the picture's centre, no lens distortion. Pure: no simulator.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+from so101.bodies.camera import TASK_FRONT_CAMERA, WRIST_CAMERA, Camera, WristCamera
+from so101.bodies.looks import Looks, looks_for
+
+CAMERA_NAMES = ("front", "wrist")
+FRAMES = {"front": "base", "wrist": "gripper"}
+Vector = tuple[float, float, float]
+# The size a camera file says when none is given: the task's pictures' default (so101 demos).
+DEFAULT_SIZE = (320, 240)
+# A line of sight closer than this to vertical has no yaw: the front camera must be tilted at least this far.
+LEVEL_MIN_DEG = 1.0
+
+
+class CameraFileError(ValueError):
+    """A camera file that cannot be used; str() is one line that says what is wrong."""
+
+
+@dataclass(frozen=True)
+class CameraFile:
+    camera: str
+    position_m: Vector
+    look_at_m: Vector
+    up: Vector
+    fov_deg: float
+    width: int = DEFAULT_SIZE[0]
+    height: int = DEFAULT_SIZE[1]
+    residual_px: float | None = None
+
+    @property
+    def frame(self) -> str:
+        return FRAMES[self.camera]
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"camera": self.camera, "frame": self.frame, "position_m": [round(v, 6) for v in self.position_m],
+                "look_at_m": [round(v, 6) for v in self.look_at_m], "up": [round(v, 6) for v in self.up],
+                "fov_deg": round(self.fov_deg, 4), "width": self.width, "height": self.height,
+                "residual_px": None if self.residual_px is None else round(self.residual_px, 4)}
+
+    def as_json(self) -> str:
+        """The file's text: a field a line, each vector on its line."""
+        lines = [f"  {json.dumps(key)}: {json.dumps(value)}" for key, value in self.as_dict().items()]
+        return "{\n" + ",\n".join(lines) + "\n}\n"
+
+
+def _vector(fields: dict[str, Any], key: str) -> Vector:
+    value = fields.get(key)
+    if (not isinstance(value, (list, tuple)) or len(value) != 3
+            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)):
+        raise CameraFileError(f"`{key}` must be three numbers (metres in the camera's frame), got {value!r}")
+    return (float(value[0]), float(value[1]), float(value[2]))
+
+
+def _norm(vector: tuple[float, ...]) -> float:
+    return math.sqrt(sum(v * v for v in vector))
+
+
+def camera_file_from(fields: object, name: str | None = None) -> CameraFile:
+    """A camera file's fields (its parsed JSON) checked; CameraFileError in one line otherwise. `name`:
+    the camera the file must be for (the NAME of `--camera-pose NAME=FILE`)."""
+    if not isinstance(fields, dict):
+        raise CameraFileError("a camera file is a JSON object with camera, position_m, look_at_m, up, fov_deg, width, height")
+    camera = fields.get("camera", name)
+    if camera not in CAMERA_NAMES:
+        raise CameraFileError(f"`camera` must be one of {', '.join(CAMERA_NAMES)}, got {camera!r}")
+    if name is not None and camera != name:
+        raise CameraFileError(f"this file is the {camera} camera's, not the {name} camera's")
+    frame = fields.get("frame", FRAMES[camera])
+    if frame != FRAMES[camera]:
+        raise CameraFileError(f"the {camera} camera's vectors are in the {FRAMES[camera]} frame, not {frame!r}")
+    position, look_at, up = _vector(fields, "position_m"), _vector(fields, "look_at_m"), _vector(fields, "up")
+    sight = tuple(b - a for a, b in zip(position, look_at))
+    if _norm(sight) < 1e-3:
+        raise CameraFileError("`look_at_m` must be at least 1 mm from `position_m`: they give the line of sight")
+    across = (up[1] * sight[2] - up[2] * sight[1], up[2] * sight[0] - up[0] * sight[2], up[0] * sight[1] - up[1] * sight[0])
+    if _norm(up) < 1e-9 or _norm(across) < 1e-3 * _norm(up) * _norm(sight):
+        raise CameraFileError("`up` must not be zero nor along the line of sight (position_m to look_at_m)")
+    if camera == "front" and abs(sight[2]) / _norm(sight) > math.cos(math.radians(LEVEL_MIN_DEG)):
+        raise CameraFileError(f"the front camera looks straight up or down: tilt its line of sight at least {LEVEL_MIN_DEG:g}°")
+    fov = fields.get("fov_deg")
+    if isinstance(fov, bool) or not isinstance(fov, (int, float)) or not 1.0 <= fov <= 170.0:
+        raise CameraFileError(f"`fov_deg` (the vertical field of view) must be a number of degrees from 1 to 170, got {fov!r}")
+    size = []
+    for key, default in (("width", DEFAULT_SIZE[0]), ("height", DEFAULT_SIZE[1])):
+        value = fields.get(key, default)
+        if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= 8192:
+            raise CameraFileError(f"`{key}` must be a whole number of pixels from 1 to 8192, got {value!r}")
+        size.append(value)
+    residual = fields.get("residual_px")
+    if residual is not None and (isinstance(residual, bool) or not isinstance(residual, (int, float)) or residual < 0):
+        raise CameraFileError(f"`residual_px` must be null or a number >= 0, got {residual!r}")
+    return CameraFile(str(camera), position, look_at, up, float(fov), size[0], size[1],
+                      None if residual is None else float(residual))
+
+
+def read_camera_file(path: Path | str, name: str | None = None) -> CameraFile:
+    """The camera file at `path`; CameraFileError in one line, naming the file, for anything else."""
+    try:
+        text = Path(path).expanduser().read_text(encoding="utf-8")
+    except OSError as error:
+        raise CameraFileError(f"{path}: cannot be read ({error.strerror or error})") from None
+    try:
+        fields = json.loads(text)
+    except json.JSONDecodeError as error:
+        raise CameraFileError(f"{path}: not a camera file: not JSON ({error.msg}, line {error.lineno})") from None
+    try:
+        return camera_file_from(fields, name)
+    except CameraFileError as error:
+        raise CameraFileError(f"{path}: {error}") from None
+
+
+def orbit_of(front: CameraFile) -> Camera:
+    """The front camera file as the renderer's orbiting camera (its look_at the target, its up a roll)."""
+    eye, target = front.position_m, front.look_at_m
+    sight = tuple(b - a for a, b in zip(eye, target))
+    distance = _norm(sight)
+    forward = tuple(v / distance for v in sight)
+    level = Camera(target, distance, math.degrees(math.atan2(forward[1], forward[0])) - 90.0,
+                   math.degrees(math.asin(max(-1.0, min(1.0, forward[2])))), front.fov_deg)
+    _, _, right, up = level.axes()
+    along = sum(u * f for u, f in zip(front.up, forward))
+    square_up = tuple(u - along * f for u, f in zip(front.up, forward))
+    roll = math.degrees(math.atan2(sum(a * b for a, b in zip(square_up, right)), sum(a * b for a, b in zip(square_up, up))))
+    return replace(level, yaw_deg=(level.yaw_deg + 180.0) % 360.0 - 180.0, roll_deg=roll)
+
+
+def front_file_of(camera: Camera, width: int, height: int, residual_px: float | None = None) -> CameraFile:
+    """The orbiting `camera` as the front camera's file, for pictures of `width` x `height`."""
+    eye, _, _, up = camera.axes()
+    return CameraFile("front", (eye[0], eye[1], eye[2]), camera.target_xyz_m, (up[0], up[1], up[2]), camera.fov_deg,
+                      width, height, residual_px)
+
+
+def wrist_of(wrist: CameraFile) -> WristCamera:
+    return WristCamera(wrist.position_m, wrist.look_at_m, wrist.up, wrist.fov_deg)
+
+
+def wrist_file_of(camera: WristCamera, width: int, height: int, residual_px: float | None = None) -> CameraFile:
+    return CameraFile("wrist", camera.eye_m, camera.target_m, camera.up, camera.fov_deg, width, height, residual_px)
+
+
+def default_camera_file(name: str, width: int = DEFAULT_SIZE[0], height: int = DEFAULT_SIZE[1]) -> CameraFile:
+    """The simulated camera `name`'s own file: where a task's episodes draw it from (without varied looks)."""
+    if name not in CAMERA_NAMES:
+        raise CameraFileError(f"unknown camera {name!r}; the simulated ones are: {', '.join(CAMERA_NAMES)}")
+    if name == "front":
+        return front_file_of(TASK_FRONT_CAMERA, width, height)
+    return wrist_file_of(WRIST_CAMERA, width, height)
+
+
+def parse_camera_poses(text: str) -> dict[str, CameraFile]:
+    """SO101_CAMERA_POSES as the nodes read it: JSON mapping a camera's name to its file's fields ("" none)."""
+    if not text.strip():
+        return {}
+    try:
+        fields = json.loads(text)
+    except json.JSONDecodeError as error:
+        raise CameraFileError(f"not JSON ({error.msg})") from None
+    if not isinstance(fields, dict):
+        raise CameraFileError("a JSON object mapping a camera's name to its camera file's fields")
+    return {name: camera_file_from(value, str(name)) for name, value in fields.items()}
+
+
+CAMERA_POSES_ENV_VAR = "SO101_CAMERA_POSES"
+CAMERA_POSES_HELP = ("where a task's simulated cameras stand: JSON mapping `front`/`wrist` to a camera file's fields "
+                     "(so101/bodies/camera_file.py; `--camera-pose NAME=FILE`); empty = the simulator's own")
+
+
+def camera_poses_text(poses: dict[str, CameraFile]) -> str:
+    """The other way: what a command puts in SO101_CAMERA_POSES."""
+    return json.dumps({name: pose.as_dict() for name, pose in poses.items()}, separators=(",", ":"))
+
+
+def wrist_placement(camera: WristCamera) -> tuple[Vector, tuple[float, float, float, float]]:
+    """Where MuJoCo puts `camera` on the gripper: its position, and its orientation as a quaternion
+    (w, x, y, z) that turns MuJoCo's camera (looking along its -z, its +y up) to look at target_m."""
+    eye, target = camera.eye_m, camera.target_m
+    sight = tuple(e - t for e, t in zip(eye, target))
+    backward = tuple(v / _norm(sight) for v in sight)
+    across = _cross3(camera.up, backward)
+    right = tuple(v / _norm(across) for v in across)
+    top = _cross3(backward, right)
+    # The rotation's columns are right, top, backward; its quaternion (Shepperd's method, the largest term first).
+    m = ((right[0], top[0], backward[0]), (right[1], top[1], backward[1]), (right[2], top[2], backward[2]))
+    trace = m[0][0] + m[1][1] + m[2][2]
+    if trace > 0:
+        s = 2.0 * math.sqrt(trace + 1.0)
+        quat = (0.25 * s, (m[2][1] - m[1][2]) / s, (m[0][2] - m[2][0]) / s, (m[1][0] - m[0][1]) / s)
+    else:
+        i = max(range(3), key=lambda k: m[k][k])
+        j, k = (i + 1) % 3, (i + 2) % 3
+        s = 2.0 * math.sqrt(1.0 + m[i][i] - m[j][j] - m[k][k])
+        q = [0.0, 0.0, 0.0]
+        q[i], q[j], q[k] = 0.25 * s, (m[j][i] + m[i][j]) / s, (m[k][i] + m[i][k]) / s
+        quat = ((m[k][j] - m[j][k]) / s, q[0], q[1], q[2])
+    return (eye[0], eye[1], eye[2]), quat
+
+
+def _cross3(a: tuple[float, ...], b: tuple[float, ...]) -> Vector:
+    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+
+
+def drawn_front(fixed: Camera, looks: Looks | None) -> Camera:
+    """The front camera as an episode's looks place it: `fixed` moved by their jitter (none: as it is)."""
+    if looks is None:
+        return fixed
+    target = tuple(float(a + b) for a, b in zip(fixed.target_xyz_m, looks.front_shift_m))
+    return replace(fixed, target_xyz_m=(target[0], target[1], target[2]), yaw_deg=fixed.yaw_deg + looks.front_turn_deg[0],
+                   pitch_deg=fixed.pitch_deg + looks.front_turn_deg[1], fov_deg=fixed.fov_deg + looks.front_fov_deg)
+
+
+def drawn_wrist(fixed: WristCamera, looks: Looks | None) -> WristCamera:
+    """The wrist camera as an episode's looks place it: moved within its mount, its aim kept."""
+    if looks is None:
+        return fixed
+    shift = looks.wrist_shift_m
+    return WristCamera(tuple(a + b for a, b in zip(fixed.eye_m, shift)),  # type: ignore[arg-type]
+                       tuple(a + b for a, b in zip(fixed.target_m, shift)),  # type: ignore[arg-type]
+                       fixed.up, fixed.fov_deg + looks.wrist_fov_deg)
+
+
+def fixed_cameras(poses: dict[str, CameraFile]) -> tuple[Camera, WristCamera]:
+    """A task's front and wrist cameras before the looks move them: the files' where given, else the simulator's own."""
+    front = orbit_of(poses["front"]) if "front" in poses else TASK_FRONT_CAMERA
+    wrist = wrist_of(poses["wrist"]) if "wrist" in poses else WRIST_CAMERA
+    return front, wrist
+
+
+def episode_cameras(poses: dict[str, CameraFile], looks: Looks | None, names: tuple[str, ...],
+                    width: int, height: int) -> dict[str, dict[str, Any]]:
+    """What a dataset keeps of where an episode's cameras `names` stood (so101_episode_cameras): each one's
+    camera file, as drawn for that episode's looks, at the pictures' size."""
+    front, wrist = fixed_cameras(poses)
+    kept: dict[str, dict[str, Any]] = {}
+    for name in names:
+        drawn = (front_file_of(drawn_front(front, looks), width, height) if name == "front"
+                 else wrist_file_of(drawn_wrist(wrist, looks), width, height))
+        kept[name] = {key: value for key, value in drawn.as_dict().items() if key != "residual_px"}
+    return kept
+
+
+def cameras_metadata(poses: dict[str, CameraFile], looks_mode: str, seed: int, names: tuple[str, ...],
+                     size: tuple[int, int]) -> dict[str, object]:
+    """episode_cameras for an episode of seed `seed` drawn in `looks_mode` (so101.bodies.looks)."""
+    return dict(episode_cameras(poses, looks_for(looks_mode, seed), names, size[0], size[1]))

@@ -1,0 +1,62 @@
+"""`--camera-pose NAME=FILE`: the simulated camera NAME drawn from where a camera file puts it
+(so101.bodies.camera_file), for `so101 demos`, `so101 eval` and `so101 teleop`: demonstrations and
+scores made from where the user's camera stands. `--looks varied` jitters around it."""
+
+from __future__ import annotations
+
+import argparse
+from typing import cast
+
+from so101.bodies.camera_file import (
+    CAMERA_NAMES, CAMERA_POSES_ENV_VAR, CameraFile, CameraFileError, camera_poses_text, read_camera_file,
+)
+
+CAMERA_POSE_HELP = ("draw the simulated camera NAME (front or wrist) from where FILE puts it: a camera file from "
+                    "`so101 cameras --fit` or `--default` (repeat for both cameras; default: the simulator's own)")
+
+
+def camera_pose(text: str) -> tuple[str, CameraFile]:
+    """argparse's type for NAME=FILE: the camera's name and its file, read and checked now."""
+    name, equals, path = text.partition("=")
+    if not equals or not name or not path:
+        raise argparse.ArgumentTypeError(f"{text!r} is not NAME=FILE (e.g. front=my_front.json)")
+    if name not in CAMERA_NAMES:
+        raise argparse.ArgumentTypeError(f"unknown camera {name!r}; the simulated ones are: {', '.join(CAMERA_NAMES)}")
+    try:
+        return name, read_camera_file(path, name)
+    except CameraFileError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
+
+
+class _CameraPoses(argparse.Action):
+    """Gathers the --camera-pose options into one map (args.camera_poses); a camera given twice is refused."""
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: object,
+                 option_string: str | None = None) -> None:
+        name, pose = cast(tuple[str, CameraFile], values)
+        poses = dict(getattr(namespace, self.dest) or {})
+        if name in poses:
+            parser.error(f"--camera-pose {name}=... is given twice: one file a camera")
+        poses[name] = pose
+        setattr(namespace, self.dest, poses)
+
+
+def add_camera_pose_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--camera-pose", dest="camera_poses", type=camera_pose, action=_CameraPoses, default={},
+                        metavar="NAME=FILE", help=CAMERA_POSE_HELP)
+
+
+def camera_poses_env(poses: dict[str, CameraFile]) -> dict[str, str]:
+    """What the nodes that draw and keep the pictures are told (none: nothing, the simulator's own)."""
+    return {CAMERA_POSES_ENV_VAR: camera_poses_text(poses)} if poses else {}
+
+
+def draw_from_poses(descriptor: dict, poses: dict[str, CameraFile], drawing: tuple[str, ...]) -> bool:
+    """`poses` told to the nodes of `descriptor` named in `drawing` (those that draw, keep or read a task's
+    simulated pictures); False when it has none of them (nothing would be drawn from there)."""
+    told = False
+    for node in descriptor["nodes"]:
+        if node["id"] in drawing:
+            node["env"] = {**node.get("env", {}), **camera_poses_env(poses)}
+            told = True
+    return told
