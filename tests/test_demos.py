@@ -106,18 +106,30 @@ def test_eval_scores_the_expert_and_an_idle_arm_scores_nothing(tmp_path):
 
 
 def test_demos_with_video_append_to_the_folder_and_every_episode_reads(tmp_path):
+    from dataclasses import replace
+
+    from so101.bodies.camera_file import cameras_metadata, default_camera_file, read_camera_file
     from so101.bodies.looks import looks_metadata
-    from so101.dataset.layout import LOOKS_KEY
+    from so101.dataset.layout import CAMERAS_KEY, LOOKS_KEY
 
     root = tmp_path / "demos"
+    moved = tmp_path / "front.json"  # the front camera 3 cm to the left of the simulator's, 4° wider
+    default = default_camera_file("front")
+    moved.write_text(replace(default, position_m=(default.position_m[0], default.position_m[1] + 0.03,
+                                                  default.position_m[2]), fov_deg=49.0).as_json(), encoding="utf-8")
     for seed, looks in (("0", "fixed"), ("1", "varied")):  # --image-size is --camera-size's older name
         result = so101("demos", str(root), "--task", "cube_to_box", "--episodes", "1", "--seed", seed,
-                       "--camera-size" if looks == "varied" else "--image-size", "160x120", "--looks", looks)
+                       "--camera-size" if looks == "varied" else "--image-size", "160x120", "--looks", looks,
+                       *(["--camera-pose", f"front={moved}"] if looks == "varied" else []))
         assert result.returncode == 0, result.stdout + result.stderr
     dataset = Dataset.open(root)
     assert len(dataset.episodes) == 2
-    # A dataset says what its pictures showed, by episode.
+    # A dataset says what its pictures showed, by episode, and where its cameras stood.
     assert dataset.info[LOOKS_KEY] == {"0": {"looks": "fixed"}, "1": looks_metadata("varied", 1)}
+    assert dataset.info[CAMERAS_KEY] == [
+        cameras_metadata({}, "fixed", 0, ("front", "wrist"), (160, 120)),
+        cameras_metadata({"front": read_camera_file(moved)}, "varied", 1, ("front", "wrist"), (160, 120))]
+    assert dataset.info[CAMERAS_KEY][0]["front"]["position_m"] == [round(v, 6) for v in default.position_m]
     for index in range(2):
         frames = dataset.episode_frames(index)
         front = list(dataset.episode_images(index, "observation.images.front"))

@@ -17,6 +17,9 @@ import os
 from pathlib import Path
 from typing import Callable, Sequence
 
+import numpy as np
+import numpy.typing as npt
+
 from so101.bodies.camera import DEFAULT_CAMERA, WRIST_CAMERA, WRIST_CAMERA_NAME, Camera
 from so101.bodies.camera_file import CameraFile, drawn_front, fixed_cameras, wrist_placement
 from so101.bodies.looks import DEFAULT_LOOKS, Looks, looks_for
@@ -74,6 +77,11 @@ class TaskCameras:
         self._object_geoms = [[geom for geom in range(model.ngeom) if int(model.body_rootid[model.geom_bodyid[geom]]) == root]
                               for root in roots]
         self._floor_geom = int(model.geom("floor").id)
+        geom_roots = [int(model.body_rootid[model.geom_bodyid[geom]]) for geom in range(model.ngeom)]
+        self._arm_geoms = np.array([root == arm_root for root in geom_roots])
+        # The objects that can move (a joint of their own: the cube), not those fixed to the floor (the box).
+        loose = {root for root in roots if model.body_jntnum[root] > 0}
+        self._loose_geoms = np.array([root in loose for root in geom_roots])
         self._wrist = int(model.camera(WRIST_CAMERA_NAME).id) if task is not None else None
         # A task's front camera frames its workspace, where `poses` (camera files) put it or where the
         # simulator's own stands; without a task, the whole arm (so101 snapshot's view).
@@ -114,19 +122,39 @@ class TaskCameras:
         return drawn_front(self.fixed_front, self.looks)
 
     def draw(self, angles_deg: AnglesDeg | Sequence[float], object_state: ObjectState | Sequence[float], width: int,
-             height: int, wrist: bool = True) -> tuple[RgbImage, RgbImage | None]:
+             height: int, wrist: bool = True, front: Camera | None = None) -> tuple[RgbImage, RgbImage | None]:
         """(front, wrist) of the arm at the six `angles_deg` and the task's objects where `object_state`
-        puts them (none yet: where they were); wrist None without a task, or not asked for."""
+        puts them (none yet: where they were); wrist None without a task, or not asked for. `front`: the
+        front picture drawn from there, as it is (the looks' colours and light, not their camera's jitter)."""
         scene = self._model.scene
         if scene is not None and len(object_state):
             scene.show_object_state([float(value) for value in object_state])
         # After the objects: posing recomputes the kinematics of both.
         self._model.show_pose_deg([float(angle) for angle in angles_deg])
-        front_camera = self.front_camera()
+        front_camera = front or self.front_camera()
         if scene is not None:  # MuJoCo's free camera takes its field of view from the model
             self._model.model.vis.global_.fovy = front_camera.fov_deg
-        front = self._model.render_rgb(width, height, front_camera)
-        return front, self._model.render_rgb(width, height, WRIST_CAMERA) if wrist and scene is not None else None
+        picture = self._model.render_rgb(width, height, front_camera)
+        return picture, self._model.render_rgb(width, height, WRIST_CAMERA) if wrist and scene is not None else None
+
+    def arm_mask(self, angles_deg: AnglesDeg | Sequence[float], camera: Camera, width: int, height: int,
+                 object_state: ObjectState | Sequence[float] = ()) -> npt.NDArray[np.bool_]:
+        """The pixels that show the arm at the six `angles_deg` (and, given an `object_state`, the task's
+        objects that move: the cube, not the box), seen from `camera` (its field of view its own): what
+        moves in a task's pictures, which a camera's fit compares with a picture's."""
+        scene = self._model.scene
+        shown = self._arm_geoms
+        if scene is not None and len(object_state):
+            scene.show_object_state([float(value) for value in object_state])
+            shown = self._arm_geoms | self._loose_geoms
+        self._model.show_pose_deg([float(angle) for angle in angles_deg])
+        self._model.model.vis.global_.fovy = camera.fov_deg
+        try:
+            geoms = self._model.render_geoms(width, height, camera)
+        finally:
+            self._model.model.vis.global_.fovy = self.front_camera().fov_deg
+        mask: npt.NDArray[np.bool_] = shown[np.clip(geoms, 0, None)] & (geoms >= 0)
+        return mask
 
     def close(self) -> None:
         self._model.close()

@@ -1,6 +1,14 @@
 """`so101 cameras`: the cameras this computer has (V4L2 capture devices: path, name, the sizes and
 frame rates each offers), as `lerobot-find-cameras opencv` lists them; `--save DIR` keeps one picture
-from each, to see which camera is which before `so101 teleop --body real --camera front=...`."""
+from each, to see which camera is which before `so101 teleop --body real --camera front=...`.
+
+And where a camera stands, against the simulated one of the same name:
+- `--default NAME` prints the simulated camera's own file (the start of a fit, a template to edit);
+- `--fit NAME --from DATASET` fits the camera's place and field of view to an episode's pictures and
+  joint states (so101.perception.camera_fit) and writes its camera file (`-o FILE`);
+- `--align NAME` shows the live picture and the simulated camera's picture of the arm where it stands
+  now, one over the other, to move the camera until the two arms coincide.
+"""
 
 from __future__ import annotations
 
@@ -12,11 +20,67 @@ from so101.cameras.listing import find_cameras, listing_lines, picture_file_name
 
 # A camera's first pictures are often dark or half-exposed while it adjusts: this many are let go first.
 WARM_UP_PICTURES = 10
+CAMERA_NAMES = ("front", "wrist")
 
 
 def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
     parser.add_argument("--save", type=Path, metavar="DIR", default=None,
                         help="also save one picture from each camera in DIR (made if missing), as videoN.png")
+    doing = parser.add_mutually_exclusive_group()
+    doing.add_argument("--default", choices=CAMERA_NAMES, metavar="NAME", default=None,
+                       help="print the simulated camera NAME's file (front or wrist): where a task's episodes draw it "
+                            "from, the start of every fit and a template to edit")
+    # The wrist camera moves with the jaws: its pictures show no arm moving, so only the front is fitted and aligned.
+    doing.add_argument("--fit", choices=("front",), metavar="NAME", default=None,
+                       help="fit camera NAME's place and field of view (front: the wrist camera is not fitted) to the "
+                            "pictures of the arm in --from DATASET's episode, and write its camera file (-o FILE)")
+    doing.add_argument("--align", choices=("front",), metavar="NAME", default=None,
+                       help="show camera NAME's live picture (--camera NAME=SOURCE) with the simulated camera's "
+                            "picture of the arm (--port, or so101 fake-arm) over it, to move the camera into place")
+    parser.add_argument("--from", dest="dataset", type=Path, metavar="DATASET", default=None,
+                        help="--fit: the LeRobot dataset whose episode's video and joint states are fitted")
+    parser.add_argument("--episode", type=int, metavar="N", default=0, help="--fit: the episode fitted (default 0)")
+    parser.add_argument("--near", type=Path, metavar="FILE", default=None,
+                        help="--fit: start from this camera file (a rough measurement) instead of the simulated camera's")
+    parser.add_argument("-o", "--output", type=Path, metavar="FILE", default=None,
+                        help="--fit: the camera file written (default: printed only); an existing file is kept "
+                             "unless the fit succeeds")
+    parser.add_argument("--size", metavar="WxH", default=None,
+                        help="--default: the pictures' size the file says (default 320x240)")
+    add_align_arguments(parser)
+
+
+def _camera_option(text: str) -> tuple[str, str]:
+    from so101.cameras.sources import parse_camera_option
+
+    try:
+        return parse_camera_option(text)
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
+
+
+def add_align_arguments(parser: argparse.ArgumentParser) -> None:
+    """--align's: the real camera, the arm, where the simulated camera stands, the fitted file, the browser view."""
+    from so101.launch.camera_poses import add_camera_pose_option
+    from so101.runtime.argtypes import whole_number
+    from so101.web.settings import DEFAULT_HOST, DEFAULT_PORT
+
+    parser.add_argument("--camera", dest="align_camera", type=_camera_option, metavar="NAME=SOURCE", default=None,
+                        help="--align: the real camera NAME: a device (/dev/video0, or its index 0) or a video file")
+    parser.add_argument("--port", metavar="PORT", default=None,
+                        help="--align: the arm's serial port (/dev/ttyACM0, ...; `so101 fake-arm` prints an emulated "
+                             "one); read only, torque off: the arm is moved by hand")
+    parser.add_argument("--calibration", type=Path, metavar="FILE", default=None,
+                        help="--align: the arm's calibration JSON (from `so101 calibrate`, or LeRobot's so101_follower one)")
+    add_camera_pose_option(parser)
+    parser.add_argument("--fitted", type=Path, metavar="FILE", default=None,
+                        help="--align: where the real camera stands, fitted (`so101 cameras --fit`): then it says in "
+                             "words which way to move it")
+    parser.add_argument("--web-port", type=whole_number(1, 65535), default=DEFAULT_PORT, metavar="P",
+                        help=f"--align: the browser view's port (default {DEFAULT_PORT}; taken, the next free one)")
+    parser.add_argument("--web-host", default=DEFAULT_HOST, metavar="ADDRESS",
+                        help=f"--align: the address the browser view serves on (default {DEFAULT_HOST}, this machine "
+                             "only; 0.0.0.0 serves every network this machine is on)")
 
 
 def save_picture(path: str, folder: Path) -> str:
@@ -44,7 +108,117 @@ def save_picture(path: str, folder: Path) -> str:
     return f"{path}: saved {target} ({rgb.shape[1]}x{rgb.shape[0]})"
 
 
+def fail(line: str) -> int:
+    print(f"so101 cameras: {line}", file=sys.stderr)
+    return 2
+
+
+def print_default(name: str, size_text: str | None) -> int:
+    from so101.bodies.camera_file import default_camera_file
+    from so101.runtime.argtypes import image_size
+
+    try:
+        width, height = image_size(size_text) if size_text else (320, 240)
+    except (ValueError, argparse.ArgumentTypeError) as error:
+        return fail(f"--size {size_text}: {error}")
+    sys.stdout.write(default_camera_file(name, width, height).as_json())
+    return 0
+
+
+def fit(args: argparse.Namespace) -> int:
+    from so101.bodies.camera_file import CameraFileError, default_camera_file, read_camera_file
+    from so101.perception.camera_fit import CameraFitError, fit_from_dataset
+
+    if args.dataset is None:
+        return fail("--fit NAME needs --from DATASET: the episode whose pictures and joint states are fitted")
+    try:
+        start = read_camera_file(args.near, args.fit) if args.near is not None else default_camera_file(args.fit)
+    except CameraFileError as error:
+        return fail(f"--near {error}")
+    try:
+        fitted = fit_from_dataset(args.dataset.expanduser(), args.fit, start, args.episode, log=print)
+    except (CameraFitError, CameraFileError) as error:
+        return fail(str(error))
+    text = fitted.camera.as_json()
+    if args.output is None:
+        sys.stdout.write(text)
+        return 0
+    target = args.output.expanduser()
+    try:
+        partial = target.with_name(target.name + ".partial")
+        partial.write_text(text, encoding="utf-8")
+        partial.replace(target)
+    except OSError as error:
+        return fail(f"{target} cannot be written ({error.strerror or error})")
+    print(f"wrote {target}")
+    return 0
+
+
+ALIGN_OPTIONS = (("--camera", "align_camera"), ("--port", "port"), ("--calibration", "calibration"),
+                 ("--fitted", "fitted"))
+
+
+def align_option_given(args: argparse.Namespace) -> str | None:
+    """The first of --align's own options given (none: None)."""
+    for option, dest in ALIGN_OPTIONS:
+        if getattr(args, dest) is not None:
+            return option
+    return "--camera-pose" if args.camera_poses else None
+
+
+def align(args: argparse.Namespace) -> int:
+    from so101.bodies.camera_file import CameraFileError, default_camera_file, read_camera_file
+    from so101.launch.camera_align import AlignError, AlignRequest, run_align
+
+    name = args.align
+    for option, value, goes_with in (("--from", args.dataset, "--fit NAME"), ("--near", args.near, "--fit NAME"),
+                                     ("-o", args.output, "--fit NAME"), ("--size", args.size, "--default NAME"),
+                                     ("--save", args.save, "the cameras' listing (no --align)")):
+        if value is not None:
+            return fail(f"{option} goes with {goes_with}")
+    if args.align_camera is None:
+        return fail(f"--align {name} needs --camera {name}=SOURCE: the real camera (/dev/video0, its index 0, "
+                    "or a video file)")
+    camera, source = args.align_camera
+    if camera != name:
+        return fail(f"--camera {camera}=...: --align {name} lines up the {name} camera: give --camera {name}=SOURCE")
+    if args.port is None or args.calibration is None:
+        return fail("--align needs the arm: --port PORT (/dev/ttyACM0, ...; `so101 fake-arm` prints an emulated one) "
+                    "and --calibration FILE (from `so101 calibrate`, or LeRobot's so101_follower one)")
+    other = [pose for pose in args.camera_poses if pose != name]
+    if other:
+        return fail(f"--camera-pose {other[0]}=...: --align {name} draws the {name} camera only")
+    simulated = args.camera_poses.get(name)
+    fitted = None
+    if args.fitted is not None:
+        try:
+            fitted = read_camera_file(args.fitted, name)
+        except CameraFileError as error:
+            return fail(f"--fitted {error}")
+    request = AlignRequest(
+        name, source, args.port, args.calibration.expanduser(),
+        simulated if simulated is not None else default_camera_file(name),
+        "where --camera-pose puts it" if simulated is not None else f"the simulator's own (so101 cameras --default {name})",
+        fitted, args.web_host, args.web_port)
+    try:
+        return run_align(request)
+    except AlignError as error:
+        return fail(str(error))
+
+
 def run(args: argparse.Namespace) -> int:
+    if args.default is not None:
+        return print_default(args.default, args.size)
+    if args.fit is not None:
+        return fit(args)
+    if args.align is not None:
+        return align(args)
+    for option, value in (("--from", args.dataset), ("--near", args.near), ("-o", args.output)):
+        if value is not None:
+            return fail(f"{option} goes with --fit NAME")
+    misplaced = align_option_given(args)
+    if misplaced is not None:
+        return fail(f"{misplaced} goes with --align NAME")
     cameras = find_cameras()
     for line in listing_lines(cameras):
         print(line)
