@@ -6,17 +6,20 @@ printed marker (ArUco) would need a board laid where the arm works and is absent
 episodes; the arm is always there, in the simulator's pictures and in a real camera's alike.
 
 How:
-- What moved, in the pictures: each picture against the pixel-wise median of the pictures chosen
-  (the still background: floor, box, the arm's base); a pixel that differs moved, softly between
-  LOW and HIGH levels of 255. No colour is assumed, so any looks, any lighting.
-- What moved, drawn: the arm's pixels (MuJoCo's segmentation, so101.bodies.task_cameras) at each
-  picture's joint angles from the camera being fitted, against their median, the same way.
-- Both blurred, and their difference made small by Levenberg-Marquardt over seven numbers: the
-  lens's place (3), its turn about its own axes (3) and the field of view, each step's slopes taken
-  by drawing the arm again. Blurred widely first, then less: a start some centimetres and degrees
-  off is drawn in; the last stage reads the outline to a fraction of a pixel.
+- The arm in the pictures: each picture against a background made of the others where the arm, as
+  the fit now draws it, is not (the floor, the box, and the arm's base, which never moves, left
+  unknown); a pixel that differs shows the arm, softly between two levels chosen for the looks. No
+  colour is assumed, so any floor, any light.
+- The arm drawn: its pixels (MuJoCo's segmentation, so101.bodies.task_cameras) at each picture's
+  joint angles from the camera being fitted, drawn at twice the size and averaged; the cube too,
+  where the dataset says where it was.
+- Both blurred, and their difference made small by Levenberg-Marquardt over seven numbers (the
+  lens's place, its turn about its own axes, the field of view), each step's slopes taken by
+  drawing the arm again. Blurred widely first, then less (STAGES): a start some centimetres and
+  degrees off is drawn in; the last stage reads the outline to a fraction of a pixel.
 - The residual: how far, on average, the drawn outline lies from the pictures' (pixels at the
-  pictures' size). A fit above MAX_RESIDUAL_PX is refused.
+  pictures' size). Above MAX_RESIDUAL_PX the fit starts again from a few places along the line of
+  sight (KICKS), then is refused.
 
 A pinhole camera: the principal point at the picture's centre, no lens distortion (a real lens's
 distortion goes in the residual). The front camera only: the wrist camera moves with the jaws and
@@ -26,7 +29,8 @@ sees them still, so its pictures show no arm moving.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+import warnings
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Sequence
 
@@ -41,14 +45,20 @@ Picture = npt.NDArray[np.uint8]
 
 # Pictures fitted at once, spread over the episode (more: a steadier fit, each step slower).
 PICTURES = 16
-# A pixel whose largest colour difference from the background is under LOW (of 255) did not move, over HIGH did.
-LOW, HIGH = 12.0, 36.0
+# A pixel whose difference from the background is under the lower level (of 255) shows no arm, over the
+# higher one it does. Which pair fits depends on the looks (a yellow arm on a beige floor is faint, a
+# bright light's sheen loud): each stage takes the pair whose arm's outline lies nearest the drawn one.
+LEVELS = ((6.0, 18.0), (12.0, 36.0), (20.0, 50.0))
+LUMA = np.array([0.299, 0.587, 0.114], dtype=np.float32)
+COLOUR_WEIGHT = 0.5
 # The stages: the blur's width in pixels of a 320-wide picture, wide first (a far start), then fine; how
 # many times smaller than the pictures that stage draws; and which of the seven it moves. The nearness
 # and the field of view wait for a sharper outline: blurred, a nearer camera and a wider view look alike.
 ALL, ACROSS = (0, 1, 2, 3, 4, 5, 6), (0, 1, 3, 4, 5)
 STAGES = ((16.0, 4, ACROSS), (8.0, 2, ALL), (4.0, 1, ALL), (2.0, 1, ALL))
 STEPS_PER_STAGE = 20
+# Where a fit that did not converge starts again (mm nearer along its line of sight, degrees of field of view).
+KICKS = ((40.0, 0.0), (-40.0, 0.0), (0.0, 4.0), (0.0, -4.0))
 # The slopes' steps at a blur of 1 px: the lens's place (m), its turn (rad), the field of view (deg).
 SLOPE_STEPS = (5e-4, math.radians(0.05), 0.05)
 # The dolly keeps the size of what lies this far ahead: about where the arm is from the camera.
@@ -58,7 +68,7 @@ SUPERSAMPLE = 2
 MAX_STEP = np.array([0.02] * 3 + [math.radians(3.0)] * 3 + [3.0])
 # Below these a step ends its stage: 0.05 mm, 0.005°, 0.005° of field of view.
 STILL_STEP = (5e-5, math.radians(0.005), 0.005)
-MAX_RESIDUAL_PX = 1.0  # at 320 pixels wide; in proportion for others
+MAX_RESIDUAL_PX = 0.8  # at 320 pixels wide; in proportion for others (a fit that converged: 0.25-0.75)
 # Fewer moving pixels than this share of a picture, in every picture: the camera shows no arm moving.
 MIN_MOVED_SHARE = 0.002
 # A picture's background leaves out the drawn arm widened by this many blurs: room for the fit's error.
@@ -129,7 +139,8 @@ def pose_error(fitted: CameraFile, truth: CameraFile) -> tuple[float, float, flo
     return float(np.linalg.norm(a.eye - b.eye)), angle, abs(a.fov_deg - b.fov_deg)
 
 
-def arm_seen(pictures: npt.NDArray[np.uint8], drawn: FloatArray, margin_px: int) -> tuple[FloatArray, FloatArray]:
+def arm_seen(pictures: npt.NDArray[np.uint8], drawn: FloatArray, margin_px: int,
+             levels: tuple[float, float] = LEVELS[1]) -> tuple[FloatArray, FloatArray]:
     """Where each of (K, H, W, 3) pictures shows the arm, softly 0-1, and which pixels can tell (1) or not (0).
 
     A pixel's background is the median of the pictures whose drawn arm (K, H, W), widened by `margin_px`,
@@ -141,11 +152,15 @@ def arm_seen(pictures: npt.NDArray[np.uint8], drawn: FloatArray, margin_px: int)
     near_arm = np.stack([cv2.dilate((mask > 0).astype(np.uint8), kernel) > 0 for mask in drawn])
     stack = pictures.astype(np.float32)
     hidden = np.where(near_arm[..., None], np.nan, stack)
-    with np.errstate(all="ignore"):
+    with warnings.catch_warnings():  # a pixel with no picture free of the arm has no background: nan, said below
+        warnings.simplefilter("ignore", RuntimeWarning)
         background = np.nanmedian(hidden, axis=0)
     known = ~np.isnan(background[..., 0])
-    difference = np.abs(stack - np.nan_to_num(background)[None]).max(axis=3)
-    seen = np.clip((difference - LOW) / (HIGH - LOW), 0.0, 1.0)
+    apart = stack - np.nan_to_num(background)[None]
+    # Brightness is sharp in a video; colour is kept at half the size (4:2:0), its edges a pixel wide: it counts half.
+    difference = np.maximum(np.abs(apart @ LUMA), COLOUR_WEIGHT * np.abs(apart).max(axis=3))
+    low, high = levels
+    seen = np.clip((difference - low) / (high - low), 0.0, 1.0)
     return seen.astype(np.float64), known.astype(np.float64)
 
 
@@ -219,44 +234,76 @@ def fit_camera(pictures: Sequence[Picture], angles_deg: Sequence[Sequence[float]
     if len(pictures) != len(angles_deg) or len(pictures) < 3:
         raise CameraFitError(f"a fit needs at least 3 pictures, each with its joint angles ({len(pictures)} pictures, "
                              f"{len(angles_deg)} rows of angles)")
-    import cv2
-
     stack = np.stack([np.asarray(picture, dtype=np.uint8) for picture in pictures])
     height, width = stack.shape[1:3]
+    most_px = MAX_RESIDUAL_PX * width / 320.0
     drawn = _Drawn(angles_deg, object_states)
-    pose = Pose.of(start)
-    steps = 0
     try:
-        for sigma, shrink, free in STAGES:
-            # A wide blur sees no detail: its stages draw and compare smaller pictures, much faster.
-            size = (max(8, round(width / shrink)), max(6, round(height / shrink)))
-            small = stack if shrink == 1 else np.stack([cv2.resize(picture, size, interpolation=cv2.INTER_AREA)
-                                                        for picture in stack])
-            sigma_px = sigma * size[0] / 320.0
-            margin_px = max(2, round(min(MARGIN_BLURS * sigma, MAX_MARGIN_PX) * size[0] / 320.0))
-
-            def compared_at(near: Pose) -> Callable[[Pose], FloatArray]:
-                """The stage's residual, its background made with the arm drawn at `near` (the fit so far)."""
-                seen, known = arm_seen(small, drawn.masks(near, *size), margin_px)
-                if float((seen * known > 0.5).mean(axis=(1, 2)).max()) < MIN_MOVED_SHARE:
-                    raise CameraFitError("the pictures show no arm where it moves: is the camera on the arm, and did "
-                                         "the arm move?")
-                return lambda at: _blurred((drawn.masks(at, *size) - seen) * known[None], sigma_px).ravel()
-
-            pose, taken = _levenberg_marquardt(pose, compared_at, sigma, free)
-            steps += taken
-            log(f"fit: blur {sigma:g} px, {taken} steps: {_describe(pose)}")
-        final = drawn.masks(pose, width, height)
-        seen, known = arm_seen(stack, final, max(2, round(MARGIN_BLURS * width / 320.0)))
-        residual_px = outline_distance_px(final * known[None], seen * known[None])
+        pose, residual_px, steps = _fit_stages(stack, drawn, Pose.of(start), STAGES, log)
+        # A fit caught where a nearer camera with a narrower view (or the other way) looks almost alike:
+        # it starts again from there, the sharper stages only, and keeps the best.
+        for kick in KICKS:
+            if residual_px <= most_px:
+                break
+            log(f"fit: the outline lies {residual_px:.2f} px off (at most {most_px:g}): again from {kick[0]:+.0f} mm "
+                f"nearer, {kick[1]:+.0f}° of field of view")
+            tried = _fit_stages(stack, drawn, pose.moved([0, 0, kick[0] / 1000, 0, 0, 0, kick[1]]), STAGES[1:], log)
+            steps += tried[2]
+            if tried[1] < residual_px:
+                pose, residual_px = tried[0], tried[1]
     finally:
         drawn.close()
     log(f"fit: the drawn outline lies {residual_px:.2f} px from the pictures' on average ({drawn.draws} drawings)")
-    if not residual_px <= MAX_RESIDUAL_PX * width / 320.0:
+    if not residual_px <= most_px:
         raise CameraFitError(f"the fit did not converge: the arm's outline lies {residual_px:.1f} px from the pictures' "
-                             f"on average (at most {MAX_RESIDUAL_PX * width / 320.0:g} accepted); start nearer with --near FILE "
+                             f"on average (at most {most_px:g} accepted); start nearer with --near FILE "
                              "(so101 cameras --default front, edited to a tape measure's numbers)")
     return CameraFit(pose.camera_file(width, height, residual_px), residual_px, steps, len(pictures))
+
+
+def _fit_stages(stack: npt.NDArray[np.uint8], drawn: "_Drawn", pose: Pose,
+                stages: Sequence[tuple[float, int, tuple[int, ...]]],
+                log: Callable[[str], None]) -> tuple[Pose, float, int]:
+    """`stages` of the fit from `pose`: where it ends, its outline's distance from the pictures' (px), its steps."""
+    import cv2
+
+    height, width = stack.shape[1:3]
+    steps = 0
+    for sigma, shrink, free in stages:
+        # A wide blur sees no detail: its stages draw and compare smaller pictures, much faster.
+        size = (max(8, round(width / shrink)), max(6, round(height / shrink)))
+        small = stack if shrink == 1 else np.stack([cv2.resize(picture, size, interpolation=cv2.INTER_AREA)
+                                                    for picture in stack])
+        sigma_px = sigma * size[0] / 320.0
+        margin_px = max(2, round(min(MARGIN_BLURS * sigma, MAX_MARGIN_PX) * size[0] / 320.0))
+
+        levels = _levels(stack, drawn, pose)[0]
+
+        def compared_at(near: Pose) -> Callable[[Pose], FloatArray]:
+            """The stage's residual, its background made with the arm drawn at `near` (the fit so far)."""
+            seen, known = arm_seen(small, drawn.masks(near, *size), margin_px, levels)
+            if float((seen * known > 0.5).mean(axis=(1, 2)).max()) < MIN_MOVED_SHARE:
+                raise CameraFitError("the pictures show no arm where it moves: is the camera on the arm, and did "
+                                     "the arm move?")
+            return lambda at: _blurred((drawn.masks(at, *size) - seen) * known[None], sigma_px).ravel()
+
+        pose, taken = _levenberg_marquardt(pose, compared_at, sigma, free)
+        steps += taken
+        log(f"fit: blur {sigma:g} px, {taken} steps: {_describe(pose)}")
+    return pose, _levels(stack, drawn, pose)[1], steps
+
+
+def _levels(stack: npt.NDArray[np.uint8], drawn: "_Drawn", pose: Pose) -> tuple[tuple[float, float], float]:
+    """The LEVELS pair whose arm, seen in the pictures, has its outline nearest the arm drawn from `pose`, and that distance."""
+    height, width = stack.shape[1:3]
+    final = drawn.masks(pose, width, height)
+    margin_px = max(2, round(MARGIN_BLURS * width / 320.0))
+    distances = []
+    for levels in LEVELS:
+        seen, known = arm_seen(stack, final, margin_px, levels)
+        distances.append((outline_distance_px(final * known[None], seen * known[None]), levels))
+    distance, levels = min(distances)
+    return levels, distance
 
 
 def _describe(pose: Pose) -> str:
