@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 from so101.bodies.camera_file import CameraFile, default_camera_file, front_file_of, orbit_of
-from so101.launch.camera_align import outline_on_edges, outline_of, overlay_picture, OUTLINE_RGB
+from so101.launch.camera_overlay import OUTLINE_RGB, outline_of, outline_on_edges, overlay_picture
 from so101.perception.camera_moves import move_in_words
 
 SO101 = Path(sys.executable).parent / "so101"
