@@ -371,7 +371,9 @@ def fit_from_dataset(root: Path, name: str, start: CameraFile, episode: int = 0,
         chosen = chosen_frames(len(states))
         wanted = set(chosen)
         pictures = [picture for index, picture in enumerate(dataset.episode_images(episode, key)) if index in wanted]
-    except (DatasetError, ValueError, OSError) as error:
+    except DatasetError as error:  # it names the dataset
+        raise CameraFitError(str(error)) from None
+    except (ValueError, OSError) as error:
         raise CameraFitError(f"{root}: {error}") from None
     if len(pictures) != len(chosen):
         raise CameraFitError(f"{root}: episode {episode}'s video {key} has fewer pictures than its {len(states)} frames")
