@@ -256,11 +256,30 @@ class AlignRequest:
 
 
 class _Stop(Exception):
-    """SIGTERM or SIGHUP: the loop ends as on Ctrl-C."""
+    """A signal asked the alignment to end (its name)."""
 
 
-def _raise_stop(signum: int, frame: object) -> None:
-    raise _Stop(signal.Signals(signum).name)
+class _Signals:
+    """Ctrl-C, SIGTERM and SIGHUP, noted rather than raised: an exception thrown into whatever runs (the browser
+    page's server, a picture's capture) can be caught there and lost; the loop asks between refreshes."""
+
+    NAMES = {signal.SIGINT: "Ctrl-C", signal.SIGTERM: "SIGTERM", signal.SIGHUP: "SIGHUP"}
+
+    def __init__(self) -> None:
+        self.caught: str | None = None
+        self._previous = {signum: signal.signal(signum, self._note) for signum in self.NAMES}
+
+    def _note(self, signum: int, frame: object) -> None:
+        self.caught = self.caught or self.NAMES[signal.Signals(signum)]
+
+    def check(self) -> None:
+        """_Stop if a signal came."""
+        if self.caught is not None:
+            raise _Stop(self.caught)
+
+    def restore(self) -> None:
+        for signum, handler in self._previous.items():
+            signal.signal(signum, handler)
 
 
 def video_file_problem(path: str) -> str | None:
@@ -319,7 +338,7 @@ def run_align(request: AlignRequest, say: Callable[[str], None] = print) -> int:
     except ValueError as error:
         raise AlignError(str(error)) from None
     source = capture_source(request.source)
-    previous = {signum: signal.signal(signum, _raise_stop) for signum in (signal.SIGTERM, signal.SIGHUP)}
+    signals = _Signals()
     arm: ArmReader | None = None
     capturing: Capturing | None = None
     closing: list[Callable[[], None]] = []
@@ -329,6 +348,7 @@ def run_align(request: AlignRequest, say: Callable[[str], None] = print) -> int:
     try:
         # The camera first: a camera that gives no picture is said before the arm is touched.
         width, height = first_picture(source, request.source, name)
+        signals.check()
         arm = ArmReader(request.port, request.calibration, signs)
         say(f"arm on {request.port}: read only, torque off: move it by hand")
         say(f"camera {name}: {request.source}, {width}x{height}")
@@ -373,16 +393,13 @@ def run_align(request: AlignRequest, say: Callable[[str], None] = print) -> int:
         elif request.window:
             say("no display (DISPLAY is not set or not reachable): no window; the browser view shows the overlay")
         running = True
-        outcome = _loop(request, arm, capturing, cameras, page, window, words, say)
-    except KeyboardInterrupt:
-        outcome = "stopped (Ctrl-C)"
+        outcome = _loop(request, arm, capturing, cameras, page, window, words, say, signals)
     except _Stop as stop:
         outcome = f"stopped ({stop})"
     except AlignError as error:
         failure = str(error)
     finally:
-        for signum, handler in previous.items():
-            signal.signal(signum, handler)
+        signals.restore()
         for close in reversed(closing):
             close()
         if capturing is not None:
@@ -405,13 +422,14 @@ def joint_signs_setting() -> str:
 
 
 def _loop(request: AlignRequest, arm: ArmReader, capturing: Capturing, cameras: Any, page: AlignPage,
-          window: AlignWindow | None, words: str | None, say: Callable[[str], None]) -> str:
+          window: AlignWindow | None, words: str | None, say: Callable[[str], None], signals: _Signals) -> str:
     """Refreshes the overlay REFRESH_HZ times a second until the window closes (what closed it, returned);
-    Ctrl-C, a signal and a failure end it by raising."""
+    Ctrl-C, SIGTERM or SIGHUP (asked for between refreshes) and a failure end it by raising."""
     period_s = 1.0 / REFRESH_HZ
     angles: tuple[float, ...] | None = None
     shown_first = False
     while True:
+        signals.check()
         started = time.monotonic()
         angles = arm.read_deg() or angles
         if capturing.failed is not None:
