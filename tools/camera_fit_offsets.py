@@ -89,14 +89,14 @@ def main() -> int:
         truth = camera_file_from(json.loads((root / "meta" / "info.json").read_text())["so101_episode_cameras"][0]["front"])
         started = time.monotonic()
         try:
-            fit = fit_from_dataset(root, "front", default_camera_file("front"))
+            fit = fit_from_dataset(root, default_camera_file("front"))
         except ValueError as error:
             print(f"offset {index} ({said}): no fit: {error}", flush=True)
             worst = [math.inf] * 4
             continue
         took = time.monotonic() - started
-        error_m, error_deg, error_fov = pose_error(fit.camera, truth)
-        difference, from_video = first_frame_difference(root, fit.camera, truth)
+        error_m, error_deg, error_fov = pose_error(fit, truth)
+        difference, from_video = first_frame_difference(root, fit, truth)
         worst = [max(a, b) for a, b in zip(worst, (1000 * error_m, error_deg, error_fov, difference))]
         print(f"offset {index} ({said}): fit off by {1000 * error_m:.1f} mm, {error_deg:.2f}°, fov {error_fov:.2f}°; "
               f"residual {fit.residual_px:.2f} px; {took:.0f} s; first frame redrawn {difference:.2f} of 255 from the "

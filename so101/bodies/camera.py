@@ -31,14 +31,15 @@ class Camera:
         eye = tuple(t - self.distance_m * f for t, f in zip(self.target_xyz_m, forward))
         level = math.hypot(forward[0], forward[1])
         right = (forward[1] / level, -forward[0] / level, 0.0)  # forward x +z, made unit
-        up = _cross(right, forward)
+        up = cross(right, forward)
         roll = math.radians(self.roll_deg)
         rolled_right = tuple(r * math.cos(roll) - u * math.sin(roll) for r, u in zip(right, up))
         rolled_up = tuple(u * math.cos(roll) + r * math.sin(roll) for r, u in zip(right, up))
         return eye, forward, rolled_right, rolled_up
 
 
-def _cross(a: tuple[float, ...], b: tuple[float, ...]) -> tuple[float, float, float]:
+def cross(a: tuple[float, ...], b: tuple[float, ...]) -> tuple[float, float, float]:
+    """a x b, for three-number tuples (the camera files' vectors)."""
     return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
 
 

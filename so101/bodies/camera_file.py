@@ -23,7 +23,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
-from so101.bodies.camera import TASK_FRONT_CAMERA, WRIST_CAMERA, Camera, WristCamera
+from so101.bodies.camera import TASK_FRONT_CAMERA, WRIST_CAMERA, Camera, WristCamera, cross
 from so101.bodies.looks import Looks, looks_for
 
 CAMERA_NAMES = ("front", "wrist")
@@ -95,7 +95,7 @@ def camera_file_from(fields: object, name: str | None = None) -> CameraFile:
     sight = tuple(b - a for a, b in zip(position, look_at))
     if _norm(sight) < 1e-3:
         raise CameraFileError("`look_at_m` must be at least 1 mm from `position_m`: they give the line of sight")
-    across = (up[1] * sight[2] - up[2] * sight[1], up[2] * sight[0] - up[0] * sight[2], up[0] * sight[1] - up[1] * sight[0])
+    across = cross(up, sight)
     if _norm(up) < 1e-9 or _norm(across) < 1e-3 * _norm(up) * _norm(sight):
         raise CameraFileError("`up` must not be zero nor along the line of sight (position_m to look_at_m)")
     if camera == "front" and abs(sight[2]) / _norm(sight) > math.cos(math.radians(LEVEL_MIN_DEG)):
@@ -162,11 +162,24 @@ def wrist_file_of(camera: WristCamera, width: int, height: int, residual_px: flo
     return CameraFile("wrist", camera.eye_m, camera.target_m, camera.up, camera.fov_deg, width, height, residual_px)
 
 
-def default_camera_file(name: str, width: int = DEFAULT_SIZE[0], height: int = DEFAULT_SIZE[1]) -> CameraFile:
-    """The simulated camera `name`'s own file: where a task's episodes draw it from (without varied looks)."""
+def simulated_camera(name: object) -> str:
+    """`name` if it is a simulated camera's; CameraFileError in one line otherwise."""
     if name not in CAMERA_NAMES:
         raise CameraFileError(f"unknown camera {name!r}; the simulated ones are: {', '.join(CAMERA_NAMES)}")
-    if name == "front":
+    return str(name)
+
+
+def camera_pose_given(text: str) -> tuple[str, CameraFile]:
+    """NAME=FILE (`--camera-pose`, so101.gym's camera_pose): the camera's name and its file, read and checked."""
+    name, equals, path = text.partition("=")
+    if not equals or not name or not path:
+        raise CameraFileError(f"{text!r} is not NAME=FILE (e.g. front=my_front.json)")
+    return simulated_camera(name), read_camera_file(path, name)
+
+
+def default_camera_file(name: str, width: int = DEFAULT_SIZE[0], height: int = DEFAULT_SIZE[1]) -> CameraFile:
+    """The simulated camera `name`'s own file: where a task's episodes draw it from (without varied looks)."""
+    if simulated_camera(name) == "front":
         return front_file_of(TASK_FRONT_CAMERA, width, height)
     return wrist_file_of(WRIST_CAMERA, width, height)
 
@@ -200,9 +213,9 @@ def wrist_placement(camera: WristCamera) -> tuple[Vector, tuple[float, float, fl
     eye, target = camera.eye_m, camera.target_m
     sight = tuple(e - t for e, t in zip(eye, target))
     backward = tuple(v / _norm(sight) for v in sight)
-    across = _cross3(camera.up, backward)
+    across = cross(camera.up, backward)
     right = tuple(v / _norm(across) for v in across)
-    top = _cross3(backward, right)
+    top = cross(backward, right)
     # The rotation's columns are right, top, backward; its quaternion (Shepperd's method, the largest term first).
     m = ((right[0], top[0], backward[0]), (right[1], top[1], backward[1]), (right[2], top[2], backward[2]))
     trace = m[0][0] + m[1][1] + m[2][2]
@@ -217,10 +230,6 @@ def wrist_placement(camera: WristCamera) -> tuple[Vector, tuple[float, float, fl
         q[i], q[j], q[k] = 0.25 * s, (m[j][i] + m[i][j]) / s, (m[k][i] + m[i][k]) / s
         quat = ((m[k][j] - m[j][k]) / s, q[0], q[1], q[2])
     return (eye[0], eye[1], eye[2]), quat
-
-
-def _cross3(a: tuple[float, ...], b: tuple[float, ...]) -> Vector:
-    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
 
 
 def drawn_front(fixed: Camera, looks: Looks | None) -> Camera:

@@ -173,13 +173,13 @@ class SO101MuJoCo:
     def render_rgb(self, width: int = 640, height: int = 480, camera: Camera | WristCamera = DEFAULT_CAMERA) -> RgbImage:
         """The scene as an RGB image, uint8 of shape (height, width, 3), drawn offscreen from `camera`
         (the orbiting one, or the one on the gripper: a task's scene has it)."""
-        self._render_setup(width, height, camera, segmentation=False)
+        self._render_setup(width, height, camera)
         return np.array(self._renderer.render(), dtype=np.uint8)
 
     def render_geoms(self, width: int, height: int, camera: Camera | WristCamera = DEFAULT_CAMERA) -> npt.NDArray[np.int32]:
         """Which geom each pixel shows, int32 of shape (height, width), -1 where none: render_rgb's picture
         as MuJoCo's segmentation draws it (a camera's fit compares the arm's outline with a picture's)."""
-        self._render_setup(width, height, camera, segmentation=True)
+        self._render_setup(width, height, camera)
         self._renderer.enable_segmentation_rendering()
         try:
             drawn = self._renderer.render()
@@ -188,7 +188,8 @@ class SO101MuJoCo:
         ids = np.asarray(drawn[:, :, 0], dtype=np.int32)
         return np.where(np.asarray(drawn[:, :, 1]) == int(mujoco.mjtObj.mjOBJ_GEOM), ids, -1).astype(np.int32)
 
-    def _render_setup(self, width: int, height: int, camera: Camera | WristCamera, segmentation: bool) -> None:
+    def _render_setup(self, width: int, height: int, camera: Camera | WristCamera) -> None:
+        """The renderer at this size, its scene updated for `camera`: what render_rgb and render_geoms draw."""
         check_picture(self.renders, width, height)
         if isinstance(camera, WristCamera) and self.scene is None:
             raise ValueError("the wrist camera is a task's: start the simulation with a task")

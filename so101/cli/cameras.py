@@ -136,15 +136,15 @@ def fit(args: argparse.Namespace) -> int:
     except CameraFileError as error:
         return fail(f"--near {error}")
     try:
-        fitted = fit_from_dataset(args.dataset.expanduser(), args.fit, start, args.episode, log=print)
+        fitted = fit_from_dataset(args.dataset.expanduser(), start, args.episode, log=print)
     except (CameraFitError, CameraFileError) as error:
         return fail(str(error))
     from so101.perception.camera_moves import move_in_words
 
     # Against the simulated camera, the one demonstrations are drawn from unless --camera-pose says otherwise.
-    words = move_in_words(fitted.camera, default_camera_file(args.fit))
+    words = move_in_words(fitted, default_camera_file(args.fit))
     print(f"to stand where the simulated {args.fit} camera does: {words}")
-    text = fitted.camera.as_json()
+    text = fitted.as_json()
     if args.output is None:
         sys.stdout.write(text)
         return 0

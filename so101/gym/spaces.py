@@ -13,7 +13,9 @@ import numpy as np
 import numpy.typing as npt
 from gymnasium import spaces
 
-from so101.bodies.camera_file import CAMERA_NAMES as CAMERA_FILE_NAMES, CameraFile, CameraFileError, camera_file_from, read_camera_file
+from so101.bodies.camera_file import (
+    CameraFile, CameraFileError, camera_file_from, camera_pose_given, read_camera_file, simulated_camera,
+)
 from so101.bodies.looks import LOOKS_CHOICES
 from so101.bodies.registry import SIMULATED_BODIES
 from so101.dataset.features import joint_targets_deg, to_lerobot
@@ -59,22 +61,15 @@ def check_camera_pose(camera_pose: object) -> dict[str, CameraFile]:
     text "front=FILE,wrist=FILE" (LeRobot's --env.camera_pose); None or "" for the simulator's own."""
     if camera_pose is None or camera_pose == "":
         return {}
-    if isinstance(camera_pose, str):
-        pairs = [part.partition("=") for part in camera_pose.split(",")]
-        if not all(equals and name and path for name, equals, path in pairs):
-            raise ValueError(f"camera_pose={camera_pose!r} is not NAME=FILE[,NAME=FILE] (e.g. front=my_front.json)")
-        camera_pose = {name.strip(): path.strip() for name, _, path in pairs}
-    if not isinstance(camera_pose, dict):
-        raise ValueError(f"camera_pose={camera_pose!r} is not a map from a camera's name to its camera file")
-    poses = {}
-    for name, given in camera_pose.items():
-        if name not in CAMERA_FILE_NAMES:
-            raise ValueError(f"camera_pose: unknown camera {name!r}; the simulated ones are: {', '.join(CAMERA_FILE_NAMES)}")
-        try:
-            poses[name] = camera_file_from(given, name) if isinstance(given, dict) else read_camera_file(given, name)
-        except CameraFileError as error:
-            raise ValueError(f"camera_pose {name}: {error}") from None
-    return poses
+    try:
+        if isinstance(camera_pose, str):
+            return dict(camera_pose_given(part.strip()) for part in camera_pose.split(","))
+        if not isinstance(camera_pose, dict):
+            raise ValueError(f"camera_pose={camera_pose!r} is not a map from a camera's name to its camera file")
+        return {simulated_camera(name): camera_file_from(given, name) if isinstance(given, dict)
+                else read_camera_file(given, name) for name, given in camera_pose.items()}
+    except CameraFileError as error:
+        raise ValueError(f"camera_pose: {error}") from None
 
 
 def check_render_mode(render_mode: object) -> str | None:

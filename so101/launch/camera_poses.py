@@ -7,9 +7,7 @@ from __future__ import annotations
 import argparse
 from typing import cast
 
-from so101.bodies.camera_file import (
-    CAMERA_NAMES, CAMERA_POSES_ENV_VAR, CameraFile, CameraFileError, camera_poses_text, read_camera_file,
-)
+from so101.bodies.camera_file import CAMERA_POSES_ENV_VAR, CameraFile, CameraFileError, camera_pose_given, camera_poses_text
 
 CAMERA_POSE_HELP = ("draw the simulated camera NAME (front or wrist) from where FILE puts it: a camera file from "
                     "`so101 cameras --fit` or `--default` (repeat for both cameras; default: the simulator's own)")
@@ -17,13 +15,8 @@ CAMERA_POSE_HELP = ("draw the simulated camera NAME (front or wrist) from where 
 
 def camera_pose(text: str) -> tuple[str, CameraFile]:
     """argparse's type for NAME=FILE: the camera's name and its file, read and checked now."""
-    name, equals, path = text.partition("=")
-    if not equals or not name or not path:
-        raise argparse.ArgumentTypeError(f"{text!r} is not NAME=FILE (e.g. front=my_front.json)")
-    if name not in CAMERA_NAMES:
-        raise argparse.ArgumentTypeError(f"unknown camera {name!r}; the simulated ones are: {', '.join(CAMERA_NAMES)}")
     try:
-        return name, read_camera_file(path, name)
+        return camera_pose_given(text)
     except CameraFileError as error:
         raise argparse.ArgumentTypeError(str(error)) from None
 

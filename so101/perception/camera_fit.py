@@ -59,15 +59,22 @@ STAGES = ((16.0, 4, ACROSS), (8.0, 2, ALL), (4.0, 1, ALL), (2.0, 1, ALL))
 STEPS_PER_STAGE = 20
 # Where a fit that did not converge starts again (mm nearer along its line of sight, degrees of field of view).
 KICKS = ((40.0, 0.0), (-40.0, 0.0), (0.0, 4.0), (0.0, -4.0))
-# The slopes' steps at a blur of 1 px: the lens's place (m), its turn (rad), the field of view (deg).
-SLOPE_STEPS = (5e-4, math.radians(0.05), 0.05)
+
+
+def _for_the_seven(place: float, turn_deg: float, view_deg: float) -> FloatArray:
+    """One amount for each of the seven numbers a fit moves: the lens's place (3, m), its turn (3), its view."""
+    return np.array([place] * 3 + [math.radians(turn_deg)] * 3 + [view_deg])
+
+
+# The slopes' steps at a blur of 1 px (more, the wider the blur).
+SLOPE_STEPS = _for_the_seven(5e-4, 0.05, 0.05)
 # The dolly keeps the size of what lies this far ahead: about where the arm is from the camera.
 DOLLY_AT_M = 0.6
 SUPERSAMPLE = 2
 # The most one step moves: 2 cm, 3°, 3° of field of view (a longer one is shortened, its direction kept).
-MAX_STEP = np.array([0.02] * 3 + [math.radians(3.0)] * 3 + [3.0])
+MAX_STEP = _for_the_seven(0.02, 3.0, 3.0)
 # Below these a step ends its stage: 0.05 mm, 0.005°, 0.005° of field of view.
-STILL_STEP = (5e-5, math.radians(0.005), 0.005)
+STILL_STEP = _for_the_seven(5e-5, 0.005, 0.005)
 MAX_RESIDUAL_PX = 0.8  # at 320 pixels wide; in proportion for others (a fit that converged: 0.25-0.75)
 # Fewer moving pixels than this share of a picture, in every picture: the camera shows no arm moving.
 MIN_MOVED_SHARE = 0.002
@@ -190,14 +197,6 @@ def outline_distance_px(drawn: FloatArray, seen: FloatArray) -> float:
     return float(np.mean(distances)) if distances else math.inf
 
 
-@dataclass(frozen=True)
-class CameraFit:
-    camera: CameraFile
-    residual_px: float
-    steps: int  # Levenberg-Marquardt steps taken, all stages
-    pictures: int
-
-
 class _Drawn:
     """The arm drawn at the chosen pictures' joint angles from any pose (one model, kept between draws)."""
 
@@ -226,8 +225,9 @@ class _Drawn:
 
 def fit_camera(pictures: Sequence[Picture], angles_deg: Sequence[Sequence[float]], start: CameraFile,
                object_states: Sequence[Sequence[float]] | None = None,
-               log: Callable[[str], None] = lambda line: None) -> CameraFit:
-    """The front camera that saw `pictures` of the arm at `angles_deg` (one six-angle row each), from `start`;
+               log: Callable[[str], None] = lambda line: None) -> CameraFile:
+    """The front camera that saw `pictures` of the arm at `angles_deg` (one six-angle row each), from `start`,
+    its residual_px the fit's;
     `object_states` (a task's, where a dataset has them) draw the cube too: it moves with the arm."""
     if start.camera != "front":
         raise CameraFitError(f"only the front camera is fitted (the {start.camera} camera sees no arm moving)")
@@ -239,7 +239,7 @@ def fit_camera(pictures: Sequence[Picture], angles_deg: Sequence[Sequence[float]
     most_px = MAX_RESIDUAL_PX * width / 320.0
     drawn = _Drawn(angles_deg, object_states)
     try:
-        pose, residual_px, steps = _fit_stages(stack, drawn, Pose.of(start), STAGES, log)
+        pose, residual_px = _fit_stages(stack, drawn, Pose.of(start), STAGES, log)
         # A fit caught where a nearer camera with a narrower view (or the other way) looks almost alike:
         # it starts again from there, the sharper stages only, and keeps the best.
         for kick in KICKS:
@@ -247,10 +247,10 @@ def fit_camera(pictures: Sequence[Picture], angles_deg: Sequence[Sequence[float]
                 break
             log(f"fit: the outline lies {residual_px:.2f} px off (at most {most_px:g}): again from {kick[0]:+.0f} mm "
                 f"nearer, {kick[1]:+.0f}° of field of view")
-            tried = _fit_stages(stack, drawn, pose.moved([0, 0, kick[0] / 1000, 0, 0, 0, kick[1]]), STAGES[1:], log)
-            steps += tried[2]
-            if tried[1] < residual_px:
-                pose, residual_px = tried[0], tried[1]
+            tried, tried_px = _fit_stages(stack, drawn, pose.moved([0, 0, kick[0] / 1000, 0, 0, 0, kick[1]]), STAGES[1:],
+                                          log)
+            if tried_px < residual_px:
+                pose, residual_px = tried, tried_px
     finally:
         drawn.close()
     log(f"fit: the drawn outline lies {residual_px:.2f} px from the pictures' on average ({drawn.draws} drawings)")
@@ -258,17 +258,16 @@ def fit_camera(pictures: Sequence[Picture], angles_deg: Sequence[Sequence[float]
         raise CameraFitError(f"the fit did not converge: the arm's outline lies {residual_px:.1f} px from the pictures' "
                              f"on average (at most {most_px:g} accepted); start nearer with --near FILE "
                              "(so101 cameras --default front, edited to a tape measure's numbers)")
-    return CameraFit(pose.camera_file(width, height, residual_px), residual_px, steps, len(pictures))
+    return pose.camera_file(width, height, residual_px)
 
 
 def _fit_stages(stack: npt.NDArray[np.uint8], drawn: "_Drawn", pose: Pose,
                 stages: Sequence[tuple[float, int, tuple[int, ...]]],
-                log: Callable[[str], None]) -> tuple[Pose, float, int]:
-    """`stages` of the fit from `pose`: where it ends, its outline's distance from the pictures' (px), its steps."""
+                log: Callable[[str], None]) -> tuple[Pose, float]:
+    """`stages` of the fit from `pose`: where it ends, and its outline's distance from the pictures' (px)."""
     import cv2
 
     height, width = stack.shape[1:3]
-    steps = 0
     for sigma, shrink, free in stages:
         # A wide blur sees no detail: its stages draw and compare smaller pictures, much faster.
         size = (max(8, round(width / shrink)), max(6, round(height / shrink)))
@@ -288,9 +287,8 @@ def _fit_stages(stack: npt.NDArray[np.uint8], drawn: "_Drawn", pose: Pose,
             return lambda at: _blurred((drawn.masks(at, *size) - seen) * known[None], sigma_px).ravel()
 
         pose, taken = _levenberg_marquardt(pose, compared_at, sigma, free)
-        steps += taken
         log(f"fit: blur {sigma:g} px, {taken} steps: {_describe(pose)}")
-    return pose, _levels(stack, drawn, pose)[1], steps
+    return pose, _levels(stack, drawn, pose)[1]
 
 
 def _levels(stack: npt.NDArray[np.uint8], drawn: "_Drawn", pose: Pose) -> tuple[tuple[float, float], float]:
@@ -316,8 +314,7 @@ def _levenberg_marquardt(pose: Pose, compared_at: Callable[[Pose], Callable[[Pos
     """Up to STEPS_PER_STAGE steps of LM from `pose`, moving the seven numbers in `free`. Each step first
     remakes the background where the arm is drawn now (`compared_at`), then takes the slopes: central
     differences over about half a pixel's move of the outline (more, the wider the blur)."""
-    slope_steps = np.array([SLOPE_STEPS[0]] * 3 + [SLOPE_STEPS[1]] * 3 + [SLOPE_STEPS[2]]) * max(sigma, 2.0)
-    still = np.array([STILL_STEP[0]] * 3 + [STILL_STEP[1]] * 3 + [STILL_STEP[2]])
+    slope_steps = SLOPE_STEPS * max(sigma, 2.0)
     damping = 1e-3
     for taken in range(1, STEPS_PER_STAGE + 1):
         residual = compared_at(pose)
@@ -340,7 +337,7 @@ def _levenberg_marquardt(pose: Pose, compared_at: Callable[[Pose], Callable[[Pos
             damping *= 4
             if damping > 1e4:
                 return pose, taken
-        if np.all(np.abs(step) < still):
+        if np.all(np.abs(step) < STILL_STEP):
             return pose, taken
     return pose, STEPS_PER_STAGE
 
@@ -352,16 +349,15 @@ def chosen_frames(length: int, count: int = PICTURES) -> list[int]:
     return [round(i * (length - 1) / (count - 1)) for i in range(count)]
 
 
-def fit_from_dataset(root: Path, name: str, start: CameraFile, episode: int = 0,
-                     log: Callable[[str], None] = lambda line: None) -> CameraFit:
-    """The camera `name` fitted to episode `episode` of the LeRobot dataset at `root` (its video
+def fit_from_dataset(root: Path, start: CameraFile, episode: int = 0,
+                     log: Callable[[str], None] = lambda line: None) -> CameraFile:
+    """`start`'s camera fitted to episode `episode` of the LeRobot dataset at `root` (its video
     observation.images.NAME and its observation.state), from `start`."""
     from so101.dataset.features import ENVIRONMENT_KEY, STATE_KEY, from_lerobot
     from so101.dataset.layout import DatasetError
     from so101.dataset.reader import Dataset
 
-    if name != "front":
-        raise CameraFitError(f"only the front camera is fitted (the {name} camera sees no arm moving)")
+    name = start.camera
     key = f"observation.images.{name}"
     try:
         dataset = Dataset.open(root)

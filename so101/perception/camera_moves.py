@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 
+from so101.bodies.camera import cross
 from so101.bodies.camera_file import CameraFile
 
 # A move or a turn below these is left out: below what a hand can set a camera to.
@@ -23,10 +24,6 @@ Vector = tuple[float, float, float]
 
 def _dot(a: Vector, b: Vector) -> float:
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-
-
-def _cross(a: Vector, b: Vector) -> Vector:
-    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
 
 
 def _unit(a: Vector) -> Vector:
@@ -43,8 +40,8 @@ def camera_axes(camera: CameraFile) -> tuple[Vector, Vector, Vector]:
     to the line of sight (a file's need not be)."""
     forward = _unit((camera.look_at_m[0] - camera.position_m[0], camera.look_at_m[1] - camera.position_m[1],
                      camera.look_at_m[2] - camera.position_m[2]))
-    right = _unit(_cross(forward, camera.up))
-    return right, _cross(right, forward), forward
+    right = _unit(cross(forward, camera.up))
+    return right, cross(right, forward), forward
 
 
 def amount(value: float) -> str:
@@ -70,7 +67,7 @@ def move_in_words(current: CameraFile, target: CameraFile) -> str:
     turn_deg = math.degrees(math.atan2(across, ahead))
     tilt_deg = math.degrees(math.atan2(along_up, math.hypot(across, ahead)))
     level_right = _unit(_scaled_sum(ahead, right, -across, forward))  # the right after pan and tilt, before roll
-    level_up = _cross(level_right, target_forward)
+    level_up = cross(level_right, target_forward)
     # Positive: the target's top leans to the right of where the top is now (clockwise, seen from behind).
     roll_deg = math.degrees(math.atan2(_dot(target_up, level_right), _dot(target_up, level_up)))
     aims = [f"{verb} {{it}} {amount(angle)}° {positive if angle > 0 else negative}"
