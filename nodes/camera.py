@@ -67,7 +67,8 @@ def main() -> int:
     try:
         settings = CameraSettings.from_environ(os.environ)
         cameras = TaskCameras(task_named(settings.task) if settings.task else None, settings.assets_dir,
-                              log=lambda line: None, looks=settings.looks, poses=settings.camera_poses)
+                              log=lambda line: None, looks=settings.looks, poses=settings.camera_poses,
+                              physics=settings.physics)
         width, height = settings.image_size or (0, 0)
         cameras.draw(HOME_POSE_DEG, [], width, height)  # a renderer that cannot work says so now, in one line
     except (ValueError, ModelFilesError, DisplayError, RuntimeError) as error:
@@ -92,12 +93,12 @@ def main() -> int:
                     gripper_deg = values[0]
             elif event["id"] == "object_state":
                 objects_value = event["value"]  # read at the next picture, not at each of the 250 a second
-            elif event["id"] == "task_status":  # the layout's seed: the pictures' looks, where they vary
+            elif event["id"] == "task_status":  # the layout's seed: the pictures' looks and physics, where they vary
                 seed = (event["metadata"] or {}).get("seed")
                 if isinstance(seed, int) and seed >= 0:
-                    before = cameras.looks
+                    before = (cameras.looks, cameras.physics)
                     cameras.show_seed(seed)
-                    if cameras.looks != before:
+                    if (cameras.looks, cameras.physics) != before:
                         drawn_deg = None  # drawn again at the next tick, in the new looks
             elif event["id"] == "tick" and arm_deg is not None:
                 if stale(event["metadata"].get("timestamp"), period_s):  # waited while drawing: newer states came

@@ -56,6 +56,7 @@ from so101.runtime.lockstep import (  # noqa: E402
 from so101.runtime.logs import send_diagnostics_to  # noqa: E402
 from so101.bodies.camera_file import cameras_metadata  # noqa: E402
 from so101.bodies.looks import looks_metadata  # noqa: E402
+from so101.bodies.physics import physics_metadata  # noqa: E402
 from so101.tasks import task_named  # noqa: E402
 from so101.tasks.episodes import EpisodeClock, Outcome, seeds_for  # noqa: E402
 from so101.tasks.settings import EpisodeSettings  # noqa: E402
@@ -128,6 +129,7 @@ def main() -> int:
         recorder = writer.start_episode(task.instruction) if writer is not None else None
         if recorder is not None:
             recorder.seed = seeds[index]
+            recorder.physics = physics_metadata(settings.physics, seeds[index])
             if settings.image_size:  # the pictures' looks, by episode: a dataset says what it showed, and from where
                 recorder.looks = looks_metadata(settings.looks, seeds[index])
                 recorder.cameras = cameras_metadata(settings.camera_poses, settings.looks, seeds[index], recorded,

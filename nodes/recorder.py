@@ -95,7 +95,7 @@ def main() -> int:
                           camera_poses=settings.camera_poses, image_size=settings.image_size,
                           observed=settings.observed, wrist=wrist,
                           camera_lost=settings.camera_lost if settings.real_cameras else "",
-                          log=lambda line: logger.info("[recorder] %s", line))
+                          log=lambda line: logger.info("[recorder] %s", line), physics=settings.physics)
 
     def send_status(lines: list[str], reply_to: str | None = None) -> None:
         for line in lines:

@@ -67,6 +67,7 @@ def test_the_same_seeds_make_the_same_demonstrations_bit_for_bit(tmp_path, body)
     assert dataset.fps == 25 and [episode.tasks for episode in dataset.episodes] == [("put the cube in the box",)] * 2
     assert all(bool(dataset.episode_frames(index)[SUCCESS_KEY][-1]) for index in range(2))
     assert dataset.info[SEEDS_KEY] == {"0": 5, "1": 6}
+    assert dataset.info["so101_episode_physics"] == {"0": {"physics": "fixed"}, "1": {"physics": "fixed"}}
 
 
 def test_with_misses_an_episode_is_written_from_the_recovery_on(tmp_path):
@@ -153,7 +154,7 @@ def test_two_workers_write_the_dataset_one_worker_writes_byte_for_byte(tmp_path)
     for workers in ("1", "2"):  # two workers: seeds 30 and 31, then 32
         result = so101("demos", str(tmp_path / workers), "--task", "cube_to_box", "--episodes", "3", "--seed", "30",
                        "--body", "mujoco", "--noise", "1", "--image-size", "64x48", "--workers", workers,
-                       "--keep", "all", "--time-limit", "12", "--looks", "varied")
+                       "--keep", "all", "--time-limit", "12", "--looks", "varied", "--physics", "varied")
         assert result.returncode == 0, result.stdout + result.stderr
         outputs[workers] = result.stdout
     assert episode_lines(outputs["2"]) == episode_lines(outputs["1"])
@@ -165,10 +166,13 @@ def test_two_workers_write_the_dataset_one_worker_writes_byte_for_byte(tmp_path)
         assert (tmp_path / "2" / name).read_bytes() == (tmp_path / "1" / name).read_bytes(), name
     merged = Dataset.open(tmp_path / "2")
     assert len(merged.episodes) == 3
-    # Each worker's episodes keep their looks through the merge: seeds 30, 31, 32 in episode order.
-    from so101.dataset.layout import LOOKS_KEY
+    # Each worker's episodes keep their looks and physics through the merge: seeds 30, 31, 32 in episode order.
+    from so101.bodies.physics import physics_metadata
+    from so101.dataset.layout import LOOKS_KEY, PHYSICS_KEY
 
     assert [merged.info[LOOKS_KEY][str(index)]["seed"] for index in range(3)] == [30, 31, 32]
+    assert merged.info[PHYSICS_KEY] == {str(index): physics_metadata("varied", seed)
+                                        for index, seed in enumerate((30, 31, 32))}
 
 
 def test_on_a_cluster_the_workers_spread_over_its_machines_and_the_dataset_is_the_same(tmp_path):
@@ -315,6 +319,10 @@ def test_a_full_disk_stops_demos_in_one_line_and_the_saved_episodes_stay_whole(t
     (["demos", "DIR", "--task", "cube_to_box", "--observe", "state,cube"], "'cube' is not something the frames can show"),
     (["demos", "DIR", "--task", "cube_to_box", "--no-video", "--observe", "state,front"],
      "--observe state,front: front and wrist are the cameras, and there are none here (--no-video)"),
+    (["eval", "--expert", "--task", "cube_to_box", "--physics", "heavy"],
+     "argument --physics: unknown physics 'heavy'; use fixed, varied, or a JSON file of ranges"),
+    (["demos", "DIR", "--task", "cube_to_box", "--physics", "/no/ranges.json"],
+     "argument --physics: cannot read physics ranges /no/ranges.json"),
 ])
 def test_bad_input_is_one_line_and_starts_nothing(tmp_path, args, message):
     other = tmp_path / "other"

@@ -53,7 +53,8 @@ def test_the_dataflow_file_sets_only_declared_settings(body):
 def test_an_empty_environment_gives_the_declared_defaults():
     assert NodeSettings.from_environ({}) == NodeSettings(
         display_mode="auto", image_hz=0.0, fast_steps=0, tick_log_path="", lang="zh", task="", seed=0,
-        lockstep_fps=0, lockstep_pictures=None, looks="fixed", camera_poses={}, lockstep_episode_frames=0)
+        lockstep_fps=0, lockstep_pictures=None, looks="fixed", camera_poses={}, physics="fixed",
+        lockstep_episode_frames=0)
     assert PyBulletSettings.from_environ({}) == PyBulletSettings(
         assets_dir=None, control_mode="position", servo_damping_ratio=0.7)
     assert MuJoCoSettings.from_environ({}) == MuJoCoSettings(assets_dir=None, joint_damping_n_m_s=None)

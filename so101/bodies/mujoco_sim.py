@@ -21,6 +21,7 @@ from so101 import assets
 from so101.bodies.camera import DEFAULT_CAMERA, WRIST_CAMERA_NAME, Camera, WristCamera, check_picture
 from so101.bodies.camera_meshes import camera_meshes
 from so101.bodies.mujoco_model import collision_hulls, scene_model
+from so101.bodies.physics import DEFAULT_PHYSICS, CommandPath, Physics, physics_for, physics_ranges
 from so101.bodies.protocol import BodyName, RgbImage, SceneTask, TaskScene
 from so101.bodies.settings import MuJoCoSettings, NodeSettings
 from so101.runtime.display import DisplayError, resolve_mode
@@ -47,6 +48,8 @@ class SO101MuJoCo:
     `renders` False: a body that draws no pictures, compiled without the visual meshes.
     `task` puts that task's scene (it makes it: so101.bodies.protocol.SceneTask) on the floor, laid out from `seed`, and switches
     the gripper's jaw pads on (so101.bodies.jaw_pads); None: the arm alone.
+    `physics` "varied" (or a ranges file) draws each layout's physics from its seed (so101.bodies.physics): the
+    cube, the actuators' kp, the joints' damping, the gripper's force range, and the command path; "fixed": the MJCF's.
     `light_pictures` draws the cameras' meshes (so101.bodies.camera_meshes), without shadows,
     multisampling, reflections and skybox: on Mesa's software renderer these cost far more than
     a picture a policy learns from needs (`so101 bench --cameras` measures it).
@@ -65,9 +68,11 @@ class SO101MuJoCo:
         task: SceneTask | None = None,
         seed: int = 0,
         light_pictures: bool = False,
+        physics: str = DEFAULT_PHYSICS,
     ):
         if joint_damping_n_m_s is not None and not joint_damping_n_m_s >= 0:
             raise ValueError(f"joint damping must be a number >= 0 N·m·s/rad, got {joint_damping_n_m_s!r}")
+        physics_ranges(physics)  # an unknown mode or a ranges file that makes no sense: refused in one line
         # A missing file gives our message, not MuJoCo's.
         mjcf = assets.mjcf_path(None if assets_dir is None else Path(assets_dir))
         self.display_mode, notice = resolve_mode(mode)
@@ -85,6 +90,13 @@ class SO101MuJoCo:
         if joint_damping_n_m_s is not None:
             self.model.dof_damping[self._qvel] = float(joint_damping_n_m_s)
         self._actuators = [int(self.model.actuator(joint.name).id) for joint in ACTUATED_JOINTS]
+        # What varied physics scales, as the model (and joint_damping_n_m_s) has it.
+        self._own_kp = self.model.actuator_gainprm[self._actuators, 0].copy()
+        self._own_damping = self.model.dof_damping[self._qvel].copy()
+        self._own_force_range = self.model.actuator_forcerange[self._actuators].copy()
+        self.physics_mode = physics
+        self.physics: Physics | None = None
+        self._command = CommandPath(None, HOME_POSE_DEG)
         self.renders = renders
         self.light_pictures = light_pictures
         self._renderer: Any = None  # a mujoco.Renderer once render_rgb has drawn
@@ -99,6 +111,8 @@ class SO101MuJoCo:
         self.set_targets_deg(HOME_POSE_DEG)
         mujoco.mj_forward(self.model, self.data)
         self.scene: TaskScene | None = None if task is None else task.mujoco_scene(self.model, self.data, seed)
+        if self.scene is not None and physics != DEFAULT_PHYSICS:
+            self.reset_task(seed)
 
     @classmethod
     def from_settings(cls, settings: MuJoCoSettings, node: NodeSettings, task: SceneTask | None = None,
@@ -109,7 +123,7 @@ class SO101MuJoCo:
             mode=node.display_mode, time_step_s=TICK_PERIOD_S, assets_dir=settings.assets_dir, log=log,
             joint_damping_n_m_s=settings.joint_damping_n_m_s,
             renders=False,  # the node's pictures are so101.bodies.task_cameras'
-            task=task, seed=node.seed,
+            task=task, seed=node.seed, physics=node.physics,
         )
 
     # -- control ---------------------------------------------------------------------
@@ -118,17 +132,35 @@ class SO101MuJoCo:
         return HOME_POSE_DEG
 
     def set_targets_deg(self, targets_deg: Sequence[float]) -> None:
-        """Goal angles in degrees for all six actuated joints (arm 0-4, gripper)."""
-        self.data.ctrl[self._actuators] = np.radians(goal_deg(targets_deg))
+        """Goal angles in degrees for all six actuated joints (arm 0-4, gripper); with varied physics they
+        go through its command path (its delay, speed limit and calibration)."""
+        self._command.send(goal_deg(targets_deg), self.sim_time_s)
+        if self.physics is None:
+            self.data.ctrl[self._actuators] = np.radians(self._command.goal_deg)
 
     def reset_task(self, seed: int) -> None:
-        """The task's scene laid out from `seed`, and the arm at home, still, its goal home."""
+        """The task's scene laid out from `seed`, and the arm at home, still, its goal home (with varied
+        physics, `seed`'s physics from now on, and home where the arm believes it is)."""
         if self.scene is None:
             raise ValueError("this simulation runs no task (start it with one: --task)")
-        self.data.qpos[self._qpos] = np.radians(HOME_POSE_DEG)
+        self._take_physics(physics_for(self.physics_mode, seed))
+        self.data.qpos[self._qpos] = np.radians(self._command.goal_deg)
         self.data.qvel[self._qvel] = 0.0
-        self.set_targets_deg(HOME_POSE_DEG)
-        self.scene.lay_out_seed(seed)  # also recomputes the kinematics
+        self.data.ctrl[self._actuators] = np.radians(self._command.goal_deg)
+        self.scene.lay_out_seed(seed, self.physics)  # also recomputes the kinematics
+
+    def _take_physics(self, physics: Physics | None) -> None:
+        """The actuators, the joints and the command path as `physics` has them (None: the model's own)."""
+        self.physics = physics
+        model, actuators = self.model, self._actuators
+        stiffness, damping = (1.0, 1.0) if physics is None else (physics.servo_stiffness, physics.servo_damping)
+        model.actuator_gainprm[actuators, 0] = self._own_kp * stiffness
+        model.actuator_biasprm[actuators, 1] = -self._own_kp * stiffness
+        model.dof_damping[self._qvel] = self._own_damping * damping
+        model.actuator_forcerange[actuators] = self._own_force_range
+        if physics is not None:
+            model.actuator_forcerange[actuators[-1]] = (-physics.gripper_torque_nm, physics.gripper_torque_nm)
+        self._command = CommandPath(physics, HOME_POSE_DEG)
 
     def joint_damping_n_m_s(self) -> float:
         """The joints' damping (one value for all, as the MJCF's STS3215 class and this class set it)."""
@@ -145,16 +177,23 @@ class SO101MuJoCo:
         self.time_step_s = self.substeps * self.model_step_s
 
     def step(self, count: int = 1) -> None:
-        """Advance the physics by `count` periods of `time_step_s`."""
-        mujoco.mj_step(self.model, self.data, nstep=count * self.substeps)
-        self.steps += count
+        """Advance the physics by `count` periods of `time_step_s` (varied physics: the command path's goals
+        each period)."""
+        if self.physics is None:
+            mujoco.mj_step(self.model, self.data, nstep=count * self.substeps)
+            self.steps += count
+        else:
+            for _ in range(count):
+                self.data.ctrl[self._actuators] = np.radians(self._command.goal_at(self.sim_time_s, self.time_step_s))
+                mujoco.mj_step(self.model, self.data, nstep=self.substeps)
+                self.steps += 1
         if self._window is not None and self._window.due():
             self._window.show(self.data.qpos[self._qpos], None if self.scene is None else self.scene.object_state())
 
     # -- state -----------------------------------------------------------------------
     def joint_angles_deg(self) -> FloatArray:
-        """Measured angles in degrees, arm joints 0-4 then the gripper."""
-        return np.degrees(np.asarray(self.data.qpos[self._qpos], dtype=np.float64))
+        """Measured angles in degrees, arm joints 0-4 then the gripper (varied physics: as its calibration reports them)."""
+        return self._command.reported(np.degrees(np.asarray(self.data.qpos[self._qpos], dtype=np.float64)))
 
     def joint_velocities_deg_s(self) -> FloatArray:
         return np.degrees(np.asarray(self.data.qvel[self._qvel], dtype=np.float64))

@@ -37,7 +37,7 @@ def pd_gains(inertia_kg_m2: npt.ArrayLike, natural_freq_rad_s: float, damping_ra
 
 def pd_torque_nm(
     error_rad: npt.ArrayLike, velocity_rad_s: npt.ArrayLike, kp: npt.ArrayLike, kd: npt.ArrayLike,
-    gravity_nm: npt.ArrayLike, limit_nm: float = SERVO_TORQUE_LIMIT_NM,
+    gravity_nm: npt.ArrayLike, limit_nm: npt.ArrayLike = SERVO_TORQUE_LIMIT_NM,
 ) -> FloatArray:
     """τ = clip(Kp·e − Kd·q̇ + gravity compensation, ±limit).
 
@@ -49,7 +49,8 @@ def pd_torque_nm(
         - np.asarray(kd, dtype=np.float64) * np.asarray(velocity_rad_s, dtype=np.float64)
         + np.asarray(gravity_nm, dtype=np.float64)
     )
-    return np.clip(torque, -limit_nm, limit_nm)
+    limit = np.asarray(limit_nm, dtype=np.float64)
+    return np.clip(torque, -limit, limit)
 
 
 def joint_damping_stable(damping_n_m_s: float, time_step_s: float, inertia_kg_m2: float) -> bool:

@@ -18,6 +18,7 @@ import numpy.typing as npt
 
 from so101.bodies.camera import DEFAULT_CAMERA, Camera, WristCamera
 from so101.bodies.jaw_pads import JawPad
+from so101.bodies.physics import Physics
 
 BodyName = Literal["pybullet", "mujoco", "real"]
 
@@ -62,8 +63,9 @@ class TaskScene(Protocol):
     def layout(self) -> SceneLayout:
         """The layout the scene was last laid out from (its seed among it)."""
 
-    def lay_out_seed(self, seed: int) -> None:
-        """The objects where the task's layout of `seed` puts them, still."""
+    def lay_out_seed(self, seed: int, physics: Physics | None = None) -> None:
+        """The objects where the task's layout of `seed` puts them, still; the cube as `physics` makes it
+        (so101.bodies.physics; None: the task's own)."""
 
     def show_object_state(self, state: Sequence[float]) -> None:
         """The objects where an object_state says, without physics: a scene to draw."""
@@ -114,7 +116,8 @@ class Body(Protocol):
         """The task's objects; None without a task (the real arm: always)."""
 
     def reset_task(self, seed: int) -> None:
-        """The scene laid out from `seed` and the arm at home, still, its targets home; ValueError without a task."""
+        """The scene laid out from `seed` and the arm at home, still, its targets home; ValueError without a task.
+        A simulation with varied physics (so101.bodies.physics) takes `seed`'s from here on."""
 
     def set_targets_deg(self, targets_deg: Sequence[float]) -> None:
         """New goals for all six joints; the next `step` applies them."""

@@ -23,6 +23,7 @@ from so101.bodies import pybullet_hulls
 from so101.bodies.camera import DEFAULT_CAMERA, Camera, WristCamera, check_picture
 from so101.bodies.camera_meshes import camera_meshes, urdf_for_cameras
 from so101.bodies.jaw_pads import jaw_pads, urdf_with_pads
+from so101.bodies.physics import DEFAULT_PHYSICS, CommandPath, Physics, physics_for, physics_ranges
 from so101.bodies.protocol import BodyName, RgbImage, SceneTask, TaskScene
 from so101.bodies.settings import NodeSettings, PyBulletSettings, check_control_mode
 from so101.runtime.display import resolve_mode
@@ -76,6 +77,12 @@ def release_freed_memory() -> None:
     libc.mallopt(M_MMAP_THRESHOLD, 64 * 1024)
 
 
+# PyBullet's own POSITION_CONTROL gains and force, when none are given (pybullet.c): varied physics scales the gains.
+POSITION_GAIN = 0.1
+VELOCITY_GAIN = 1.0
+MOTOR_FORCE_N_M = 100000.0
+
+
 @dataclass(frozen=True)
 class JointInfo:
     """A row of `getJointInfo`, as PyBullet reports it: limits in radians, max_velocity in rad/s, max_force in N·m."""
@@ -114,6 +121,11 @@ class SO101Sim:
     `task` puts that task's scene (it makes it: so101.bodies.protocol.SceneTask) on the floor, laid out from `seed`, and gives
     the gripper its jaw pads (so101.bodies.jaw_pads); None: the arm alone, as in the course.
 
+    `physics` "varied" (or a ranges file) draws each layout's physics from its seed (so101.bodies.physics): the
+    cube, the motors' gains (times PyBullet's defaults, POSITION_GAIN and VELOCITY_GAIN; the servo's kp and kd),
+    the gripper's force, and the command path, whose speed limit then stands for the course's maxVelocity;
+    "fixed": as always.
+
     `mode` is the display mode asked for (auto, gui, direct); `display_mode` the one it got.
     """
 
@@ -136,8 +148,10 @@ class SO101Sim:
         task: SceneTask | None = None,
         seed: int = 0,
         light_pictures: bool = False,  # the cameras' meshes (so101.bodies.camera_meshes); no shadows to leave out here
+        physics: str = DEFAULT_PHYSICS,
     ):
         check_control_mode(control_mode)
+        physics_ranges(physics)  # an unknown mode or a ranges file that makes no sense: refused in one line
         if not servo_torque_limit_nm > 0:
             raise ValueError(f"servo torque limit must be a positive number of N·m, got {servo_torque_limit_nm!r}")
         # Checks ζ and ωn before anything connects (the inertia here is a stand-in).
@@ -189,6 +203,9 @@ class SO101Sim:
                     physicsClientId=cid,
                 )
         self.max_velocity_rad_s = float(max_velocity_rad_s)
+        self.physics_mode = physics
+        self.physics: Physics | None = None
+        self._command = CommandPath(None, HOME_POSE_DEG)
         self._goal_rad: FloatArray = np.radians(np.asarray(HOME_POSE_DEG, dtype=np.float64))
         # (joint index, goal in radians) pairs for the per-joint motor calls, while they are
         # still to be made; None once the motors have them.
@@ -203,6 +220,8 @@ class SO101Sim:
                 targetVelocities=[0.0] * len(self._indices), forces=[0.0] * len(self._indices),
                 physicsClientId=cid,
             )
+        if self.scene is not None and physics != DEFAULT_PHYSICS:
+            self.reset_task(seed)
 
     # -- set-up helpers --------------------------------------------------------------
     def _load_arm(self, physics_urdf: Path, assets_dir: Path | str | None, with_pads: bool,
@@ -263,7 +282,7 @@ class SO101Sim:
             mode=node.display_mode, time_step_s=TICK_PERIOD_S, assets_dir=settings.assets_dir, log=log,
             control_mode=settings.control_mode, servo_damping_ratio=settings.servo_damping_ratio,
             renders=False,  # the node's pictures are so101.bodies.task_cameras'
-            task=task, seed=node.seed,
+            task=task, seed=node.seed, physics=node.physics,
         )
 
     # -- control ---------------------------------------------------------------------
@@ -272,9 +291,12 @@ class SO101Sim:
         return HOME_POSE_DEG
 
     def set_targets_deg(self, targets_deg: Sequence[float]) -> None:
-        """Goal angles in degrees for all six actuated joints (arm 0-4, gripper)."""
-        self._goal_rad = np.radians(goal_deg(targets_deg))
-        self._motor_goals = list(zip(self._indices, self._goal_rad.tolist()))
+        """Goal angles in degrees for all six actuated joints (arm 0-4, gripper); with varied physics they
+        go through its command path (its delay, speed limit and calibration)."""
+        self._command.send(goal_deg(targets_deg), self.sim_time_s)
+        if self.physics is None:
+            self._goal_rad = np.radians(self._command.goal_deg)
+            self._motor_goals = list(zip(self._indices, self._goal_rad.tolist()))
 
     def set_time_step_s(self, time_step_s: float) -> None:
         """Change the physics step (before the first step: `sim_time_s` assumes one step size)."""
@@ -290,8 +312,10 @@ class SO101Sim:
         """The task's scene laid out from `seed`, and the arm at home, still, its goal home."""
         if self.scene is None:
             raise ValueError("this simulation runs no task (start it with one: --task)")
-        self.scene.lay_out_seed(seed)
-        for joint_index, home_rad in zip(self._indices, np.radians(HOME_POSE_DEG).tolist()):
+        self.physics = physics_for(self.physics_mode, seed)
+        self._command = CommandPath(self.physics, HOME_POSE_DEG)
+        self.scene.lay_out_seed(seed, self.physics)
+        for joint_index, home_rad in zip(self._indices, np.radians(self._command.goal_deg).tolist()):
             p.resetJointState(self.robot_id, joint_index, home_rad, 0.0, physicsClientId=self.client)
         self.set_targets_deg(HOME_POSE_DEG)
 
@@ -299,11 +323,15 @@ class SO101Sim:
         """Send new motor commands, if any, and advance the physics by `count` time steps."""
         client, robot_id, max_velocity = self.client, self.robot_id, self.max_velocity_rad_s
         for _ in range(count):
+            if self.physics is not None:
+                self._goal_rad = np.radians(self._command.goal_at(self.sim_time_s, self.time_step_s))
             if self.control_mode == "servo":
                 # A servo gets the goal as a step, as a real one does over its bus; the
                 # torque limit bounds its speed. (A goal slewed at 3 rad/s would hide the
                 # lesson: a PD loop follows a ramp with little overshoot whatever ζ.)
                 self._send_servo_torques()
+            elif self.physics is not None:
+                self._send_varied_motor_goals(self.physics)
             elif self._motor_goals is not None:
                 # The course's own call, joint by joint: setJointMotorControlArray has no
                 # maxVelocity, and PyBullet applies maxVelocity as a cap on the motor's
@@ -323,6 +351,16 @@ class SO101Sim:
             states = p.getJointStates(robot_id, self._indices, physicsClientId=client)
             self._window.show([state[0] for state in states], None if self.scene is None else self.scene.object_state())
 
+    def _send_varied_motor_goals(self, physics: Physics) -> None:
+        # Every tick (the command path moves the goal): gains times PyBullet's defaults, the gripper's force drawn.
+        count = len(self._indices)
+        p.setJointMotorControlArray(
+            self.robot_id, self._indices, p.POSITION_CONTROL, targetPositions=self._goal_rad.tolist(),
+            positionGains=[POSITION_GAIN * physics.servo_stiffness] * count,
+            velocityGains=[VELOCITY_GAIN * physics.servo_damping] * count,
+            forces=[MOTOR_FORCE_N_M] * (count - 1) + [physics.gripper_torque_nm], physicsClientId=self.client,
+        )
+
     def _send_servo_torques(self) -> None:
         # PyBullet forgets TORQUE_CONTROL torques after each step: they are sent every step.
         states = p.getJointStates(self.robot_id, self._indices, physicsClientId=self.client)
@@ -334,9 +372,11 @@ class SO101Sim:
             self.robot_id, angles_rad.tolist(), zeros, zeros, physicsClientId=self.client,
         )
         kp, kd = pd_gains(self._inertias_at(angles_rad), self.servo_natural_freq_rad_s, self.servo_damping_ratio)
-        self.last_torques_nm = pd_torque_nm(
-            self._goal_rad - angles_rad, velocities_rad_s, kp, kd, gravity_nm, self.servo_torque_limit_nm,
-        )
+        limits_nm = np.full(len(self._indices), self.servo_torque_limit_nm)
+        if self.physics is not None:
+            kp, kd = kp * self.physics.servo_stiffness, kd * self.physics.servo_damping
+            limits_nm[-1] = min(self.servo_torque_limit_nm, self.physics.gripper_torque_nm)
+        self.last_torques_nm = pd_torque_nm(self._goal_rad - angles_rad, velocities_rad_s, kp, kd, gravity_nm, limits_nm)
         p.setJointMotorControlArray(
             self.robot_id, self._indices, p.TORQUE_CONTROL,
             forces=self.last_torques_nm.tolist(), physicsClientId=self.client,
@@ -344,9 +384,9 @@ class SO101Sim:
 
     # -- state -----------------------------------------------------------------------
     def joint_angles_deg(self) -> FloatArray:
-        """Measured angles in degrees, arm joints 0-4 then the gripper."""
+        """Measured angles in degrees, arm joints 0-4 then the gripper (varied physics: as its calibration reports them)."""
         states = p.getJointStates(self.robot_id, self._indices, physicsClientId=self.client)
-        return np.degrees(np.array([state[0] for state in states], dtype=np.float64))
+        return self._command.reported(np.degrees(np.array([state[0] for state in states], dtype=np.float64)))
 
     def joint_velocities_deg_s(self) -> FloatArray:
         states = p.getJointStates(self.robot_id, self._indices, physicsClientId=self.client)

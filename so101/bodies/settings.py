@@ -17,6 +17,7 @@ from typing import Mapping, Self
 from so101.assets import ASSETS_ENV_VAR
 from so101.bodies.camera_file import CAMERA_POSES_ENV_VAR, CAMERA_POSES_HELP, CameraFile, parse_camera_poses
 from so101.bodies.looks import DEFAULT_LOOKS, LOOKS_CHOICES
+from so101.bodies.physics import DEFAULT_PHYSICS, PHYSICS_ENV_VAR, PHYSICS_HELP, physics_mode
 from so101.bodies.pd_servo import DEFAULT_DAMPING_RATIO
 from so101.feetech.calibration import parse_joint_signs
 from so101.runtime.display import MODE_ENV_VAR
@@ -110,6 +111,8 @@ class NodeSettings(EnvironSettings):
         "episode's seed draws its light, colours and camera placement: so101/bodies/looks.py)", read_choice(LOOKS_CHOICES))
     camera_poses: dict[str, CameraFile] = setting(
         CAMERA_POSES_ENV_VAR, "", CAMERA_POSES_HELP, read_parsed(parse_camera_poses))
+    physics: str = setting(
+        PHYSICS_ENV_VAR, DEFAULT_PHYSICS, f"a task's physics: {PHYSICS_HELP}", read_parsed(physics_mode))
     lockstep_episode_frames: int = setting(
         "SO101_EPISODE_FRAMES", "0",
         "N > 0: in lockstep, an episode's last frame is at most N; after it, or after a frame whose `task_status` "

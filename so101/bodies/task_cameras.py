@@ -23,6 +23,7 @@ import numpy.typing as npt
 from so101.bodies.camera import DEFAULT_CAMERA, WRIST_CAMERA, WRIST_CAMERA_NAME, Camera
 from so101.bodies.camera_file import CameraFile, drawn_front, fixed_cameras, wrist_placement
 from so101.bodies.looks import DEFAULT_LOOKS, Looks, looks_for
+from so101.bodies.physics import DEFAULT_PHYSICS, Physics, physics_for
 from so101.bodies.protocol import AnglesDeg, ObjectState, RgbImage, SceneTask
 from so101.bodies.settings import NodeSettings
 from so101.robot import ACTUATED_JOINTS
@@ -55,16 +56,21 @@ class TaskCameras:
     """`draw(angles_deg, object_state, width, height)`: the front picture, and with a task the wrist's.
 
     `looks` "varied": `show_seed(seed)` gives the pictures that episode's looks (so101.bodies.looks);
-    "fixed": the pictures as they always were, whatever the seed."""
+    "fixed": the pictures as they always were, whatever the seed. `physics` "varied" (or a ranges file):
+    `show_seed(seed)` draws that episode's cube, and the arm where it truly is when its calibration
+    reports `angles_deg` (so101.bodies.physics), as the body it draws has them."""
 
     def __init__(self, task: SceneTask | None, assets_dir: Path | str | None = None,
                  log: Callable[[str], None] = print, looks: str = DEFAULT_LOOKS,
-                 poses: dict[str, CameraFile] | None = None):
+                 poses: dict[str, CameraFile] | None = None, physics: str = DEFAULT_PHYSICS):
         # MuJoCo's body as a model to draw: posed by hand, never stepped.
         from so101.bodies.mujoco_sim import SO101MuJoCo
 
         looks_for(looks, 0)  # an unknown mode is refused here, in one line
+        physics_for(physics, 0)
         self.task = task
+        self.physics_mode = physics
+        self.physics: Physics | None = None
         self.looks_mode = looks
         self.looks: Looks | None = None
         # Light pictures whatever the task: one look, defined once, and a picture in milliseconds.
@@ -97,7 +103,10 @@ class TaskCameras:
                        float(model.vis.global_.fovy), model.cam_pos.copy(), model.cam_fovy.copy())
 
     def show_seed(self, seed: int) -> None:
-        """The looks of episode seed `seed` from now on (varied looks; fixed ones stay as they are)."""
+        """The looks and physics of episode seed `seed` from now on (varied ones; fixed ones stay as they are)."""
+        if self.physics_mode != DEFAULT_PHYSICS and self._model.scene is not None:
+            self.physics = physics_for(self.physics_mode, seed)
+            self._model.scene.lay_out_seed(seed, self.physics)
         looks = looks_for(self.looks_mode, seed, len(self._object_geoms))
         if looks == self.looks:
             return
@@ -130,7 +139,7 @@ class TaskCameras:
         if scene is not None and len(object_state):
             scene.show_object_state([float(value) for value in object_state])
         # After the objects: posing recomputes the kinematics of both.
-        self._model.show_pose_deg([float(angle) for angle in angles_deg])
+        self._show_pose(angles_deg)
         front_camera = front or self.front_camera()
         if scene is not None:  # MuJoCo's free camera takes its field of view from the model
             self._model.model.vis.global_.fovy = front_camera.fov_deg
@@ -147,7 +156,7 @@ class TaskCameras:
         if scene is not None and len(object_state):
             scene.show_object_state([float(value) for value in object_state])
             shown = self._arm_geoms | self._loose_geoms
-        self._model.show_pose_deg([float(angle) for angle in angles_deg])
+        self._show_pose(angles_deg)
         self._model.model.vis.global_.fovy = camera.fov_deg
         try:
             geoms = self._model.render_geoms(width, height, camera)
@@ -155,6 +164,11 @@ class TaskCameras:
             self._model.model.vis.global_.fovy = self.front_camera().fov_deg
         mask: npt.NDArray[np.bool_] = shown[np.clip(geoms, 0, None)] & (geoms >= 0)
         return mask
+
+    def _show_pose(self, angles_deg: AnglesDeg | Sequence[float]) -> None:
+        """The arm where it is when it reports `angles_deg` (varied physics: its calibration's offsets taken off)."""
+        angles = [float(angle) for angle in angles_deg]
+        self._model.show_pose_deg(angles if self.physics is None else self.physics.true_deg(angles).tolist())
 
     def close(self) -> None:
         self._model.close()
@@ -173,7 +187,7 @@ def node_cameras(task: SceneTask | None, settings: NodeSettings, assets_dir: Pat
     cannot work stops the node in one line before it joins."""
     if settings.lockstep_pictures is None and not settings.image_hz > 0:
         return None
-    cameras = TaskCameras(task, assets_dir, log, settings.looks, settings.camera_poses)
+    cameras = TaskCameras(task, assets_dir, log, settings.looks, settings.camera_poses, settings.physics)
     cameras.show_seed(settings.seed)
     from so101.robot import HOME_POSE_DEG
 

@@ -38,10 +38,12 @@ import sys
 from pathlib import Path, PurePath
 
 from so101.bodies.looks import DEFAULT_LOOKS, LOOKS_CHOICES
+from so101.bodies.physics import DEFAULT_PHYSICS, PHYSICS_ENV_VAR
 from so101.bodies.registry import BODIES, BodyKind
 from so101.dataset.features import DEFAULT_FPS, video_keys_and_sizes
 from so101.dataset.settings import DEFAULT_IMAGE_SIZE
 from so101.launch.camera_poses import add_camera_pose_option, draw_from_poses
+from so101.launch.lockstep import add_physics_option
 from so101.launch.beside_prompt import (
     TEXT, add_body_arguments, add_log_option, add_task_arguments, add_web_arguments, add_web_view, prepare, run_beside,
     task_problem,
@@ -82,6 +84,7 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
                         help="--task --record: the cameras' pictures, fixed (default), varied (each layout's seed draws "
                              "its light, floor and object colours and camera placement; the dataset keeps them) or "
                              "unseen (looks held out of varied's palettes and spreads)")
+    add_physics_option(parser)
     parser.add_argument("--observe", type=observed_list, default=None, metavar="LIST", help=f"--record: {OBSERVE_HELP}")
     add_camera_pose_option(parser)
     add_camera_size_option(parser, None, "--record: each camera's pictures, stored as video; real cameras are asked "
@@ -172,6 +175,10 @@ def run(args: argparse.Namespace) -> int:
         print(f"so101 teleop: --looks {args.looks} goes with --task NAME and --record DIR on a simulated body: "
               "the task's cameras draw only while recording", file=sys.stderr)
         return 2
+    if args.physics != DEFAULT_PHYSICS and (args.task is None or not launch.body.simulated):
+        print("so101 teleop: --physics varies a task's simulated physics: it goes with --task NAME on a simulated body",
+              file=sys.stderr)
+        return 2
     if args.observe is not None and args.record is None:
         print("so101 teleop: --observe says what a recording's frames show: it goes with --record DIR", file=sys.stderr)
         return 2
@@ -196,6 +203,10 @@ def run(args: argparse.Namespace) -> int:
         print("so101 teleop: --camera-pose draws a task's simulated cameras: it goes with --task NAME on a simulated "
               "body, and --record DIR or a --policy that sees", file=sys.stderr)
         return 2
+    if args.physics != DEFAULT_PHYSICS:  # the body has it, the camera draws its cube and calibration, the recorder keeps it
+        for node in descriptor["nodes"]:
+            if node["id"] in (launch.body.node_id, CAMERA_NODE_ID, "recorder"):
+                node["env"] = {**node.get("env", {}), PHYSICS_ENV_VAR: args.physics}
     web_line = add_web_view(args, descriptor, launch.body, "teleop")
     if web_line:
         ready_marks += (WEB_VIEW_MARKS,)

@@ -77,6 +77,8 @@ SEEDS_KEY = "so101_episode_seeds"
 LOOKS_KEY = "so101_episode_looks"
 # Where each episode's simulated cameras stood (so101.bodies.camera_file: each camera's file, as drawn), a list by episode index.
 CAMERAS_KEY = "so101_episode_cameras"
+# Each episode's physics (so101.bodies.physics: "fixed", or the varied physics drawn), by episode index.
+PHYSICS_KEY = "so101_episode_physics"
 
 
 def recorder_features(video_sizes: Mapping[str, tuple[int, int]],

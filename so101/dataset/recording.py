@@ -28,6 +28,7 @@ import numpy.typing as npt
 
 from so101.bodies.camera_file import DEFAULT_SIZE, CameraFile, cameras_metadata
 from so101.bodies.looks import DEFAULT_LOOKS, looks_metadata
+from so101.bodies.physics import DEFAULT_PHYSICS, physics_metadata
 from so101.cameras.sources import silent_camera
 from so101.dataset.features import (
     ACTION_KEY, ENVIRONMENT_KEY, IMAGE_KEY, REWARD_KEY, STATE_KEY, SUCCESS_KEY, WRIST_IMAGE_KEY, to_lerobot,
@@ -97,6 +98,7 @@ class Episode(Protocol):
     seed: int | None  # the task's layout, and its pictures' looks, kept by episode in info.json
     looks: dict[str, object] | None
     cameras: dict[str, object] | None
+    physics: dict[str, object] | None
 
     def add_frame(self, frame: Mapping[str, Any]) -> None: ...  # feature key -> value
 
@@ -160,7 +162,8 @@ class Recording:
                  say: Callable[[str], None], clock: Callable[[], float] = time.monotonic, task: CubeToBox | None = None,
                  looks: str = DEFAULT_LOOKS, observed: Observed = ALL_OBSERVED, wrist: bool = False,
                  camera_poses: dict[str, CameraFile] | None = None, image_size: tuple[int, int] | None = None,
-                 camera_lost: str = "", log: Callable[[str], None] = lambda line: None):
+                 camera_lost: str = "", log: Callable[[str], None] = lambda line: None,
+                 physics: str = DEFAULT_PHYSICS):
         self.writer, self.root, self.fps = writer, root, fps
         self.text = TEXT[lang]
         self.needs_image = needs_image and observed.front
@@ -185,6 +188,7 @@ class Recording:
         self.looks = looks  # the pictures' looks (so101.bodies.looks), drawn from the layout's seed
         self.camera_poses = dict(camera_poses or {})  # where the simulated cameras stand (so101.bodies.camera_file)
         self.image_size = image_size  # the pictures' size
+        self.physics = physics  # the body's physics (so101.bodies.physics), drawn from the layout's seed
         self.seed: int | None = None  # the layout's, from task_status
         self.episode: Episode | None = None
         self.episode_index = 0  # the index of the episode recording (or of the next one)
@@ -322,8 +326,9 @@ class Recording:
         # save that fails gives its number back).
         self.episode_index = len(self.writer.episodes) + len(self._pending)
         self.episode = self.writer.start_episode(task)
-        if self.task is not None and self.seed is not None:  # the layout it starts from, and how it looks
+        if self.task is not None and self.seed is not None:  # the layout it starts from, its physics, how it looks
             self.episode.seed = self.seed
+            self.episode.physics = physics_metadata(self.physics, self.seed)
             if self.needs_image or self.needs_wrist_image:
                 self.episode.looks = looks_metadata(self.looks, self.seed)
                 if not self.camera_lost:  # a simulation's cameras: where they stood, as drawn

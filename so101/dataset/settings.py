@@ -9,6 +9,7 @@ from pathlib import Path
 from so101.assets import ASSETS_ENV_VAR
 from so101.bodies.camera_file import CAMERA_POSES_ENV_VAR, CAMERA_POSES_HELP, CameraFile, parse_camera_poses
 from so101.bodies.looks import DEFAULT_LOOKS, LOOKS_CHOICES
+from so101.bodies.physics import DEFAULT_PHYSICS, PHYSICS_ENV_VAR, physics_mode
 from so101.bodies.settings import read_language
 from so101.tasks.settings import read_task
 from so101.dataset.features import DEFAULT_FPS
@@ -43,6 +44,9 @@ class RecorderSettings(EnvironSettings):
     looks: str = setting(
         "SO101_LOOKS", DEFAULT_LOOKS, "the pictures' looks, as the camera draws them (`fixed` or `varied`): each "
         "episode's, from the seed its layout starts from, is kept in info.json", read_choice(LOOKS_CHOICES))
+    physics: str = setting(
+        PHYSICS_ENV_VAR, DEFAULT_PHYSICS, "the physics, as the body has it (`fixed`, `varied` or a ranges file): each "
+        "episode's, from the seed its layout starts from, is kept in info.json", read_parsed(physics_mode))
     camera_poses: dict[str, CameraFile] = setting(
         CAMERA_POSES_ENV_VAR, "", CAMERA_POSES_HELP, read_parsed(parse_camera_poses))
     observed: Observed = setting(
@@ -72,6 +76,9 @@ class CameraSettings(EnvironSettings):
     looks: str = setting(
         "SO101_LOOKS", DEFAULT_LOOKS, "`fixed`, or `varied`: each layout's seed (from `task_status`) draws the pictures' "
         "light, colours and camera placement (so101/bodies/looks.py)", read_choice(LOOKS_CHOICES))
+    physics: str = setting(
+        PHYSICS_ENV_VAR, DEFAULT_PHYSICS, "the physics, as the body has it: varied, each layout's seed draws the cube's "
+        "size and the calibration, and the pictures show them (so101/bodies/physics.py)", read_parsed(physics_mode))
     camera_poses: dict[str, CameraFile] = setting(
         CAMERA_POSES_ENV_VAR, "", CAMERA_POSES_HELP, read_parsed(parse_camera_poses))
 

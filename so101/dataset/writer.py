@@ -24,7 +24,7 @@ from so101.dataset.commit import (WORK_DIR, CommitIncomplete, Plan, commit, fsyn
 from so101.dataset.episode import EpisodeRecorder
 from so101.dataset.features import ENVIRONMENT_KEY, REWARD_KEY, ROBOT_TYPE
 from so101.dataset.layout import (CODEBASE_VERSION, DATA_PATH, DEFAULT_CHUNK_SIZE, DEFAULT_DATA_FILE_SIZE_IN_MB,
-                                  DEFAULT_VIDEO_FILE_SIZE_IN_MB, EPISODES_DIR, EPISODES_PATH, INFO_PATH, LOOKS_KEY, SEEDS_KEY, CAMERAS_KEY,
+                                  DEFAULT_VIDEO_FILE_SIZE_IN_MB, EPISODES_DIR, EPISODES_PATH, INFO_PATH, LOOKS_KEY, SEEDS_KEY, CAMERAS_KEY, PHYSICS_KEY,
                                   STATS_PATH, TASKS_PATH, VIDEO_PATH, DatasetError, EpisodeSummary,
                                   data_schema, episode_row_schema, frame_features, load_info, next_file,
                                   read_episode_rows, read_tasks, recorder_features, summary, tasks_table,
@@ -276,10 +276,11 @@ class DatasetWriter:
     # -- a save ------------------------------------------------------------------------------
     def commit_episode(self, task: str, columns: dict[str, np.ndarray], encoded: dict[str, videos.EncodedVideo],
                        seed: int | None = None, looks: dict[str, object] | None = None,
-                       cameras: dict[str, object] | None = None) -> EpisodeSummary:
+                       cameras: dict[str, object] | None = None,
+                       physics: dict[str, object] | None = None) -> EpisodeSummary:
         """Add an episode (EpisodeRecorder.save): its frame features' (frames, ...) columns, its
-        finished videos, and a task's layout seed, its pictures' looks and where its cameras stood (kept in
-        info.json under SEEDS_KEY and LOOKS_KEY by episode index, and CAMERAS_KEY's list). All of it or nothing is in the dataset when this returns or raises."""
+        finished videos, and a task's layout seed, its pictures' looks, where its cameras stood and its physics
+        (kept in info.json under SEEDS_KEY, LOOKS_KEY and PHYSICS_KEY by episode index, and CAMERAS_KEY's list). All of it or nothing is in the dataset when this returns or raises."""
         with self._commit_lock:
             if self._lock_fd is None:
                 raise DatasetError(f"the writer of {self.root} is closed: the episode is not saved")
@@ -334,6 +335,8 @@ class DatasetWriter:
                 info[SEEDS_KEY] = {**info.get(SEEDS_KEY, {}), str(episode_index): int(seed)}
             if looks is not None:
                 info[LOOKS_KEY] = {**info.get(LOOKS_KEY, {}), str(episode_index): looks}
+            if physics is not None:
+                info[PHYSICS_KEY] = {**info.get(PHYSICS_KEY, {}), str(episode_index): physics}
             if cameras is not None:  # a list by episode index; none for episodes recorded before it was kept
                 kept = list(info.get(CAMERAS_KEY, []))
                 info[CAMERAS_KEY] = [*kept, *[None] * (episode_index - len(kept)), cameras]

@@ -45,6 +45,7 @@ class SO101CubeToBoxEnv(EnvConfig):
     observation_height: int = DEFAULT_CAMERA_SIZE[1]
     looks: str = "fixed"
     camera_pose: str = ""  # "front=FILE[,wrist=FILE]": the simulated cameras drawn from camera files
+    physics: str = "fixed"  # "varied", or a JSON file of ranges: each layout's physics drawn from its seed
     render_mode: str = "rgb_array"
     features: dict[str, PolicyFeature] = field(default_factory=lambda: {
         ACTION: PolicyFeature(type=FeatureType.ACTION, shape=(len(ACTUATED_JOINTS),))})
@@ -74,6 +75,7 @@ class SO101CubeToBoxEnv(EnvConfig):
     @property
     def gym_kwargs(self) -> dict:
         return {"body": self.body, "obs_type": self.obs_type, "looks": self.looks, "camera_pose": self.camera_pose,
+                "physics": self.physics,
                 "render_mode": self.render_mode,
                 "camera_size": (self.observation_width, self.observation_height),
                 "max_episode_steps": self.episode_length}

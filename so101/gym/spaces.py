@@ -17,6 +17,7 @@ from so101.bodies.camera_file import (
     CameraFile, CameraFileError, camera_file_from, camera_pose_given, read_camera_file, simulated_camera,
 )
 from so101.bodies.looks import LOOKS_CHOICES
+from so101.bodies.physics import physics_mode
 from so101.bodies.registry import SIMULATED_BODIES
 from so101.dataset.features import joint_targets_deg, to_lerobot
 from so101.robot import ACTUATED_JOINTS
@@ -54,6 +55,16 @@ def check_obs_type(obs_type: object) -> str:
 
 def check_looks(looks: object) -> str:
     return check_choice("looks", looks, LOOKS_CHOICES)
+
+
+def check_physics(physics: object) -> str:
+    """`physics`: "fixed", "varied" or a ranges file's path (so101.bodies.physics); ValueError in one line otherwise."""
+    if not isinstance(physics, str):
+        raise ValueError(f"physics={physics!r} is not one of: 'fixed', 'varied', or a JSON file of ranges")
+    try:
+        return physics_mode(physics)
+    except ValueError as error:
+        raise ValueError(f"physics: {error}") from None
 
 
 def check_camera_pose(camera_pose: object) -> dict[str, CameraFile]:

@@ -27,6 +27,7 @@ from typing import Callable
 
 from so101.bodies.camera_file import CAMERA_POSES_ENV_VAR
 from so101.bodies.looks import DEFAULT_LOOKS, LOOKS_CHOICES
+from so101.bodies.physics import DEFAULT_PHYSICS, PHYSICS_ENV_VAR, PhysicsError, physics_mode
 from so101.bodies.registry import BODIES, SIMULATED_BODIES, BodyKind
 from so101.launch.camera_poses import add_camera_pose_option, camera_poses_env
 from so101.launch.on_cluster import ClusterPlace, joined_cluster
@@ -46,6 +47,22 @@ WORKERS_MACHINE = "local"  # the daemon's machine id when --workers runs several
 # A run whose dataflow said nothing for this long (no episode ended, dora did not exit) is stuck.
 STALL_S = 300.0
 INTERRUPTED = "stopped (Ctrl-C, or a signal): the episode running was dropped"
+
+
+def checked_physics(text: str) -> str:
+    """--physics's value as nodes are told it (so101.bodies.physics.physics_mode); argparse's one line otherwise."""
+    try:
+        return physics_mode(text)
+    except PhysicsError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
+
+
+def add_physics_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--physics", type=checked_physics, default=DEFAULT_PHYSICS, metavar="fixed|varied|FILE.json",
+                        help="the task's physics: fixed (default, each simulator's own), varied (each episode's seed "
+                             "draws the cube's size, mass and friction, the servos' stiffness, damping, delay and speed "
+                             "limit, a calibration up to 2° off and the gripper's force; a dataset keeps them by "
+                             "episode) or a JSON file of ranges to vary within (docs/loop/physics.md)")
 
 
 def add_common_arguments(parser: argparse.ArgumentParser) -> None:
@@ -70,6 +87,7 @@ def add_common_arguments(parser: argparse.ArgumentParser) -> None:
                              "or unseen (looks held out of varied's palettes and spreads, to score eyes on looks they "
                              "never saw)")
     add_camera_pose_option(parser)
+    add_physics_option(parser)
     parser.add_argument("--workers", type=whole_number(1, MAX_WORKERS), default=1, metavar="K",
                         help="dataflows run at once, each on its share of the seeds; the results are merged in seed "
                              "order (default 1)")
@@ -155,6 +173,8 @@ def flows_for(args: argparse.Namespace, work: Path, driver: Driver | None, pictu
             env["SO101_LOOKS"] = args.looks
         if size:  # where the cameras stand: the body draws from there, the runner keeps it
             env.update(camera_poses_env(args.camera_poses))
+        if args.physics != DEFAULT_PHYSICS:  # the body has it, the runner keeps it in the dataset
+            env[PHYSICS_ENV_VAR] = args.physics
         flows.append(Flow(BODIES[args.body], driver=driver, runner_env=env, lang=args.lang,
                           pictures=pictures if size else (), picture_size=size))
     return flows
@@ -185,7 +205,7 @@ def lockstep_dataflow(flow: Flow, placement: Placement | None = None, root: Pure
         "env": {"SO101_MODE": "direct", "SO101_LANG": flow.lang, "SO101_TASK": flow.runner_env["SO101_TASK"],
                 "SO101_SEED": flow.runner_env["SO101_SEED"], "SO101_LOCKSTEP_FPS": str(fps),
                 "SO101_EPISODE_FRAMES": str(last_frame), "SO101_LOCKSTEP_PICTURES": flow.picture_size,
-                **{key: value for key, value in flow.runner_env.items() if key in ("SO101_LOOKS", CAMERA_POSES_ENV_VAR)},
+                **{key: value for key, value in flow.runner_env.items() if key in ("SO101_LOOKS", CAMERA_POSES_ENV_VAR, PHYSICS_ENV_VAR)},
                 **flow.body_env},
     }]
     if driver is not None:

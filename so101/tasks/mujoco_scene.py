@@ -6,6 +6,7 @@ and switches the jaw pads on (so101.bodies.jaw_pads); `MuJoCoScene` lays them ou
 
 from __future__ import annotations
 
+import math
 from typing import Any, Sequence
 
 import numpy as np
@@ -15,7 +16,8 @@ from so101.bodies import mujoco_model  # noqa: F401  (first: it chooses MuJoCo's
 from so101.bodies.camera import WRIST_CAMERA, WRIST_CAMERA_NAME, WristCamera
 from so101.bodies.camera_file import wrist_placement
 from so101.bodies.jaw_pads import JawPad
-from so101.tasks.objects import Layout, SceneFacts
+from so101.bodies.physics import Physics
+from so101.tasks.objects import Cube, Layout, SceneFacts, cube_with, on_the_floor
 
 import mujoco  # noqa: E402
 
@@ -68,11 +70,33 @@ class MuJoCoScene:
         joint = model.joint(CUBE_BODY)
         self._cube_qpos = int(joint.qposadr[0])
         self._cube_qvel = int(joint.dofadr[0])
+        self._cube_geom, self._cube_body = int(model.geom(CUBE_BODY).id), int(model.body(CUBE_BODY).id)
         self._box_body = int(model.body(BOX_BODY).id)
+        self.cube = task.cube
         self.lay_out(layout)
 
-    def lay_out_seed(self, seed: int) -> None:
-        self.lay_out(self.task.layout(seed))
+    def lay_out_seed(self, seed: int, physics: Physics | None = None) -> None:
+        """The layout of `seed`, its cube as `physics` makes it (its size, mass and friction)."""
+        cube = cube_with(self.task.cube, physics)
+        if cube != self.cube:
+            self._shape_cube(cube)
+        self.lay_out(on_the_floor(self.task.layout(seed), cube))
+
+    def _shape_cube(self, cube: Cube) -> None:
+        """The compiled model's cube made `cube`: its box, its bounds (the collision's broad phase reads them),
+        its friction, its mass and a solid cube's inertia; then the constants derived from them."""
+        model, geom, body, half = self.model, self._cube_geom, self._cube_body, cube.half_size_m
+        model.geom_size[geom] = [half] * 3
+        model.geom_aabb[geom][3:] = half
+        model.geom_rbound[geom] = half * math.sqrt(3.0)
+        model.geom_friction[geom][0] = cube.friction
+        model.body_mass[body] = cube.mass_kg
+        model.body_inertia[body] = [cube.mass_kg * (2 * half) ** 2 / 6] * 3
+        # mj_setConst poses the model at qpos0 in `data` to derive them: the state is put back after.
+        qpos, qvel, ctrl = self.data.qpos.copy(), self.data.qvel.copy(), self.data.ctrl.copy()
+        mujoco.mj_setConst(model, self.data)
+        self.data.qpos[:], self.data.qvel[:], self.data.ctrl[:] = qpos, qvel, ctrl
+        self.cube = cube
 
     def lay_out(self, layout: Layout) -> None:
         """The cube and the box where `layout` puts them, the cube still (kinematics recomputed)."""

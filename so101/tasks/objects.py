@@ -9,8 +9,10 @@ this module sits below both. Frame and units as so101.tasks.cube_to_box says.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Iterable, Protocol
+
+from so101.bodies.physics import Physics
 
 # The names of `object_state` (so101/bodies/node_loop.py), in its order: the cube's centre and
 # orientation (a quaternion, x y z w), the box's position (its footprint's centre, on the floor).
@@ -87,6 +89,19 @@ class Layout:
     def cube_quat_xyzw(self) -> tuple[float, float, float, float]:
         half = self.cube_yaw_rad / 2
         return (0.0, 0.0, math.sin(half), math.cos(half))
+
+
+def cube_with(cube: Cube, physics: Physics | None) -> Cube:
+    """The cube as an episode's physics makes it (so101.bodies.physics: its size, mass and friction); None: as it is."""
+    if physics is None:
+        return cube
+    return replace(cube, half_size_m=physics.cube_half_size_m, mass_kg=physics.cube_mass_kg, friction=physics.cube_friction)
+
+
+def on_the_floor(layout: Layout, cube: Cube) -> Layout:
+    """`layout` with `cube` lying on the floor where it says (a layout is drawn for the task's own cube)."""
+    x, y, _ = layout.cube_xyz_m
+    return replace(layout, cube_xyz_m=(x, y, cube.half_size_m))
 
 
 class SceneFacts(Protocol):

@@ -12,7 +12,8 @@ import numpy as np
 import numpy.typing as npt
 import pybullet as p
 
-from so101.tasks.objects import Layout, SceneFacts
+from so101.bodies.physics import Physics
+from so101.tasks.objects import Cube, Layout, SceneFacts, cube_with, on_the_floor
 
 
 class PyBulletScene:
@@ -21,17 +22,8 @@ class PyBulletScene:
     def __init__(self, client: int, task: SceneFacts, layout: Layout):
         self.client = client
         self.task = task
-        cube = task.cube
-        half = [cube.half_size_m] * 3
-        self.cube_id: int = p.createMultiBody(
-            baseMass=cube.mass_kg,
-            baseCollisionShapeIndex=p.createCollisionShape(p.GEOM_BOX, halfExtents=half, physicsClientId=client),
-            baseVisualShapeIndex=p.createVisualShape(p.GEOM_BOX, halfExtents=half, rgbaColor=list(cube.rgba),
-                                                     physicsClientId=client),
-            physicsClientId=client,
-        )
-        # A friction anchor, as on the jaws (so101.bodies.pybullet_sim): without, a held cube creeps out.
-        p.changeDynamics(self.cube_id, -1, lateralFriction=cube.friction, frictionAnchor=1, physicsClientId=client)
+        self.cube = task.cube
+        self.cube_id = self._make_cube(self.cube)
         plates = task.box.plates()
         centres = [list(centre) for centre, _ in plates]
         halves = [list(half_extents) for _, half_extents in plates]
@@ -47,8 +39,27 @@ class PyBulletScene:
         p.changeDynamics(self.box_id, -1, lateralFriction=task.box.friction, physicsClientId=client)
         self.lay_out(layout)
 
-    def lay_out_seed(self, seed: int) -> None:
-        self.lay_out(self.task.layout(seed))
+    def _make_cube(self, cube: Cube) -> int:
+        client = self.client
+        half = [cube.half_size_m] * 3
+        cube_id = int(p.createMultiBody(
+            baseMass=cube.mass_kg,
+            baseCollisionShapeIndex=p.createCollisionShape(p.GEOM_BOX, halfExtents=half, physicsClientId=client),
+            baseVisualShapeIndex=p.createVisualShape(p.GEOM_BOX, halfExtents=half, rgbaColor=list(cube.rgba),
+                                                     physicsClientId=client),
+            physicsClientId=client,
+        ))
+        # A friction anchor, as on the jaws (so101.bodies.pybullet_sim): without, a held cube creeps out.
+        p.changeDynamics(cube_id, -1, lateralFriction=cube.friction, frictionAnchor=1, physicsClientId=client)
+        return cube_id
+
+    def lay_out_seed(self, seed: int, physics: Physics | None = None) -> None:
+        """The layout of `seed`, its cube as `physics` makes it (a new size: a new body; PyBullet's shapes keep theirs)."""
+        cube = cube_with(self.task.cube, physics)
+        if cube != self.cube:
+            p.removeBody(self.cube_id, physicsClientId=self.client)
+            self.cube, self.cube_id = cube, self._make_cube(cube)
+        self.lay_out(on_the_floor(self.task.layout(seed), cube))
 
     def lay_out(self, layout: Layout) -> None:
         """The cube and the box where `layout` puts them, the cube still."""

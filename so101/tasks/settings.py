@@ -9,6 +9,7 @@ from typing import Mapping
 
 from so101.bodies.camera_file import CAMERA_POSES_ENV_VAR, CAMERA_POSES_HELP, CameraFile, parse_camera_poses
 from so101.bodies.looks import DEFAULT_LOOKS, LOOKS_CHOICES
+from so101.bodies.physics import DEFAULT_PHYSICS, PHYSICS_ENV_VAR, physics_mode
 from so101.bodies.settings import read_language, read_lockstep_fps
 from so101.lang import DEFAULT_LANGUAGE, ENV_VAR as LANG_ENV_VAR
 from so101.observe import ALL_OBSERVED, OBSERVE_ENV_VAR, Observed, parse_observed
@@ -98,6 +99,9 @@ class EpisodeSettings(EnvironSettings):
     looks: str = setting(
         "SO101_LOOKS", DEFAULT_LOOKS, "the pictures' looks, as the body draws them (`fixed` or `varied`): a dataset "
         "keeps each episode's in info.json", read_choice(LOOKS_CHOICES))
+    physics: str = setting(
+        PHYSICS_ENV_VAR, DEFAULT_PHYSICS, "the physics, as the body has it (`fixed`, `varied` or a ranges file): a dataset "
+        "keeps each episode's in info.json", read_parsed(physics_mode))
     camera_poses: dict[str, CameraFile] = setting(
         CAMERA_POSES_ENV_VAR, "", CAMERA_POSES_HELP, read_parsed(parse_camera_poses))
     observed: Observed = setting(

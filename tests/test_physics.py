@@ -1,0 +1,147 @@
+"""Physics that varies by seed (so101.bodies.physics): drawn the same for the same seed, within its ranges,
+its ranges files checked, its command path's delay, speed limit and calibration, and both simulators
+applying the same physics for the same seed."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, fields
+
+import numpy as np
+import pytest
+
+from so101.bodies.physics import (
+    DEFAULT_RANGES, CommandPath, PhysicsError, PhysicsRanges, draw_physics, physics_for, physics_metadata, physics_mode,
+)
+from so101.bodies.registry import BODIES, SIMULATED_BODIES
+from so101.robot import HOME_POSE_DEG
+from so101.runtime.dataflow import TICK_PERIOD_S
+from so101.tasks import CUBE_TO_BOX
+
+
+def test_the_same_seed_draws_the_same_physics_within_its_ranges_and_other_seeds_other_ones():
+    assert draw_physics(7) == draw_physics(7) == physics_for("varied", 7)
+    assert physics_for("fixed", 7) is None and physics_metadata("fixed", 7) == {"physics": "fixed"}
+    drawn = [draw_physics(seed) for seed in range(200)]
+    assert len({physics.calibration_offsets_deg for physics in drawn}) == 200
+    for name in ("cube_size_m", "cube_mass_kg", "cube_friction", "servo_stiffness", "servo_damping", "command_delay_s",
+                 "speed_limit_deg_s", "gripper_torque_nm"):
+        low, high = getattr(DEFAULT_RANGES, name)
+        values = [getattr(physics, name) for physics in drawn]
+        assert low <= min(values) and max(values) <= high, name
+        assert min(values) < low + 0.1 * (high - low) and max(values) > high - 0.1 * (high - low), name  # the whole range
+    offsets = np.array([physics.calibration_offsets_deg for physics in drawn])
+    assert offsets.shape == (200, 6) and np.abs(offsets).max() <= DEFAULT_RANGES.calibration_deg
+    assert physics_metadata("varied", 7) == {"physics": "varied", **json.loads(json.dumps(asdict(draw_physics(7))))}
+
+
+def test_a_ranges_file_varies_within_its_own_ranges_and_the_dataset_keeps_them(tmp_path):
+    ranges = tmp_path / "narrow.json"
+    ranges.write_text(json.dumps({"cube_size_m": [0.025, 0.025], "calibration_deg": 0}))
+    mode = physics_mode(str(ranges))  # the ranges themselves, for nodes on any machine
+    physics = physics_for(mode, 3)
+    assert physics is not None and physics.cube_size_m == 0.025 and physics.calibration_offsets_deg == (0.0,) * 6
+    assert physics.cube_mass_kg == draw_physics(3).cube_mass_kg  # the others: the documented ranges
+    kept = physics_metadata(mode, 3)
+    assert kept["physics"] == "varied" and PhysicsRanges(**{
+        name: tuple(value) if isinstance(value, list) else value for name, value in kept["ranges"].items()
+    }) == PhysicsRanges(cube_size_m=(0.025, 0.025), calibration_deg=0.0)
+
+
+@pytest.mark.parametrize("text, message", [
+    ("wobbly", "unknown physics 'wobbly'; use fixed, varied, or a JSON file of ranges"),
+    ('{"cube_mass_kg": [-0.01, 0.05]}', "cube_mass_kg must be above 0, got [-0.01, 0.05]"),
+    ('{"cube_size_m": [0.03, 0.05]}', "cube_size_m up to 0.05 m is larger than the jaws open (0.04 m between the pads)"),
+    ('{"cube_size_m": [0.028, 0.022]}', "cube_size_m is [low, high], two numbers, low <= high; got [0.028, 0.022]"),
+    ('{"cube_friction": 1.0}', "cube_friction is [low, high], two numbers, low <= high; got 1.0"),
+    ('{"servo_damping": [-1, 1]}', "servo_damping must be >= 0, got [-1, 1]"),
+    ('{"calibration_deg": [0, 2]}', "calibration_deg is a number of degrees >= 0"),
+    ('{"gravity": [1, 2]}', "unknown range 'gravity'; the ranges are: calibration_deg, command_delay_s,"),
+    ('[0.022, 0.028]', "a physics ranges file is a JSON object of ranges"),
+    ("{", "ranges.json is not JSON (line 1: Expecting property name enclosed in double quotes)"),
+    ("/no/such/ranges.json", "cannot read physics ranges /no/such/ranges.json: No such file or directory"),
+])
+def test_a_mode_or_ranges_that_make_no_sense_are_one_line(tmp_path, text, message):
+    if text[0] in "[{":  # a ranges file's content
+        (tmp_path / "ranges.json").write_text(text)
+        text = str(tmp_path / "ranges.json")
+    with pytest.raises(PhysicsError) as raised:
+        physics_mode(text)
+    assert message in str(raised.value) and "\n" not in str(raised.value)
+
+
+def test_the_command_path_delays_limits_speed_and_is_off_by_the_calibration():
+    physics = draw_physics(11)
+    path = CommandPath(physics, HOME_POSE_DEG)
+    offsets = np.array(physics.calibration_offsets_deg)
+    assert np.allclose(path.goal_deg, -offsets)  # home, where the arm believes it is
+    assert np.allclose(path.reported(path.goal_deg), HOME_POSE_DEG)
+    target = np.array([60.0, -30.0, 20.0, 10.0, -45.0, 30.0])
+    path.send(target, now_s=1.0)
+    tick = TICK_PERIOD_S
+    before = [path.goal_at(1.0 + k * tick, tick).copy() for k in range(int(physics.command_delay_s / tick))]
+    assert all(np.allclose(goal, -offsets) for goal in before)  # nothing moves before the delay is out
+    goals = [path.goal_at(1.0 + physics.command_delay_s + k * tick, tick).copy() for k in range(1, 400)]
+    steps = np.abs(np.diff(np.array(goals), axis=0))
+    assert steps.max() <= physics.speed_limit_deg_s * tick + 1e-9  # never faster than the speed limit
+    assert np.allclose(goals[-1], target - offsets)  # where the arm believes the target is
+    unvaried = CommandPath(None, HOME_POSE_DEG)
+    unvaried.send(target, now_s=0.0)
+    assert np.array_equal(unvaried.goal_at(0.0, tick), target) and np.array_equal(unvaried.reported(target), target)
+
+
+@pytest.mark.parametrize("body", SIMULATED_BODIES)
+def test_both_simulators_apply_the_seeds_physics_and_report_as_its_calibration(body):
+    seed = 21
+    physics = draw_physics(seed)
+    simulation = BODIES[body].body_class()(mode="direct", renders=False, time_step_s=TICK_PERIOD_S, task=CUBE_TO_BOX,
+                                           seed=seed, physics="varied")
+    try:
+        assert simulation.physics == physics  # the same seed, the same physics, on either simulator
+        assert np.allclose(simulation.joint_angles_deg(), HOME_POSE_DEG, atol=1e-6)  # home, as the arm believes it
+        simulation.step(50)
+        cube_z = float(simulation.scene.object_state()[2])
+        assert abs(cube_z - physics.cube_half_size_m) < 0.0015  # the cube lies on the floor, its own size
+        if body == "pybullet":
+            import pybullet as p
+
+            cube_id, client = simulation.scene.cube_id, simulation.client
+            size = p.getCollisionShapeData(cube_id, -1, physicsClientId=client)[0][3]
+            mass, friction = p.getDynamicsInfo(cube_id, -1, physicsClientId=client)[:2]
+            joints = [state[0] for state in p.getJointStates(simulation.robot_id, simulation._indices,
+                                                             physicsClientId=client)]
+        else:
+            model = simulation.model
+            size = 2 * model.geom_size[model.geom("cube").id]
+            mass, friction = model.body_mass[model.body("cube").id], model.geom_friction[model.geom("cube").id][0]
+            joints = simulation.data.qpos[simulation._qpos]
+            assert np.allclose(model.actuator_gainprm[simulation._actuators, 0], 17.8 * physics.servo_stiffness)
+            assert model.actuator_forcerange[simulation._actuators[-1], 1] == pytest.approx(physics.gripper_torque_nm)
+        assert np.allclose(size, physics.cube_size_m) and mass == pytest.approx(physics.cube_mass_kg)
+        assert friction == pytest.approx(physics.cube_friction)
+        # The engine's joints are where the arm believes it is, less the calibration's offsets.
+        assert np.allclose(np.degrees(joints), np.array(simulation.joint_angles_deg()) - physics.calibration_offsets_deg)
+        simulation.reset_task(seed + 1)
+        assert simulation.physics == draw_physics(seed + 1)
+    finally:
+        simulation.close()
+
+
+def test_the_pictures_show_the_seeds_cube_and_the_arm_where_it_truly_is():
+    from so101.bodies.task_cameras import TaskCameras
+
+    physics = draw_physics(5)
+    with TaskCameras(CUBE_TO_BOX, log=lambda line: None, physics="varied") as cameras:
+        cameras.show_seed(5)
+        cameras.draw(HOME_POSE_DEG, [], 64, 48, wrist=False)
+        drawn = cameras._model
+        assert np.allclose(2 * drawn.model.geom_size[drawn.model.geom("cube").id], physics.cube_size_m)
+        assert np.allclose(drawn.joint_angles_deg(), -np.array(physics.calibration_offsets_deg))
+
+
+def test_every_range_is_documented():
+    from pathlib import Path
+
+    page = (Path(__file__).resolve().parents[1] / "docs" / "loop" / "physics.md").read_text(encoding="utf-8")
+    for spec in fields(PhysicsRanges):
+        assert f"`{spec.name}`" in page, spec.name
