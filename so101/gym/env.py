@@ -22,7 +22,7 @@ SUITE = "so101_cube_to_box"  # the suite's name in LeRobot's results: the EnvCon
 def make_env(n_envs: int = 1, use_async_envs: bool = False, cfg: Any = None,
              **gym_kwargs: Any) -> dict[str, dict[int, gymnasium.vector.VectorEnv]]:
     """`n_envs` environments in one vector (processes of their own with `use_async_envs`), each made with
-    `gym_kwargs` (body, obs_type, camera_size, looks), or with those of `cfg`, an EnvConfig LeRobot passes."""
+    `gym_kwargs` (body, obs_type, camera_size, looks, camera_pose, physics), or with those of `cfg`, an EnvConfig LeRobot passes."""
     if not isinstance(n_envs, int) or isinstance(n_envs, bool) or n_envs < 1:
         raise ValueError(f"n_envs={n_envs!r} is not a whole number of environments >= 1")
     kwargs = {**(getattr(cfg, "gym_kwargs", None) or {}), **gym_kwargs}

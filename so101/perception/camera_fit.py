@@ -43,8 +43,9 @@ from so101.bodies.camera_file import CameraFile, orbit_of
 FloatArray = npt.NDArray[np.float64]
 Picture = npt.NDArray[np.uint8]
 
-# Pictures fitted at once, spread over the episode (more: a steadier fit, each step slower).
-PICTURES = 16
+# Pictures fitted at once, spread over the episode (more: a steadier fit, each step slower). 32, not 16: one
+# episode of docs/experiments/fitting-cameras.md came 6.8 mm off from 16 pictures, 4.2 mm from 32.
+PICTURES = 32
 # A pixel whose difference from the background is under the lower level (of 255) shows no arm, over the
 # higher one it does. Which pair fits depends on the looks (a yellow arm on a beige floor is faint, a
 # bright light's sheen loud): each stage takes the pair whose arm's outline lies nearest the drawn one.
@@ -256,7 +257,8 @@ def fit_camera(pictures: Sequence[Picture], angles_deg: Sequence[Sequence[float]
     log(f"fit: the drawn outline lies {residual_px:.2f} px from the pictures' on average ({drawn.draws} drawings)")
     if not residual_px <= most_px:
         raise CameraFitError(f"the fit did not converge: the arm's outline lies {residual_px:.1f} px from the pictures' "
-                             f"on average (at most {most_px:g} accepted); start nearer with --near FILE "
+                             f"on average (at most {most_px:g} accepted): record the arm over a plain, light surface, "
+                             "well lit (a faint outline misleads the fit), or start nearer with --near FILE "
                              "(so101 cameras --default front, edited to a tape measure's numbers)")
     return pose.camera_file(width, height, residual_px)
 
@@ -342,8 +344,9 @@ def _levenberg_marquardt(pose: Pose, compared_at: Callable[[Pose], Callable[[Pos
     return pose, STEPS_PER_STAGE
 
 
-def chosen_frames(length: int, count: int = PICTURES) -> list[int]:
-    """`count` frame indices spread evenly over an episode of `length` frames (all of them when fewer)."""
+def chosen_frames(length: int, count: int | None = None) -> list[int]:
+    """`count` (default PICTURES) frame indices spread evenly over an episode of `length` frames (all of them when fewer)."""
+    count = PICTURES if count is None else count
     if length <= count:
         return list(range(length))
     return [round(i * (length - 1) / (count - 1)) for i in range(count)]
