@@ -10,8 +10,9 @@ from dataclasses import asdict, fields
 import numpy as np
 import pytest
 
+from so101.bodies.command_path import CommandPath
 from so101.bodies.physics import (
-    DEFAULT_RANGES, CommandPath, PhysicsError, PhysicsRanges, draw_physics, physics_for, physics_metadata, physics_mode,
+    DEFAULT_RANGES, PhysicsError, PhysicsRanges, draw_physics, physics_for, physics_metadata, physics_mode,
 )
 from so101.bodies.registry import BODIES, SIMULATED_BODIES
 from so101.robot import HOME_POSE_DEG

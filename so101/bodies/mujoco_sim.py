@@ -21,7 +21,8 @@ from so101 import assets
 from so101.bodies.camera import DEFAULT_CAMERA, WRIST_CAMERA_NAME, Camera, WristCamera, check_picture
 from so101.bodies.camera_meshes import camera_meshes
 from so101.bodies.mujoco_model import collision_hulls, scene_model
-from so101.bodies.physics import DEFAULT_PHYSICS, CommandPath, Physics, physics_for, physics_ranges
+from so101.bodies.command_path import CommandPath
+from so101.bodies.physics import DEFAULT_PHYSICS, Physics, physics_for, physics_ranges
 from so101.bodies.protocol import BodyName, RgbImage, SceneTask, TaskScene
 from so101.bodies.settings import MuJoCoSettings, NodeSettings
 from so101.runtime.display import DisplayError, resolve_mode

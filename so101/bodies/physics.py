@@ -12,8 +12,8 @@ file of ranges: `physics_ranges`):
 physics on every machine and on both simulators (Python's `random.Random`, seeded by text). Pure: the
 bodies (so101.bodies.pybullet_sim, so101.bodies.mujoco_sim) apply it, the renderer
 (so101.bodies.task_cameras) draws the cube's size and the arm where it truly is, a dataset keeps it by
-episode (`physics_metadata`). `CommandPath` is the part both bodies share: the delay, the speed limit
-and the calibration between a command and the joints.
+episode (`physics_metadata`), and so101.bodies.command_path puts the delay, the speed limit and the
+calibration between a command and the joints, alike for both. No numpy: the prompt's settings read it.
 """
 
 from __future__ import annotations
@@ -22,12 +22,9 @@ import functools
 import json
 import math
 import random
-from collections import deque
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
-
-import numpy as np
-import numpy.typing as npt
+from typing import Iterable
 
 PHYSICS_MODES = ("fixed", "varied")
 DEFAULT_PHYSICS = "fixed"
@@ -167,15 +164,13 @@ class Physics:
     def cube_half_size_m(self) -> float:
         return self.cube_size_m / 2
 
-    def true_deg(self, believed_deg: npt.ArrayLike) -> npt.NDArray[np.float64]:
-        """Where the joints are when the arm believes them at `believed_deg`."""
-        true: npt.NDArray[np.float64] = np.asarray(believed_deg, dtype=np.float64) - np.asarray(self.calibration_offsets_deg)
-        return true
+    def true_deg(self, believed_deg: Iterable[float]) -> list[float]:
+        """Where the six joints are when the arm believes them at `believed_deg`."""
+        return [float(angle) - offset for angle, offset in zip(believed_deg, self.calibration_offsets_deg, strict=True)]
 
-    def believed_deg(self, true_deg: npt.ArrayLike) -> npt.NDArray[np.float64]:
-        """What the arm reports of joints at `true_deg`."""
-        believed: npt.NDArray[np.float64] = np.asarray(true_deg, dtype=np.float64) + np.asarray(self.calibration_offsets_deg)
-        return believed
+    def believed_deg(self, true_deg: Iterable[float]) -> list[float]:
+        """What the arm reports of six joints at `true_deg`."""
+        return [float(angle) + offset for angle, offset in zip(true_deg, self.calibration_offsets_deg, strict=True)]
 
     def as_metadata(self) -> dict[str, object]:
         metadata: dict[str, object] = json.loads(json.dumps(asdict(self)))
@@ -217,41 +212,3 @@ def physics_metadata(mode: str, seed: int) -> dict[str, object]:
     if mode.strip() != "varied" and ranges is not None:  # a file's ranges
         metadata["ranges"] = json.loads(json.dumps(asdict(ranges)))
     return {**metadata, **physics.as_metadata()}
-
-
-class CommandPath:
-    """Between the targets sent and the servos' goals: the delay, the speed limit and the calibration
-    (`physics`; None: the targets go through at once, as they always have). Both bodies step it each
-    tick (`goal_at`), so both simulators see the same goals."""
-
-    def __init__(self, physics: Physics | None, goal_deg: npt.ArrayLike):
-        self.physics = physics
-        self.goal_deg = self._true(goal_deg)
-        self._wanted = self.goal_deg.copy()
-        self._queue: deque[tuple[float, npt.NDArray[np.float64]]] = deque()
-
-    def _true(self, believed_deg: npt.ArrayLike) -> npt.NDArray[np.float64]:
-        return (np.asarray(believed_deg, dtype=np.float64).copy() if self.physics is None
-                else self.physics.true_deg(believed_deg))
-
-    def send(self, targets_deg: npt.ArrayLike, now_s: float) -> None:
-        """Targets as the arm believes them, sent at `now_s`: they reach the servos after the delay."""
-        if self.physics is None:
-            self._wanted = self.goal_deg = self._true(targets_deg)
-            return
-        self._queue.append((now_s + self.physics.command_delay_s, self._true(targets_deg)))
-
-    def goal_at(self, now_s: float, tick_s: float) -> npt.NDArray[np.float64]:
-        """The servos' goals (true degrees) for the tick starting at `now_s`, `tick_s` long."""
-        if self.physics is None:
-            return self.goal_deg
-        while self._queue and self._queue[0][0] <= now_s + 1e-9:
-            self._wanted = self._queue.popleft()[1]
-        most = self.physics.speed_limit_deg_s * tick_s
-        self.goal_deg = self.goal_deg + np.clip(self._wanted - self.goal_deg, -most, most)
-        return self.goal_deg
-
-    def reported(self, true_deg: npt.ArrayLike) -> npt.NDArray[np.float64]:
-        """What the arm reports of joints at `true_deg`."""
-        return (np.asarray(true_deg, dtype=np.float64) if self.physics is None
-                else self.physics.believed_deg(true_deg))

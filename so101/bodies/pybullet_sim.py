@@ -23,7 +23,8 @@ from so101.bodies import pybullet_hulls
 from so101.bodies.camera import DEFAULT_CAMERA, Camera, WristCamera, check_picture
 from so101.bodies.camera_meshes import camera_meshes, urdf_for_cameras
 from so101.bodies.jaw_pads import jaw_pads, urdf_with_pads
-from so101.bodies.physics import DEFAULT_PHYSICS, CommandPath, Physics, physics_for, physics_ranges
+from so101.bodies.command_path import CommandPath
+from so101.bodies.physics import DEFAULT_PHYSICS, Physics, physics_for, physics_ranges
 from so101.bodies.protocol import BodyName, RgbImage, SceneTask, TaskScene
 from so101.bodies.settings import NodeSettings, PyBulletSettings, check_control_mode
 from so101.runtime.display import resolve_mode

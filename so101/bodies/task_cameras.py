@@ -168,7 +168,7 @@ class TaskCameras:
     def _show_pose(self, angles_deg: AnglesDeg | Sequence[float]) -> None:
         """The arm where it is when it reports `angles_deg` (varied physics: its calibration's offsets taken off)."""
         angles = [float(angle) for angle in angles_deg]
-        self._model.show_pose_deg(angles if self.physics is None else self.physics.true_deg(angles).tolist())
+        self._model.show_pose_deg(angles if self.physics is None else self.physics.true_deg(angles))
 
     def close(self) -> None:
         self._model.close()
