@@ -35,6 +35,7 @@ from pathlib import Path
 
 from bench.common import machine_facts, machine_line, tick_records
 from so101.bodies.looks import DEFAULT_LOOKS
+from so101.bodies.physics import DEFAULT_PHYSICS
 from so101.launch.lockstep import Driver, flows_for, run_flows
 from so101.launch.on_cluster import ClusterPlace
 from so101.runtime.dataflow import POLICY_NODE_FILE, ROOT
@@ -67,7 +68,7 @@ def one_run(work: Path, driver: Driver, picture_size: tuple[int, int] | None, ep
             time_limit_s: float, place: ClusterPlace) -> dict:
     """The episodes with the policy on place.policy_machine: the round trips (ms) and the outcomes."""
     args = argparse.Namespace(task=TASK, episodes=episodes, seed=seed, workers=1, time_limit=time_limit_s,
-                              looks=DEFAULT_LOOKS, body="pybullet", lang="en")
+                              looks=DEFAULT_LOOKS, physics=DEFAULT_PHYSICS, body="pybullet", lang="en")
     pictures = ("image", "wrist_image") if picture_size else ()
     (flow,) = flows_for(args, work, driver, pictures, picture_size,
                         lambda folder: {"SO101_RECORD_DIR": str(folder / "dataset"), "SO101_KEEP": "all"})

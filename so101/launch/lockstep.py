@@ -205,7 +205,8 @@ def lockstep_dataflow(flow: Flow, placement: Placement | None = None, root: Pure
         "env": {"SO101_MODE": "direct", "SO101_LANG": flow.lang, "SO101_TASK": flow.runner_env["SO101_TASK"],
                 "SO101_SEED": flow.runner_env["SO101_SEED"], "SO101_LOCKSTEP_FPS": str(fps),
                 "SO101_EPISODE_FRAMES": str(last_frame), "SO101_LOCKSTEP_PICTURES": flow.picture_size,
-                **{key: value for key, value in flow.runner_env.items() if key in ("SO101_LOOKS", CAMERA_POSES_ENV_VAR, PHYSICS_ENV_VAR)},
+                **{key: value for key, value in flow.runner_env.items()
+                   if key in ("SO101_LOOKS", CAMERA_POSES_ENV_VAR, PHYSICS_ENV_VAR)},
                 **flow.body_env},
     }]
     if driver is not None:

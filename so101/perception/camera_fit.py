@@ -43,9 +43,9 @@ from so101.bodies.camera_file import CameraFile, orbit_of
 FloatArray = npt.NDArray[np.float64]
 Picture = npt.NDArray[np.uint8]
 
-# Pictures fitted at once, spread over the episode (more: a steadier fit, each step slower). 32, not 16: one
-# episode of docs/experiments/fitting-cameras.md came 6.8 mm off from 16 pictures, 4.2 mm from 32.
-PICTURES = 32
+# Pictures fitted at once, spread over the episode (each step slower with more). 32 were tried: the lens came
+# nearer on four offsets and farther on two (docs/experiments/fitting-cameras.md), at twice the time.
+PICTURES = 16
 # A pixel whose difference from the background is under the lower level (of 255) shows no arm, over the
 # higher one it does. Which pair fits depends on the looks (a yellow arm on a beige floor is faint, a
 # bright light's sheen loud): each stage takes the pair whose arm's outline lies nearest the drawn one.
