@@ -171,8 +171,9 @@ def test_a_policy_that_sees_drives_the_emulated_arm_from_file_cameras_within_its
     sent kept the joint limits and the speed limit, and torque is off at the end."""
     seeing_policy = request.getfixturevalue(kind)
     width, height = (2 * side for side in SEEN_SIZE)
-    front = write_numbered_video(tmp_path / "front.mp4", 1000, width=width, height=height)
-    wrist = write_numbered_video(tmp_path / "wrist.mp4", 1000, width=width, height=height)
+    # 100 s of pictures at 30 fps: under the whole suite's load a run outlasted 1000 (the wrist's file ran out).
+    front = write_numbered_video(tmp_path / "front.mp4", 3000, width=width, height=height)
+    wrist = write_numbered_video(tmp_path / "wrist.mp4", 3000, width=width, height=height)
     kept = tmp_path / "front-kept.mp4"
     shutil.copy(front, kept)
     policy = f"--policy {seeing_policy} --policy-python {policy_python}"
