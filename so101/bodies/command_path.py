@@ -25,8 +25,9 @@ class CommandPath:
         self._queue: deque[tuple[float, npt.NDArray[np.float64]]] = deque()
 
     def _true(self, believed_deg: npt.ArrayLike) -> npt.NDArray[np.float64]:
-        believed = np.array(believed_deg, dtype=np.float64)
-        return believed if self.physics is None else believed - np.asarray(self.physics.calibration_offsets_deg)
+        if self.physics is None:
+            return np.array(believed_deg, dtype=np.float64)
+        return np.array(self.physics.true_deg(np.ravel(believed_deg)), dtype=np.float64)
 
     def send(self, targets_deg: npt.ArrayLike, now_s: float) -> None:
         """Targets as the arm believes them, sent at `now_s`: they reach the servos after the delay."""

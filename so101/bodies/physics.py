@@ -168,10 +168,6 @@ class Physics:
         """Where the six joints are when the arm believes them at `believed_deg`."""
         return [float(angle) - offset for angle, offset in zip(believed_deg, self.calibration_offsets_deg, strict=True)]
 
-    def believed_deg(self, true_deg: Iterable[float]) -> list[float]:
-        """What the arm reports of six joints at `true_deg`."""
-        return [float(angle) + offset for angle, offset in zip(true_deg, self.calibration_offsets_deg, strict=True)]
-
     def as_metadata(self) -> dict[str, object]:
         metadata: dict[str, object] = json.loads(json.dumps(asdict(self)))
         return metadata

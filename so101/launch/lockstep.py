@@ -27,11 +27,11 @@ from typing import Callable
 
 from so101.bodies.camera_file import CAMERA_POSES_ENV_VAR
 from so101.bodies.looks import DEFAULT_LOOKS, LOOKS_CHOICES
-from so101.bodies.physics import DEFAULT_PHYSICS, PHYSICS_ENV_VAR, PhysicsError, physics_mode
+from so101.bodies.physics import DEFAULT_PHYSICS, PHYSICS_ENV_VAR, physics_mode
 from so101.bodies.registry import BODIES, SIMULATED_BODIES, BodyKind
 from so101.launch.camera_poses import add_camera_pose_option, camera_poses_env
 from so101.launch.on_cluster import ClusterPlace, joined_cluster
-from so101.runtime.argtypes import add_language_option, number, whole_number
+from so101.runtime.argtypes import add_language_option, number, parsed_by, whole_number
 from so101.runtime.dataflow import (
     EXPERT_NODE_FILE, PERCEPTION_NODE_FILE, PERCEPTION_NODE_ID, ROOT, node_launch, write_dataflow,
 )
@@ -49,16 +49,8 @@ STALL_S = 300.0
 INTERRUPTED = "stopped (Ctrl-C, or a signal): the episode running was dropped"
 
 
-def checked_physics(text: str) -> str:
-    """--physics's value as nodes are told it (so101.bodies.physics.physics_mode); argparse's one line otherwise."""
-    try:
-        return physics_mode(text)
-    except PhysicsError as error:
-        raise argparse.ArgumentTypeError(str(error)) from None
-
-
 def add_physics_option(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--physics", type=checked_physics, default=DEFAULT_PHYSICS, metavar="fixed|varied|FILE.json",
+    parser.add_argument("--physics", type=parsed_by(physics_mode), default=DEFAULT_PHYSICS, metavar="fixed|varied|FILE.json",
                         help="the task's physics: fixed (default, each simulator's own), varied (each episode's seed "
                              "draws the cube's size, mass and friction, the servos' stiffness, damping, delay and speed "
                              "limit, a calibration up to 2° off and the gripper's force; a dataset keeps them by "
