@@ -578,6 +578,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="a short smoke run (3 s paced, 2 s per fast-mode run, fewer in-process steps, a 5 s episode saved; about a minute in all); not for the docs")
     parser.add_argument("--show", type=Path, metavar="JSON",
                         help="print the table of a saved result (e.g. bench/results/latest.json) and measure nothing")
+    parser.add_argument("--stale", action="store_true",
+                        help="measure nothing: list the saved results of bench/results/ that a later commit's change to "
+                        "the code they measure has left out of date, each with the command that reruns it")
 
 
 _positive_seconds = number(lambda value: 0 < value <= 3600, "a number of seconds above 0 and at most 3600")
@@ -606,23 +609,44 @@ def round_trip_place(args: argparse.Namespace):
     return place
 
 
+def table_of(result: dict) -> str:
+    """The table `so101 bench` prints for a result of any of its kinds (as `--show` prints a saved one)."""
+    from bench import cluster_bench, real_bench, round_trip_bench
+
+    tables = {"real": real_bench.table, "cluster": cluster_bench.table, "web": alone_table, "cameras": alone_table,
+              "demos": alone_table, "gym": alone_table, "round-trip": round_trip_bench.table,
+              "round-trip-sealed": round_trip_bench.table}
+    return tables.get(result.get("only", result.get("body")), table)(result)
+
+
+def print_stale() -> int:
+    """`--stale`: the out-of-date results, one line each (exit 1), or that all are up to date (0)."""
+    from bench import staleness
+
+    if not staleness.has_history(ROOT):
+        print("so101 bench: --stale reads git's history, and this checkout has none (or a shallow one)", file=sys.stderr)
+        return 2
+    lines = staleness.stale_lines(ROOT)
+    print("\n".join(lines) if lines else f"every result in {staleness.RESULTS} is newer than the code it measures")
+    return 1 if lines else 0
+
+
 def main(argv=None) -> int:
     return run(parse_args(argv))
 
 
 def run(args: argparse.Namespace) -> int:
     """The benchmark for parsed options (`so101 bench` calls this)."""
-    # Here, not at the top: every `so101` command builds this parser, and these two bring the
+    # Here, not at the top: every `so101` command builds this parser, and these bring the
     # serial bus, the fake arm and the cluster (about 0.1 s of imports) that only a run needs.
     from bench import cluster_bench, real_bench, round_trip_bench
 
-    tables = {"real": real_bench.table, "cluster": cluster_bench.table, "web": alone_table, "cameras": alone_table,
-              "demos": alone_table, "gym": alone_table, "round-trip": round_trip_bench.table,
-              "round-trip-sealed": round_trip_bench.table}
+    if args.stale:
+        return print_stale()
     if args.show is not None:
         try:
             shown = json.loads(args.show.read_text(encoding="utf-8"))
-            print(tables.get(shown.get("only", shown.get("body")), table)(shown))
+            print(table_of(shown))
         except OSError as error:
             print(f"so101 bench: cannot read {args.show}: {error.strerror or error}", file=sys.stderr)
             return 2
@@ -672,7 +696,7 @@ def run(args: argparse.Namespace) -> int:
         return 1
     result["settings"]["quick"] = args.quick
     print()
-    print(tables.get(kind, table)(result))
+    print(table_of(result))
     out = args.out or DEFAULT_OUT[f"{kind}-mujoco" if kind in ("cameras", "demos", "gym") and args.body == "mujoco" else kind]
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(result, indent=2) + "\n")

@@ -19,6 +19,7 @@ import logging
 import os
 import queue
 import sys
+import time
 from datetime import datetime
 from pathlib import Path
 
@@ -109,8 +110,8 @@ def main() -> int:
         for event in node:
             if event["type"] == "INPUT":
                 name = event["id"]
-                if name == "tick":
-                    recording.tick()
+                if name == "tick":  # on the pictures' clock: a tick read late adds the frames of its time
+                    recording.tick(sent_s(event) or time.time())
                 elif name == "joint_state":
                     recording.on_joint_state(event["value"].to_pylist(), sent_s(event))
                 elif name == "gripper_state":
@@ -127,11 +128,11 @@ def main() -> int:
                 elif name == "image" and settings.image_size:
                     rgb = picture(event, settings.image_size)
                     if rgb is not None:
-                        recording.on_image(rgb, captured_s(event))
+                        recording.on_image(rgb, captured_s(event), sent_s(event))
                 elif name == "wrist_image" and settings.image_size:
                     rgb = picture(event, settings.image_size)
                     if rgb is not None:
-                        recording.on_wrist_image(rgb, captured_s(event))
+                        recording.on_wrist_image(rgb, captured_s(event), sent_s(event))
                 elif name == "record_cmd":
                     texts = event["value"].to_pylist()
                     reply_to = (event.get("metadata") or {}).get("request", "")

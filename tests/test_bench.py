@@ -495,3 +495,37 @@ def test_the_gym_bench_counts_a_vectors_steps_for_each_of_its_environments():
 def test_gym_refuses_the_real_arm_in_one_line(capsys):
     assert run_bench.main(["--gym", "--body", "real"]) == 1
     assert capsys.readouterr().err == "so101 bench: --gym measures a simulation's environment: --body pybullet or mujoco\n"
+
+
+def test_every_saved_result_is_newer_than_the_code_it_measures():
+    """The change that moves a figure reruns it: no commit after a result was saved changed the code it measures
+    (`so101 bench --stale` names them, with the command that reruns each)."""
+    from bench import staleness
+
+    if not staleness.has_history(run_bench.ROOT):
+        pytest.skip("this checkout has no git history (or a shallow one): a result's age cannot be told")
+    policy_round_trips = {"latest-round-trip.json", "latest-round-trip-sealed.json"}  # a trained policy's: by hand
+    assert {measured.result for measured in staleness.MEASURED} == \
+        {path.name for path in run_bench.DEFAULT_OUT.values()} - policy_round_trips
+    assert staleness.stale_lines(run_bench.ROOT) == []
+
+
+def test_a_result_is_stale_once_a_later_commit_changes_its_code_until_it_is_saved_again(tmp_path):
+    from bench import staleness
+
+    def commit(path: str, text: str) -> None:
+        (tmp_path / path).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / path).write_text(text)
+        staleness.git(tmp_path, "add", path)
+        staleness.git(tmp_path, "-c", "user.name=t", "-c", "user.email=t@t", "commit", "-qm", f"{path} {text}")
+
+    staleness.git(tmp_path, "init", "-q")
+    measured = staleness.Measured("latest-x.json", ("so101/x.py", "nodes/"), "so101 bench --x")
+    commit("so101/x.py", "1")
+    commit("bench/results/latest-x.json", "{}")
+    assert staleness.changes_since_saved(tmp_path, measured) == []
+    commit("so101/other.py", "1")  # not what it measures
+    commit("nodes/x_node.py", "2")  # in a folder it measures
+    assert [line.split(" ", 1)[1] for line in staleness.changes_since_saved(tmp_path, measured)] == ["nodes/x_node.py 2"]
+    commit("bench/results/latest-x.json", '{"again": 1}')
+    assert staleness.changes_since_saved(tmp_path, measured) == []

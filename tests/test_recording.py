@@ -136,6 +136,33 @@ def record_for(rec, clock, task, seconds):
     feed(rec, clock, seconds)
 
 
+@pytest.mark.parametrize("stamped", [True, False])
+def test_a_recorder_that_stalls_keeps_each_picture_on_its_frame(stamped):
+    """A camera's pictures at 30 a second, numbered; the recorder, stalled for 0.4 s, reads its queue at once
+    afterwards. With the times dora stamps on the ticks and pictures, each frame holds the picture of its
+    moment: in order, none twice, none skipped. Without them, the frames of the stall repeat one picture and
+    those sent during it are lost: the failure the stamps mend."""
+    rec, _, clock, _ = recording(needs_image=True)
+    rec.on_joint_state([0.0] * 5)
+    rec.on_gripper_state([0.0])
+    rec.command(RecordCommand("record", "watch"))
+    # What was sent, in time order: a picture every 1/30 s (3 ms after a frame is due), a tick every 5 ms.
+    events = sorted([(0.003 + n / 30, "image", n) for n in range(45)] + [(k * 0.005, "tick", None) for k in range(300)])
+    for sent_s, kind, number in events:
+        clock.now_s = 0.9 if 0.5 <= sent_s <= 0.9 else sent_s  # stalled from 0.5 s to 0.9 s: all read at 0.9 s
+        stamp = sent_s if stamped else None
+        if kind == "image":
+            rec.on_image(np.full((2, 2, 3), number, np.uint8), sent_s=stamp)
+        else:
+            rec.tick(stamp)
+    numbers = [int(row[2][0, 0, 0]) for row in rec.episode.rows]
+    steps = np.diff(numbers)
+    if stamped:
+        assert numbers[:3] == [0, 1, 2] and set(steps) == {1}, numbers
+    else:
+        assert steps.min() == 0 and steps.max() > 2, numbers
+
+
 def test_an_episode_samples_state_and_target_at_each_frame():
     rec, writer, clock, said = recording()
     rec.on_joint_state([10, 20, 30, 40, 50])

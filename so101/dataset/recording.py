@@ -5,8 +5,11 @@ The node (nodes/recorder.py) hands `Recording` the body's latest `joint_state`, 
 and `joint_target` (and, with a task, `object_state` and `task_status`), the camera's latest
 `image`, the prompt's `record_cmd` messages and the time at each of its ticks; `Recording` says what to reply. Each frame samples the latest state
 and target at the frame's tick; its timestamp is frame_index / fps (LeRobot's rule), so a
-recorder that fell behind adds the frames it owes, each with the latest sample, and the episode
-keeps the wall clock's length. Saving runs in a thread: the recorder goes on answering and
+recorder that fell behind adds the frames it owes, and the episode keeps the wall clock's length.
+The node gives each tick and picture the time it was sent (dora's stamp): a recorder that stalls
+(it yields the CPU to the body) and then reads its queue adds each frame with the picture sent
+before that frame was due, not the picture newest when it caught up (which left the frames of the
+stall with one picture, then skipped those that came during it). Saving runs in a thread: the recorder goes on answering and
 sampling while an episode is written.
 
 Real cameras stamp each picture with the time it was captured, and the body's states come stamped
@@ -43,6 +46,8 @@ from so101.tasks.cube_to_box import CubeToBox
 MAX_FRAMES_OWED = 30
 # The states kept to pair a picture with: about 1 s of the real arm's 50 a second, 1.2 s of a simulation's 250.
 STATE_HISTORY = 300
+# A picture sent at the very instant a frame is due belongs to that frame: the frames before it come first.
+FRAME_EPSILON_S = 1e-6
 CAMERA_LOST_CHOICES = ("save", "discard")  # what becomes of the episode a camera stopped
 
 TEXT = {
@@ -215,13 +220,22 @@ class Recording:
         if len(targets_deg) == len(ACTUATED_JOINTS):
             self.targets_deg = tuple(float(angle) for angle in targets_deg)
 
-    def on_image(self, rgb: npt.NDArray[np.uint8], captured_s: float | None = None) -> None:
+    def on_image(self, rgb: npt.NDArray[np.uint8], captured_s: float | None = None, sent_s: float | None = None) -> None:
+        """The front camera's newest picture; `sent_s` (when it was sent, on the ticks' clock): the frames due
+        before then are added first, with the picture before it."""
+        self._frames_before(sent_s)
         self.image, self.captured_s = rgb, captured_s
         self._arrived_s["front"] = self.clock()
 
-    def on_wrist_image(self, rgb: npt.NDArray[np.uint8], captured_s: float | None = None) -> None:
+    def on_wrist_image(self, rgb: npt.NDArray[np.uint8], captured_s: float | None = None,
+                       sent_s: float | None = None) -> None:
+        self._frames_before(sent_s)
         self.wrist_image = rgb
         self._arrived_s["wrist"] = self.clock()
+
+    def _frames_before(self, sent_s: float | None) -> None:
+        if sent_s is not None and self.episode is not None and self._frame_clock is not None:
+            self._add_due(sent_s - FRAME_EPSILON_S)
 
     def on_object_state(self, values: Sequence[float]) -> None:
         if self.task is not None and len(values) == len(self.task.object_state_names):
@@ -256,8 +270,8 @@ class Recording:
         return silent_camera(self._arrived_s, needed, self.clock())
 
     # -- the frame clock -----------------------------------------------------------------
-    def tick(self) -> int:
-        """Add the frames due now; returns how many were added."""
+    def tick(self, now_s: float | None = None) -> int:
+        """Add the frames due at `now_s` (the tick's time; None: the clock's now); returns how many were added."""
         if self.episode is None:
             return 0
         silent = self.silent_camera() if self._frame_clock is not None else None
@@ -269,12 +283,16 @@ class Recording:
             else:
                 announce(self.discard())
             return 0
+        return self._add_due(self.clock() if now_s is None else now_s)
+
+    def _add_due(self, now_s: float) -> int:
+        """Add the frames due at `now_s`, each with the latest state, target and pictures."""
+        assert self.episode is not None
         state = self.state_at_picture()
         if (state is None or (self.needs_image and self.image is None)
                 or (self.needs_wrist_image and self.wrist_image is None)
                 or (self.task is not None and self.object_state is None)):
             return 0
-        now_s = self.clock()
         if self._frame_clock is None:  # the first frame: everything it needs has come
             self._frame_clock = FrameClock(self.fps, now_s)
         due = self._frame_clock.due(now_s)
