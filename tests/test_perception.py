@@ -219,3 +219,32 @@ def test_an_incomplete_recipe_is_refused_in_one_line(tmp_path, damage, message):
         (folder / "so101_recipe.json").write_text("{")
     with pytest.raises(ValueError, match=re.escape(message)):
         choose_policy(folder, Path(python), "cube_to_box", CUBE_TO_BOX.object_state_names)
+
+
+def test_pictures_are_drawn_with_their_episodes_physics_and_measured_on_seeds_training_never_draws():
+    """A varied-physics episode's pictures show its cube, and the tip where the arm truly was while its
+    calibration reported the recorded angles; `tip_xyz` stays where the recorded angles put it (what the
+    node computes); a fixed episode's are as they always were."""
+    from so101.bodies.physics import draw_physics
+    from so101.kinematics import Kinematics
+    from so101.perception.pictures import Frames, draw_pictures, picture_seeds
+
+    physics = replace(draw_physics(5), calibration_offsets_deg=(6.0, -5.0, 4.0, 0.0, 0.0, 0.0))
+    pose = np.array([10.0, -20.0, 30.0, 40.0, 0.0, 20.0])
+    half = {0: CUBE.half_size_m, 1: physics.cube_half_size_m}
+    states = np.array([[0.20, 0.05, half[episode], 0, 0, 0, 1, *BOX.xy_m, 0.0] for episode in (0, 1)])
+    frames = Frames(np.stack([pose, pose]), states, np.array([0, 1]), {0: None, 1: physics})
+    drawn = draw_pictures(frames, 6, 3, SIZE, "fixed")
+    view = view_of(TASK_FRONT_CAMERA, *SIZE)
+    with Kinematics() as kinematics:
+        reported_tip = np.asarray(kinematics.tip_mm(pose[:5])) / 1000.0
+        true_tip = np.asarray(kinematics.tip_mm(physics.true_deg(pose)[:5])) / 1000.0
+    varied = np.isclose(drawn["cube_half_m"], physics.cube_half_size_m)
+    assert 0 < varied.sum() < 6 and np.allclose(drawn["cube_half_m"][~varied], CUBE.half_size_m)
+    assert np.allclose(drawn["tip_xyz"], reported_tip)
+    assert np.allclose(drawn["tip_px"][varied], view.project([true_tip])[0], atol=1e-6)
+    assert np.allclose(drawn["tip_px"][~varied], view.project([reported_tip])[0], atol=1e-6)
+    assert np.hypot(*(view.project([true_tip])[0] - view.project([reported_tip])[0])) > 2  # the offsets show
+    # Held-out pictures draw their looks and layouts from spans training never draws.
+    (looks, layouts), (held_looks, held_layouts) = picture_seeds(False), picture_seeds(True)
+    assert looks[1] <= held_looks[0] and layouts[1] <= held_layouts[0]

@@ -12,7 +12,8 @@ import pytest
 
 from so101.bodies.command_path import CommandPath
 from so101.bodies.physics import (
-    DEFAULT_RANGES, PhysicsError, PhysicsRanges, draw_physics, physics_for, physics_metadata, physics_mode,
+    DEFAULT_RANGES, PhysicsError, PhysicsRanges, draw_physics, physics_for, physics_from_metadata, physics_metadata,
+    physics_mode,
 )
 from so101.bodies.registry import BODIES, SIMULATED_BODIES
 from so101.robot import HOME_POSE_DEG
@@ -47,6 +48,12 @@ def test_a_ranges_file_varies_within_its_own_ranges_and_the_dataset_keeps_them(t
     assert kept["physics"] == "varied" and PhysicsRanges(**{
         name: tuple(value) if isinstance(value, list) else value for name, value in kept["ranges"].items()
     }) == PhysicsRanges(cube_size_m=(0.025, 0.025), calibration_deg=0.0)
+    # What the dataset keeps gives the episode's physics back (the eyes' pictures and the camera fit draw with it).
+    assert physics_from_metadata(kept) == physics and physics_from_metadata(physics_metadata("fixed", 3)) is None
+    with pytest.raises(ValueError, match="^an episode's varied physics has no 'gripper_torque_nm': it holds seed, "):
+        physics_from_metadata({key: value for key, value in kept.items() if key != "gripper_torque_nm"})
+    with pytest.raises(ValueError, match=r'^an episode.s physics is \{"physics": "fixed"\} or the varied values drawn, got'):
+        physics_from_metadata({"physics": "wobbly"})
 
 
 @pytest.mark.parametrize("text, message", [
@@ -129,15 +136,28 @@ def test_both_simulators_apply_the_seeds_physics_and_report_as_its_calibration(b
 
 
 def test_the_pictures_show_the_seeds_cube_and_the_arm_where_it_truly_is():
+    """By seed (the bodies' cameras), or an episode's physics given whole (a dataset's: the eyes' pictures, the
+    camera fit), then fixed physics again."""
     from so101.bodies.task_cameras import TaskCameras
 
     physics = draw_physics(5)
-    with TaskCameras(CUBE_TO_BOX, log=lambda line: None, physics="varied") as cameras:
-        cameras.show_seed(5)
+
+    def shown(cameras) -> tuple[float, np.ndarray]:
         cameras.draw(HOME_POSE_DEG, [], 64, 48, wrist=False)
         drawn = cameras._model
-        assert np.allclose(2 * drawn.model.geom_size[drawn.model.geom("cube").id], physics.cube_size_m)
-        assert np.allclose(drawn.joint_angles_deg(), -np.array(physics.calibration_offsets_deg))
+        return 2 * float(drawn.model.geom_size[drawn.model.geom("cube").id][0]), drawn.joint_angles_deg() - HOME_POSE_DEG
+
+    with TaskCameras(CUBE_TO_BOX, log=lambda line: None, physics="varied") as cameras:
+        cameras.show_seed(5)
+        size_m, off_deg = shown(cameras)
+        assert size_m == pytest.approx(physics.cube_size_m) and np.allclose(off_deg, -np.array(physics.calibration_offsets_deg))
+    with TaskCameras(CUBE_TO_BOX, log=lambda line: None) as cameras:
+        cameras.show_physics(physics_from_metadata(physics_metadata("varied", 5)))
+        size_m, off_deg = shown(cameras)
+        assert size_m == pytest.approx(physics.cube_size_m) and np.allclose(off_deg, -np.array(physics.calibration_offsets_deg))
+        cameras.show_physics(None)
+        size_m, off_deg = shown(cameras)
+        assert size_m == pytest.approx(2 * CUBE_TO_BOX.cube.half_size_m) and np.allclose(off_deg, 0.0, atol=1e-9)
 
 
 def test_every_range_is_documented():

@@ -198,6 +198,22 @@ def physics_for(mode: str, seed: int) -> Physics | None:
     return None if ranges is None else draw_physics(seed, ranges)
 
 
+def physics_from_metadata(entry: object) -> Physics | None:
+    """An episode's physics as a dataset keeps it (`physics_metadata`): None for fixed physics; ValueError in
+    one line for an entry this project did not write."""
+    if not isinstance(entry, dict) or entry.get("physics") not in PHYSICS_MODES:
+        raise ValueError(f"an episode's physics is {{\"physics\": \"fixed\"}} or the varied values drawn, got {entry!r}")
+    if entry["physics"] == "fixed":
+        return None
+    names = [field.name for field in fields(Physics)]
+    missing = [name for name in names if name not in entry]
+    if missing:
+        raise ValueError(f"an episode's varied physics has no {missing[0]!r}: it holds {', '.join(names)}")
+    values = {name: entry[name] for name in names}
+    values["calibration_offsets_deg"] = tuple(float(offset) for offset in values["calibration_offsets_deg"])
+    return Physics(**values)
+
+
 def physics_metadata(mode: str, seed: int) -> dict[str, object]:
     """What a dataset keeps of an episode's physics: {"physics": "fixed"}, or the varied physics drawn."""
     physics = physics_for(mode, seed)

@@ -104,9 +104,8 @@ class TaskCameras:
 
     def show_seed(self, seed: int) -> None:
         """The looks and physics of episode seed `seed` from now on (varied ones; fixed ones stay as they are)."""
-        if self.physics_mode != DEFAULT_PHYSICS and self._model.scene is not None:
-            self.physics = physics_for(self.physics_mode, seed)
-            self._model.scene.lay_out_seed(seed, self.physics)
+        if self.physics_mode != DEFAULT_PHYSICS:
+            self.show_physics(physics_for(self.physics_mode, seed))
         looks = looks_for(self.looks_mode, seed, len(self._object_geoms))
         if looks == self.looks:
             return
@@ -125,6 +124,13 @@ class TaskCameras:
                 model.cam_pos[self._wrist] = cam_pos[self._wrist] + looks.wrist_shift_m
                 model.cam_fovy[self._wrist] = cam_fovy[self._wrist] + looks.wrist_fov_deg
         self.looks = looks
+
+    def show_physics(self, physics: Physics | None) -> None:
+        """Draw with `physics` from now on (an episode's, as its dataset keeps it; None: fixed): its cube's
+        size, and the arm where it truly is when its calibration reports the angles given to `draw`."""
+        self.physics = physics
+        if self._model.scene is not None:
+            self._model.scene.lay_out_seed(physics.seed if physics is not None else 0, physics)
 
     def front_camera(self) -> Camera:
         """The front camera as this episode's looks place it."""

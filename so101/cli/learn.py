@@ -201,7 +201,7 @@ class Learning:
         log = self.work / "pictures-held-out.log"
         self.wait(children)
         command = [sys.executable, "-m", "so101.perception.draw", str(self.work / "held-out-demos"),
-                   str(self.work / "pictures-held-out.npz"), "--count", "1500", "--seed", "77"]
+                   str(self.work / "pictures-held-out.npz"), "--count", "1500", "--seed", "77", "--held-out"]
         self.wait([(self.start(command, log), log, "drawing the held-out pictures")])
 
     def train(self, policy_steps: int, eyes_steps: int, seed: int) -> None:

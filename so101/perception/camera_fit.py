@@ -39,6 +39,7 @@ import numpy.typing as npt
 
 from so101.bodies.camera import Camera
 from so101.bodies.camera_file import CameraFile, orbit_of
+from so101.bodies.physics import Physics, physics_from_metadata
 
 FloatArray = npt.NDArray[np.float64]
 Picture = npt.NDArray[np.uint8]
@@ -201,11 +202,13 @@ def outline_distance_px(drawn: FloatArray, seen: FloatArray) -> float:
 class _Drawn:
     """The arm drawn at the chosen pictures' joint angles from any pose (one model, kept between draws)."""
 
-    def __init__(self, angles_deg: Sequence[Sequence[float]], object_states: Sequence[Sequence[float]] | None):
+    def __init__(self, angles_deg: Sequence[Sequence[float]], object_states: Sequence[Sequence[float]] | None,
+                 physics: Physics | None = None):
         from so101.bodies.task_cameras import TaskCameras
         from so101.tasks import CUBE_TO_BOX
 
         self._cameras = TaskCameras(CUBE_TO_BOX, log=lambda line: None)
+        self._cameras.show_physics(physics)  # the episode's cube, the arm where its calibration put it
         self._angles = [list(angles) for angles in angles_deg]
         self._objects = [list(state) for state in object_states] if object_states is not None else [[]] * len(self._angles)
         self.draws = 0
@@ -226,10 +229,11 @@ class _Drawn:
 
 def fit_camera(pictures: Sequence[Picture], angles_deg: Sequence[Sequence[float]], start: CameraFile,
                object_states: Sequence[Sequence[float]] | None = None,
-               log: Callable[[str], None] = lambda line: None) -> CameraFile:
+               log: Callable[[str], None] = lambda line: None, physics: Physics | None = None) -> CameraFile:
     """The front camera that saw `pictures` of the arm at `angles_deg` (one six-angle row each), from `start`,
     its residual_px the fit's;
-    `object_states` (a task's, where a dataset has them) draw the cube too: it moves with the arm."""
+    `object_states` (a task's, where a dataset has them) draw the cube too: it moves with the arm; `physics`
+    (the episode's, as its dataset keeps it) draws its cube and the arm where its calibration put it."""
     if start.camera != "front":
         raise CameraFitError(f"only the front camera is fitted (the {start.camera} camera sees no arm moving)")
     if len(pictures) != len(angles_deg) or len(pictures) < 3:
@@ -238,7 +242,7 @@ def fit_camera(pictures: Sequence[Picture], angles_deg: Sequence[Sequence[float]
     stack = np.stack([np.asarray(picture, dtype=np.uint8) for picture in pictures])
     height, width = stack.shape[1:3]
     most_px = MAX_RESIDUAL_PX * width / 320.0
-    drawn = _Drawn(angles_deg, object_states)
+    drawn = _Drawn(angles_deg, object_states, physics)
     try:
         pose, residual_px = _fit_stages(stack, drawn, Pose.of(start), STAGES, log)
         # A fit caught where a nearer camera with a narrower view (or the other way) looks almost alike:
@@ -357,7 +361,7 @@ def fit_from_dataset(root: Path, start: CameraFile, episode: int = 0,
     """`start`'s camera fitted to episode `episode` of the LeRobot dataset at `root` (its video
     observation.images.NAME and its observation.state), from `start`."""
     from so101.dataset.features import ENVIRONMENT_KEY, STATE_KEY, from_lerobot
-    from so101.dataset.layout import DatasetError
+    from so101.dataset.layout import PHYSICS_KEY, DatasetError
     from so101.dataset.reader import Dataset
 
     name = start.camera
@@ -370,6 +374,7 @@ def fit_from_dataset(root: Path, start: CameraFile, episode: int = 0,
         chosen = chosen_frames(len(states))
         wanted = set(chosen)
         pictures = [picture for index, picture in enumerate(dataset.episode_images(episode, key)) if index in wanted]
+        physics = physics_from_metadata(dataset.info.get(PHYSICS_KEY, {}).get(str(episode), {"physics": "fixed"}))
     except DatasetError as error:  # it names the dataset
         raise CameraFitError(str(error)) from None
     except (ValueError, OSError) as error:
@@ -379,5 +384,5 @@ def fit_from_dataset(root: Path, start: CameraFile, episode: int = 0,
     log(f"fit: the {name} camera, from episode {episode} of {root} ({len(pictures)} pictures of {len(states)} frames, "
         f"{pictures[0].shape[1]}x{pictures[0].shape[0]})")
     return fit_camera(pictures, [states[index] for index in chosen], start,
-                      None if objects is None else [objects[index] for index in chosen], log)
+                      None if objects is None else [objects[index] for index in chosen], log, physics)
 

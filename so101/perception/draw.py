@@ -23,9 +23,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--looks", choices=LOOKS_CHOICES, default="varied")
     parser.add_argument("--size", type=image_size, default=(160, 120))
+    parser.add_argument("--held-out", action="store_true",
+                        help="pictures to measure on: looks and layouts from seeds the training pictures never draw")
     args = parser.parse_args(argv)
     started = time.monotonic()
-    drawn = draw_pictures(read_frames(args.dataset), args.count, args.seed, tuple(args.size), args.looks)
+    drawn = draw_pictures(read_frames(args.dataset), args.count, args.seed, tuple(args.size), args.looks,
+                          held_out=args.held_out)
     partial = args.out.with_name(args.out.name + ".part.npz")
     np.savez(partial, **drawn)  # type: ignore[arg-type]  # numpy's stub reads a keyword as allow_pickle
     partial.replace(args.out)  # whole or not at all: a stopped run leaves no half file under the name

@@ -17,7 +17,7 @@ from so101.perception.eyes import EYES_FACTS, EYES_WEIGHTS, default_eyes_facts
 from so101.perception.estimate import KEYPOINTS, LIFT_SCALE_M, STRIDE, cube_in_world, read_maps
 from so101.perception.geometry import view_of
 from so101.perception.net import CHANNELS, EyesNet
-from so101.perception.pictures import yaw_mod_quarter
+from so101.perception.pictures import cube_half_m, yaw_mod_quarter
 from so101.tasks.cube_to_box import CUBE_TO_BOX
 
 SIGMA_CELLS = 1.0
@@ -46,7 +46,7 @@ def _targets(data: dict[str, np.ndarray], index: np.ndarray, grid: tuple[int, in
         out[f"{name}_du"] = torch.from_numpy((px[:, 0, None, None] - cells_u[None]).astype(np.float32))
         out[f"{name}_dv"] = torch.from_numpy((px[:, 1, None, None] - cells_v[None]).astype(np.float32))
     yaw = yaw_mod_quarter(data["cube_yaw"][index])
-    lift = (data["object_state"][index, 2] - CUBE_TO_BOX.cube.half_size_m) / LIFT_SCALE_M
+    lift = (data["object_state"][index, 2] - cube_half_m(data)[index]) / LIFT_SCALE_M
     out["cube_reg"] = torch.from_numpy(np.stack([np.cos(4 * yaw), np.sin(4 * yaw), lift], 1).astype(np.float32))
     return out
 
@@ -97,7 +97,7 @@ def check(net: EyesNet, data: dict[str, np.ndarray], batch: int = 64) -> dict[st
                 pixel.append(np.hypot(*(np.asarray(sighting.pixels["cube"]) - data["cube_px"][i])))
                 landmark_px.append(max(np.hypot(*(np.asarray(sighting.pixels[name]) - data[f"{name}_px"][i]))
                                        for name in ("box", "tip")))
-                lift.append(abs(sighting.cube_lift_m - (data["object_state"][i, 2] - CUBE_TO_BOX.cube.half_size_m)))
+                lift.append(abs(sighting.cube_lift_m - (data["object_state"][i, 2] - cube_half_m(data)[i])))
                 truth = data["object_state"][i, :3]
                 world.append(np.linalg.norm(cube_in_world(sighting, view, CUBE_TO_BOX.cube, CUBE_TO_BOX.box,
                                                           data["tip_xyz"][i]) - truth))
