@@ -127,7 +127,10 @@ class TaskCameras:
 
     def show_physics(self, physics: Physics | None) -> None:
         """Draw with `physics` from now on (an episode's, as its dataset keeps it; None: fixed): its cube's
-        size, and the arm where it truly is when its calibration reports the angles given to `draw`."""
+        size, and the arm where it truly is when its calibration reports the angles given to `draw`.
+        The same physics again changes nothing (the eyes' pictures ask once a picture)."""
+        if physics == self.physics:
+            return
         self.physics = physics
         if self._model.scene is not None:
             self._model.scene.lay_out_seed(physics.seed if physics is not None else 0, physics)
