@@ -101,9 +101,10 @@ def run_prompt(control: KeyboardControl, interactive: bool, history_file: Path) 
                     return
                 line = line.rstrip("\n")
                 say(f"> {line}")
-            replies, quit_now = control.handle_line(line)
-            for reply in replies:
-                say(reply)
+            with control.news_after_replies():  # a node's quick answer prints below the line that asked
+                replies, quit_now = control.handle_line(line)
+                for reply in replies:
+                    say(reply)
             if quit_now:
                 return
     except KeyboardInterrupt:  # Ctrl-C, or the dataflow stopped

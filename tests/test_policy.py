@@ -329,6 +329,16 @@ def test_the_prompt_says_how_to_ask_the_policy_and_without_one_how_to_start_it()
     told: list[str] = []
     control.tell_policy = told.append
     assert control.handle_line("policy on") == (["  → told the policy: on"], False) and told == ["on"]
+    # A policy that answers before the reply is printed: its news still comes below the reply (the CI's 11-29 flake).
+    screen: list[str] = []
+    control.show_news = screen.append
+    control.tell_policy = lambda word: control.on_event(
+        {"type": "INPUT", "id": "policy_status", "value": __import__("pyarrow").array([f"[policy] act: {word}"])})
+    with control.news_after_replies():
+        replies, _ = control.handle_line("policy off")
+        screen.extend(replies)
+        assert screen == ["  → told the policy: off"]
+    assert screen == ["  → told the policy: off", "  [policy] act: off"]
 
 
 @pytest.mark.skipif(__import__("shutil").which("tmux") is None, reason="tmux is not installed (.ci/run installs it)")

@@ -30,7 +30,7 @@ from typing import Callable
 
 from so101.bodies.registry import SIMULATED_BODIES
 from so101.perception.recipe import EYES_DIR, POLICY_DIR, write_recipe
-from so101.policy.environment import OFFLINE, default_dir, python_in
+from so101.policy.environment import OFFLINE, default_dir, python_in, with_checkout
 from so101.runtime.argtypes import whole_number
 from so101.runtime.dataflow import ROOT
 from so101.tasks import TASKS
@@ -155,7 +155,8 @@ class Learning:
 
     def start(self, command: list[str], log: Path, env: dict[str, str] | None = None) -> subprocess.Popen:
         child = subprocess.Popen(command, stdout=log.open("w"), stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-                                 env={**os.environ, **(env or {})}, cwd=ROOT, start_new_session=True)
+                                 env={**os.environ, **(env or {}), "PYTHONPATH": with_checkout(os.environ.get("PYTHONPATH"))},
+                                 cwd=ROOT, start_new_session=True)
         self.children.append(child)
         return child
 

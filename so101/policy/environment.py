@@ -121,10 +121,11 @@ def check(python: Path, timeout_s: float = 300.0) -> PolicyEnv:
     if problem:
         raise PolicyEnvError(problem)
     try:
-        # From the interpreter's own folder: the project is found through the environment's link, not the
-        # folder this command was run in.
+        # From the interpreter's own folder, with this checkout first on its path: as the nodes run, each
+        # from its own checkout, whichever one the environment's link names (link_checkout).
         done = subprocess.run([str(python), "-c", CHECK_SCRIPT], capture_output=True, text=True, timeout=timeout_s,
-                              env={**os.environ, **OFFLINE}, cwd=python.parent)
+                              env={**os.environ, **OFFLINE, "PYTHONPATH": with_checkout(os.environ.get("PYTHONPATH"))},
+                              cwd=python.parent)
     except (OSError, subprocess.TimeoutExpired) as error:
         raise PolicyEnvError(f"{python} could not be run: {error}") from None
     if done.returncode != 0:
@@ -170,10 +171,18 @@ def build(folder: Path, base_python: str = sys.executable, say: Callable[[str], 
     return env
 
 
+def with_checkout(python_path: str | None, root: Path = ROOT) -> str:
+    """A PYTHONPATH with the checkout `root` first: the policy environment serves every checkout on the
+    machine, and each runs its own code there."""
+    return os.pathsep.join(filter(None, [str(root), python_path]))
+
+
 def link_checkout(python: Path, say: Callable[[str], None] = print, root: Path = ROOT) -> Path:
     """A .pth file in `python`'s site-packages naming the checkout `root`, so that its interpreter imports
-    this project's modules (lerobot-eval: `--env.discover_packages_path=so101.gym`); rewritten where the
-    checkout moved. Returns the file."""
+    this project's modules when nothing else says which (lerobot-eval run by hand:
+    `--env.discover_packages_path=so101.gym`); so101's nodes and commands put their own checkout first
+    (with_checkout). Rewritten where the checkout moved, in one line naming the one it named before.
+    Returns the file."""
     try:
         done = subprocess.run([str(python), "-c", SITE_PACKAGES_PROBE], capture_output=True, text=True, timeout=60)
     except (OSError, subprocess.TimeoutExpired) as error:
@@ -182,7 +191,9 @@ def link_checkout(python: Path, say: Callable[[str], None] = print, root: Path =
         raise PolicyEnvError(f"{python} did not say where its packages are: {(done.stderr.strip().splitlines() or [''])[-1]}")
     link = Path(done.stdout.strip().splitlines()[-1]) / CHECKOUT_LINK_NAME
     wanted = f"{root}\n"
-    if not link.exists() or link.read_text(encoding="utf-8") != wanted:
-        say(f"+ {link}: {root}")
+    before = link.read_text(encoding="utf-8").strip() if link.exists() else ""
+    if before != str(root):
+        elsewhere = f" (it named {before}; so101's commands there still run that checkout's code)" if before else ""
+        say(f"+ {link}: {root}: lerobot-eval run by hand in this environment imports this checkout's so101{elsewhere}")
         link.write_text(wanted, encoding="utf-8")
     return link

@@ -7,6 +7,7 @@ and key jogging load on first use only, to keep the prompt's start-up quick.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import subprocess
@@ -66,12 +67,38 @@ class KeyboardControl:
         self.news_shown = 0  # lines of news printed while jogging (jog draws its status line again)
         # Prints a line of news at once (the leader's, on `leader_status`); None: nowhere to show it.
         self.show_news: Callable[[str], None] | None = None
+        # News that came while a typed line was being answered, shown after its replies (news_after_replies).
+        self._held_news: list[str] | None = None
+        self._news_lock = threading.Lock()
         # The line to a body running a task (`so101 teleop --task`); None: the dataflow runs none.
         self.task: TaskLink | None = None
         # Sends a word ("run", "stop") to the task's expert node, where the dataflow has one.
         self.tell_expert: Callable[[str], None] | None = None
         # Sends a word ("on", "off") to the policy node, where the dataflow has one.
         self.tell_policy: Callable[[str], None] | None = None
+
+    @contextlib.contextmanager
+    def news_after_replies(self):
+        """Inside the block (a typed line answered and its replies printed), news waits and is shown
+        after it: `policy on` prints its own reply before the policy's answer to it, however fast that came."""
+        with self._news_lock:
+            self._held_news = []
+        try:
+            yield
+        finally:
+            with self._news_lock:
+                held, self._held_news = self._held_news, None
+            for line in held:
+                self.news(line)
+
+    def news(self, line: str) -> None:
+        """Shows a line of news, or holds it while a typed line is answered (jog shows it at once)."""
+        with self._news_lock:
+            if self._held_news is not None and not self.jogging:
+                self._held_news.append(line)
+                return
+        if self.show_news is not None:
+            self.show_news(line)
 
     # -- events, from the pump thread ----------------------------------------------------
     def on_event(self, event: dict) -> None:
@@ -91,7 +118,7 @@ class KeyboardControl:
             self.task.on_objects(event["value"])  # 250 a second: read when `task` asks, not here
         elif event["type"] == "INPUT" and event["id"] in ("leader_status", "expert_status", "policy_status") and self.show_news is not None:
             for line in event["value"].to_pylist():
-                self.show_news(f"  {line}")
+                self.news(f"  {line}")
         elif event["type"] == "INPUT" and event["id"] in ("joint_state", "gripper_state"):
             values = [float(angle) for angle in event["value"].to_pylist()]
             landing, landed_deg = None, None
@@ -147,7 +174,7 @@ class KeyboardControl:
         if worth_saying(target_mm, landed_mm):
             x, y, z = (round(value, 1) + 0.0 for value in landed_mm)
             tx, ty, tz = target_mm
-            self.show_news(self.text["landed"].format(x=x, y=y, z=z, tx=tx, ty=ty, tz=tz, off=math.dist(target_mm, landed_mm)))
+            self.news(self.text["landed"].format(x=x, y=y, z=z, tx=tx, ty=ty, tz=tz, off=math.dist(target_mm, landed_mm)))
 
     def kinematics(self):
         """so101.kinematics.Kinematics, made on first use (PyBullet stays out of the prompt's
@@ -265,7 +292,7 @@ class KeyboardControl:
         """The cube came to rest in the box, or was taken from there: so101.tasks.news' LANDED or LEFT
         (the task link's on_news, on the pump thread)."""
         if self.show_news is not None:
-            self.show_news(self.text[news].format(task=status.task, seed=status.seed))
+            self.news(self.text[news].format(task=status.task, seed=status.seed))
         if news == LANDED and self.tell_policy is not None:
             # The episode is over, as so101 eval ends it: the demonstrations show nothing after it, and a
             # policy left driving nudges the cube in the box (it says `stopped` if it was driving).

@@ -21,7 +21,7 @@ from so101.prompt.task_link import TaskLink, TaskStatus
 def link_other_nodes(control: KeyboardControl, node, interactive: bool) -> None:
     """Gives `control` what the joined `node`'s dataflow offers beyond joint_cmd and the states."""
     control.show_news = news_printer(control, interactive)
-    control.recorder = recorder_link(node, control.show_news)
+    control.recorder = recorder_link(node, control.news)
     control.task = task_link(node, control.task_news)
     control.tell_expert = word_sender(node, "expert_cmd")
     control.tell_policy = word_sender(node, "policy_cmd")

@@ -65,8 +65,41 @@ class Terminal:
         self.seen = match.end()
         return match
 
-    def close(self) -> None:
+    def close(self, wait_s: float = 60.0) -> None:
+        """Closes the terminal (its command gets SIGHUP, as when a person closes the window) and waits until
+        every process started in it is gone: a dataflow still stopping holds the port the next test's prompt takes."""
+        panes = subprocess.run(["tmux", "list-panes", "-t", self.name, "-F", "#{pane_pid}"], capture_output=True,
+                               text=True).stdout.split()
+        started = descendants(int(panes[0])) if panes else set()
         subprocess.run(["tmux", "kill-session", "-t", self.name], capture_output=True)
+        deadline = time.monotonic() + wait_s
+        while started and time.monotonic() < deadline:
+            started = {pid for pid in started if alive(pid)}
+            time.sleep(0.2)
+
+
+def alive(pid: int) -> bool:
+    """Whether `pid` runs (a zombie waiting to be reaped does not)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+def descendants(pid: int) -> set[int]:
+    """The processes below `pid`, and `pid` itself (Linux /proc)."""
+    children: dict[int, list[int]] = {}
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        children.setdefault(int(fields[1]), []).append(int(stat.parent.name))
+    found, todo = set(), [pid]
+    while todo:
+        found.add(todo[-1])
+        todo.extend(child for child in children.get(todo.pop(), []) if child not in found)
+    return found
 
 
 def start_teleop(tmp_path: Path, lang: str, mode: str = "direct", body: str = "pybullet", extra: str = "",
