@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -37,6 +38,8 @@ from so101.tasks import TASKS
 
 STATE_FILE = "so101_learn.json"
 HELD_OUT_SEED = 900_000  # the held-out pictures' demonstrations: layouts no score uses
+# The layouts the candidates are scored on to choose one: no score in the docs uses them (those are 1000-1049).
+VALIDATION_SEED = 800_000
 # The state policy's recipe (docs/loop/policy.md): a small ACT on the joints and the objects' state.
 STATE_POLICY_ARGS = (
     "--policy.type=act", "--policy.device=cpu", "--policy.push_to_hub=false", "--policy.dim_model=128",
@@ -65,8 +68,14 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
     parser.add_argument("--policy-steps", type=whole_number(1, 1_000_000), default=6500, metavar="N",
                         help="lerobot-train's steps for the state policy, of 64 frames (default 6500)")
     parser.add_argument("--seed", type=whole_number(0, 2**31 - 1), default=1, metavar="S",
-                        help="the training seed of the state policy and the eyes (default 1); a score moves with it "
-                             "(docs/experiments/eyes-taught-by-the-simulator.md)")
+                        help="the training seed of the eyes and of the first state policy (default 1); a score moves "
+                             "with it (docs/experiments/eyes-taught-by-the-simulator.md)")
+    parser.add_argument("--candidates", type=whole_number(1, 8), default=2, metavar="N",
+                        help="state policies trained, with seeds S, S+1, ...; the one that scores best on the "
+                             f"validation layouts (seeds {VALIDATION_SEED} on, which no documented score uses) is kept "
+                             "(default 2)")
+    parser.add_argument("--validation", type=whole_number(1, 10_000), default=20, metavar="N",
+                        help="episodes each candidate is scored on when there are several (default 20)")
     parser.add_argument("--policy-python", type=Path, default=None, metavar="PY",
                         help=f"the policy environment's Python, with LeRobot (default {python_in(default_dir())}, "
                              "which so101 policy-env makes)")
@@ -83,11 +92,13 @@ def run(args: argparse.Namespace) -> int:
         return _fail(f"{python} has no lerobot-train beside it: give the Python of a policy environment (so101 policy-env)")
     settings = {"task": args.task, "sees": args.sees, "body": args.body, "episodes": args.episodes,
                 "pictures": args.pictures if args.sees else 0, "eyes_steps": args.eyes_steps if args.sees else 0,
-                "policy_steps": args.policy_steps, "seed": args.seed}
+                "policy_steps": args.policy_steps, "seed": args.seed, "candidates": args.candidates,
+                "validation": args.validation if args.candidates > 1 else 0}
     state_file = out / STATE_FILE
     if out.exists() and not state_file.is_file() and any(out.iterdir()):
         return _fail(f"{out} is not empty and not a folder `so101 learn` began: give a new folder")
     done: dict[str, float] = {}
+    scores: dict[str, int] = {}
     if state_file.is_file():
         try:
             saved = json.loads(state_file.read_text(encoding="utf-8"))
@@ -100,10 +111,12 @@ def run(args: argparse.Namespace) -> int:
                                for key, value in settings.items() if saved.get("settings", {}).get(key) != value)
             return _fail(f"{out} was learned with other options ({differ}): use those, or another folder")
         done = dict(saved.get("done", {}))
+        scores = dict(saved.get("validation", {}))
     out.mkdir(parents=True, exist_ok=True)
     work = out / "work"
     work.mkdir(exist_ok=True)
-    learning = Learning(out, work, settings, done, python)
+    learning = Learning(out, work, settings, done, python, scores)
+    learning.save()  # from here the folder is this command's: interrupted in any stage, it resumes
     print(f"learn: {args.task} on {args.body}, {'a policy that sees (eyes + state policy)' if args.sees else 'a state policy'}"
           f", into {out}" + (f"; resuming after: {', '.join(done)}" if done else ""), flush=True)
     started = time.monotonic()
@@ -112,8 +125,9 @@ def run(args: argparse.Namespace) -> int:
         if args.sees:
             learning.stage("held-out demos", lambda: learning.demos(work / "held-out-demos", 20, HELD_OUT_SEED))
             learning.stage("pictures", lambda: learning.pictures(args.pictures))
-        learning.stage("training", lambda: learning.train(args.policy_steps, args.eyes_steps if args.sees else 0,
-                                                          args.seed))
+        learning.stage("training", lambda: learning.train(args.policy_steps, args.eyes_steps if args.sees else 0))
+        if args.candidates > 1:
+            learning.stage("validation", lambda: learning.validate(args.validation))
         learning.stage("folder", lambda: learning.assemble())
     except KeyboardInterrupt:
         learning.stop_children()
@@ -123,6 +137,8 @@ def run(args: argparse.Namespace) -> int:
     except StageFailed as error:
         learning.stop_children()
         return _fail(str(error))
+    if args.candidates > 1:
+        print(f"learn: kept the state policy of seed {learning.chosen_seed()}", flush=True)
     print(f"learn: done in {time.monotonic() - started:.0f} s this run "
           f"({', '.join(f'{name} {seconds:.0f} s' for name, seconds in learning.done.items())}). "
           f"Score it: so101 eval --task {args.task} --policy {out if args.sees else out / POLICY_DIR} --episodes 50 --seed 1000", flush=True)
@@ -135,13 +151,24 @@ class StageFailed(Exception):
 
 
 class Learning:
-    def __init__(self, out: Path, work: Path, settings: dict, done: dict[str, float], python: Path):
+    def __init__(self, out: Path, work: Path, settings: dict, done: dict[str, float], python: Path,
+                 scores: dict[str, int]):
         self.out, self.work, self.settings, self.done, self.python = out, work, settings, done, python
+        self.scores = scores  # each candidate's successes on the validation layouts, by its seed (a string: JSON's keys)
         self.children: list[subprocess.Popen] = []
 
+    @property
+    def seeds(self) -> list[int]:
+        """The candidates' training seeds: the first is --seed, also the eyes'."""
+        return [self.settings["seed"] + index for index in range(self.settings["candidates"])]
+
     def save(self) -> None:
-        state = {"settings": self.settings, "done": self.done}
-        (self.out / STATE_FILE).write_text(json.dumps(state, indent=1) + "\n", encoding="utf-8")
+        """The state file, replaced whole: an interruption leaves the old one or the new one."""
+        state = {"settings": self.settings, "done": self.done, "validation": self.scores}
+        path = self.out / STATE_FILE
+        partial = path.with_name(path.name + ".partial")
+        partial.write_text(json.dumps(state, indent=1) + "\n", encoding="utf-8")
+        os.replace(partial, path)
 
     def stage(self, name: str, action: Callable[[], None]) -> None:
         if name in self.done:
@@ -161,10 +188,18 @@ class Learning:
         return child
 
     def wait(self, children: list[tuple[subprocess.Popen, Path, str]]) -> None:
-        for child, log, what in children:
-            if child.wait() != 0:
-                tail = log.read_text(encoding="utf-8", errors="replace").strip().splitlines()[-1:] or ["(no output)"]
-                raise StageFailed(f"{what} failed (exit code {child.returncode}): {tail[0][-300:]} (log: {log})")
+        """Until every child has ended; the first to fail is said at once (the caller stops the others)."""
+        running = list(children)
+        while running:
+            for entry in list(running):
+                child, log, what = entry
+                if child.poll() is None:
+                    continue
+                running.remove(entry)
+                if child.returncode != 0:
+                    tail = log.read_text(encoding="utf-8", errors="replace").strip().splitlines()[-1:] or ["(no output)"]
+                    raise StageFailed(f"{what} failed (exit code {child.returncode}): {tail[0][-300:]} (log: {log})")
+            time.sleep(0.5)
         self.children.clear()
 
     def stop_children(self) -> None:
@@ -205,14 +240,22 @@ class Learning:
                    str(self.work / "pictures-held-out.npz"), "--count", "1500", "--seed", "77", "--held-out"]
         self.wait([(self.start(command, log), log, "drawing the held-out pictures")])
 
-    def train(self, policy_steps: int, eyes_steps: int, seed: int) -> None:
-        trained = self.work / "state-policy"
-        shutil.rmtree(trained, ignore_errors=True)
-        log = self.work / "state-policy.log"
-        command = [str(self.python.parent / "lerobot-train"), f"--dataset.repo_id=local/{self.out.name}-demos",
-                   f"--dataset.root={self.out / 'demos'}", *STATE_POLICY_ARGS, f"--seed={seed}", f"--steps={policy_steps}",
-                   f"--save_freq={policy_steps}", f"--output_dir={trained}"]
-        children = [(self.start(command, log, {**OFFLINE, **ONE_THREAD}), log, "lerobot-train (the state policy)")]
+    def trained(self, seed: int) -> Path:
+        """The state policy of training seed `seed`, as lerobot-train leaves it."""
+        return self.work / f"state-policy-seed{seed}" / "checkpoints" / "last" / "pretrained_model"
+
+    def train(self, policy_steps: int, eyes_steps: int) -> None:
+        children = []
+        for seed in self.seeds:
+            trained = self.work / f"state-policy-seed{seed}"
+            shutil.rmtree(trained, ignore_errors=True)
+            log = self.work / f"state-policy-seed{seed}.log"
+            command = [str(self.python.parent / "lerobot-train"), f"--dataset.repo_id=local/{self.out.name}-demos",
+                       f"--dataset.root={self.out / 'demos'}", *STATE_POLICY_ARGS, f"--seed={seed}",
+                       f"--steps={policy_steps}", f"--save_freq={policy_steps}", f"--output_dir={trained}"]
+            children.append((self.start(command, log, {**OFFLINE, **ONE_THREAD}), log,
+                             f"lerobot-train (the state policy, seed {seed})"))
+        seed = self.settings["seed"]
         if eyes_steps:
             eyes_log = self.work / "eyes.log"
             shutil.rmtree(self.work / EYES_DIR, ignore_errors=True)
@@ -221,23 +264,61 @@ class Learning:
                        "--held-out", str(self.work / "pictures-held-out.npz"), "--out", str(self.work / EYES_DIR),
                        "--steps", str(eyes_steps), "--seed", str(seed)]
             children.append((self.start(command, eyes_log, ONE_THREAD), eyes_log, "the eyes' training"))
-        print(f"learn: the state policy{' and the eyes' if eyes_steps else ''} at once, logs: "
+        policies = "the state policy" if len(self.seeds) == 1 else f"{len(self.seeds)} state policies"
+        print(f"learn: {policies}{' and the eyes' if eyes_steps else ''} at once, logs: "
               f"{', '.join(str(log) for _, log, _ in children)}", flush=True)
         self.wait(children)
 
+    def validate(self, episodes: int) -> None:
+        """Each candidate scored by `so101 eval` on `episodes` validation layouts, as the folder it would make
+        runs (a seeing recipe behind its eyes, in varied looks); each score is kept as it comes."""
+        for seed in self.seeds:
+            if str(seed) in self.scores:
+                continue
+            folder = self.work / f"candidate-seed{seed}"
+            shutil.rmtree(folder, ignore_errors=True)
+            self.assemble_into(folder, self.trained(seed))
+            log = self.work / f"validation-seed{seed}.log"
+            command = [sys.executable, "-m", "so101.cli", "eval", "--task", self.settings["task"],
+                       "--body", self.settings["body"], "--policy", str(folder if self.settings["sees"] else folder / POLICY_DIR),
+                       "--policy-python", str(self.python), "--episodes", str(episodes), "--seed", str(VALIDATION_SEED),
+                       "--workers", "2", *(("--looks", "varied") if self.settings["sees"] else ())]
+            self.wait([(self.start(command, log, OFFLINE), log, f"so101 eval (the candidate of seed {seed})")])
+            successes = validation_successes(log.read_text(encoding="utf-8", errors="replace"))
+            if successes is None:
+                raise StageFailed(f"so101 eval (the candidate of seed {seed}) printed no score line (log: {log})")
+            self.scores[str(seed)] = successes
+            self.save()
+            print(f"learn: the state policy of seed {seed}: {successes}/{episodes} on the validation layouts "
+                  f"(seeds {VALIDATION_SEED}-{VALIDATION_SEED + episodes - 1})", flush=True)
+
+    def chosen_seed(self) -> int:
+        """The candidate kept: the most validation successes, the first seed on a tie (the only one alone)."""
+        return max(self.seeds, key=lambda seed: (self.scores.get(str(seed), -1), -seed))
+
     def assemble(self) -> None:
+        self.assemble_into(self.out, self.trained(self.chosen_seed()))
+
+    def assemble_into(self, folder: Path, policy: Path) -> None:
         for name in (POLICY_DIR, EYES_DIR):
-            shutil.rmtree(self.out / name, ignore_errors=True)
-        shutil.copytree(self.work / "state-policy" / "checkpoints" / "last" / "pretrained_model", self.out / POLICY_DIR)
+            shutil.rmtree(folder / name, ignore_errors=True)
+        shutil.copytree(policy, folder / POLICY_DIR)
         if self.settings["sees"]:
-            (self.out / EYES_DIR).mkdir()
+            (folder / EYES_DIR).mkdir()
             for name in ("eyes.pt", "eyes.json"):  # the weights at each 1,000 steps stay in work/eyes/steps
-                shutil.copy2(self.work / EYES_DIR / name, self.out / EYES_DIR / name)
-            eyes = json.loads((self.out / EYES_DIR / "eyes.json").read_text(encoding="utf-8"))
-            write_recipe(self.out, {"recipe": "eyes + state policy", "task": self.settings["task"],
-                                    "body": self.settings["body"], "eyes": EYES_DIR, "policy": POLICY_DIR,
-                                    "eyes_held_out": eyes.get("trained", {}).get("held_out", {}),
-                                    "stages_s": self.done})
+                shutil.copy2(self.work / EYES_DIR / name, folder / EYES_DIR / name)
+            eyes = json.loads((folder / EYES_DIR / "eyes.json").read_text(encoding="utf-8"))
+            write_recipe(folder, {"recipe": "eyes + state policy", "task": self.settings["task"],
+                                  "body": self.settings["body"], "eyes": EYES_DIR, "policy": POLICY_DIR,
+                                  "eyes_held_out": eyes.get("trained", {}).get("held_out", {}),
+                                  "policy_seed": self.chosen_seed(), "validation": self.scores,
+                                  "stages_s": self.done})
+
+
+def validation_successes(eval_output: str) -> int | None:
+    """The successes in so101 eval's score line (`success: K/N (...)`), or None where it printed none."""
+    found = re.findall(r"^success: (\d+)/\d+ ", eval_output, re.M)
+    return int(found[-1]) if found else None
 
 
 def _fail(message: str) -> int:
