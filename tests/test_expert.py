@@ -194,3 +194,32 @@ def test_a_grasp_missed_on_purpose_closes_beside_the_cube_and_the_recovery_puts_
     aside_m = np.linalg.norm(grasp_point_m(planner, closing.targets_deg[:5])[:2] - cube_xy)
     assert MISS_ASIDE_M[0] - 0.001 < aside_m < MISS_ASIDE_M[1] + 0.001
     assert succeeded and expert.attempts == 2, (succeeded, expert.attempts, seconds)
+
+
+@pytest.mark.parametrize("body_name", SIMULATED_BODIES)
+@pytest.mark.parametrize("phase, held, first_phase", [("descend", False, "approach"), ("carry", True, "carry"),
+                                                      ("lower", True, "lower")])
+def test_an_expert_taking_over_mid_episode_finishes_from_where_things_are(planner, body_name, phase, held, first_phase):
+    """DAgger's labeller (so101 demos --learner): a fresh expert, given the arm and the cube as another sender left
+    them, plans from there: a cube on the floor is grasped again from above; a held one is carried on (or let go
+    over the box) in one attempt, never dropped on the way."""
+    seed = 3
+    first = Expert(planner, seed=seed)
+    fresh = Expert(planner, seed=seed)
+    seen_held = []
+
+    class Relay:  # the first expert drives until it is in `phase`, then the fresh one from that frame on
+        phase = ""
+
+        def targets(self, now_s, joints_deg, object_state):
+            if not seen_held and first.phase != phase:
+                return first.targets(now_s, joints_deg, object_state)
+            if not seen_held:
+                seen_held.append(planner.holds_cube(seen_in(object_state), joints_deg))
+            return fresh.targets(now_s, joints_deg, object_state)
+
+    with make(body_name, seed) as sim:
+        succeeded, seconds, _ = run_episode(sim, Relay())
+    assert seen_held == [held]
+    assert fresh.plan[0].phase == first_phase
+    assert succeeded and fresh.attempts == 1, (succeeded, seconds, fresh.attempts)

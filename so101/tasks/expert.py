@@ -71,6 +71,12 @@ OPEN_S = 0.4
 SETTLE_S = 0.3  # held at the end of a move before the next starts
 # A lift succeeded when the cube's centre is this much higher than on the floor.
 LIFTED_M = 0.03
+# The jaws hold the cube (Planner.holds_cube) when it is this far off the floor, they are shut below this angle
+# (on the 25 mm cube they stop at 22° in PyBullet, 13° in MuJoCo; open is 50°), and its centre is this near the
+# grasp point.
+HELD_OFF_FLOOR_M = 0.01
+HELD_JAWS_BELOW_DEG = 35.0
+HELD_WITHIN_M = 0.025
 MAX_ATTEMPTS = 3
 # The noise at scale 1: standard deviations of the perturbations (metres, or a fraction of the time).
 NOISE_APPROACH_M = 0.015
@@ -152,37 +158,13 @@ class Planner:
         """The waypoints that put the cube `seen` into its box, from the arm at `start_deg` (six angles).
         `noise` > 0 perturbs them with `draw` (a seeded random.Random); `grasp_aside_m` (x, y) moves
         the grasp off the cube's centre (a miss on purpose)."""
-        draw = draw or random.Random(0)
-
-        def jitter(scale_m: float, count: int = 3) -> np.ndarray:
-            return np.array([draw.gauss(0.0, scale_m * noise) for _ in range(count)]) if noise > 0 else np.zeros(count)
-
-        def pace() -> float:  # a move's duration, stretched by the noise (never hurried: a hurried carry flings)
-            return 1.0 + abs(draw.gauss(0.0, NOISE_TIME * noise)) if noise > 0 else 1.0
-
-        half = self.task.cube.half_size_m
-        grasp_point = np.array(seen.cube_xyz_m) + jitter(NOISE_GRASP_M) * [1, 1, 0]  # the cube's centre
+        writing = _Writing(self, start_deg, noise, draw or random.Random(0))
+        grasp_point = np.array(seen.cube_xyz_m) + writing.jitter(NOISE_GRASP_M) * [1, 1, 0]  # the cube's centre
         grasp_point[:2] += grasp_aside_m
-        approach = grasp_point + [0, 0, APPROACH_ABOVE_M] + jitter(NOISE_APPROACH_M)
+        approach = grasp_point + [0, 0, APPROACH_ABOVE_M] + writing.jitter(NOISE_APPROACH_M)
         approach[2] = max(approach[2], grasp_point[2] + 0.03)
-        box = self.task.box
-        box_centre = np.array(seen.box_xyz_m)
-        carry_z = box_centre[2] + box.wall_height_m + CARRY_CLEARANCE_M + half
-        release = box_centre + [0, 0, box.floor_thickness_m + RELEASE_ABOVE_FLOOR_M + half]
-        release[:2] += jitter(NOISE_RELEASE_M, 2)
-        inner = box.inner_half_m - half - 0.01  # the cube well inside the walls when let go
-        release[:2] = box_centre[:2] + np.clip(release[:2] - box_centre[:2], -inner, inner)
-
+        release = self._release_point(seen, writing)
         arm = [float(angle) for angle in start_deg[:NUM_ARM_JOINTS]]
-        waypoints: list[Waypoint] = []
-        last = tuple(float(angle) for angle in start_deg)
-
-        def add(arm_deg: Sequence[float], gripper_deg: float, speed_deg_s: float, hold_s: float, phase: str,
-                check: str = "") -> None:
-            nonlocal last
-            targets = (*(float(angle) for angle in arm_deg), float(gripper_deg))
-            waypoints.append(Waypoint(targets, move_time_s(last, targets, speed_deg_s) * pace(), hold_s, phase, check))
-            last = targets
 
         # The yaw is chosen once, above the cube: the cube's own, taken within ±45°, turned by
         # GRASP_TURN_RAD (where the wrist reaches it: else the best of the four that grasp it), so that
@@ -192,43 +174,101 @@ class Planner:
         first = self.grasp.pose_at_yaw(approach.tolist(), quarter_turn_rad(seen.cube_yaw_rad) + GRASP_TURN_RAD, seed_deg=arm)
         if not first.exact:
             first = self.grasp.pose(approach.tolist(), seen.cube_yaw_rad, seed_deg=arm)
-        yaw = first.yaw_rad
-
-        def pose(point: np.ndarray, seed_deg: Sequence[float], held: bool = False, turned_rad: float = 0.0) -> tuple[float, ...]:
-            found = self.grasp.pose_at_yaw(point.tolist(), yaw + turned_rad, seed_deg, max_starts=NEAR_STARTS)
-            return found.arm_deg if found.exact or not held else self.held_at(point, seed_deg)
-
+        writing.yaw = first.yaw_rad
         above = first.arm_deg
-        add(above, OPEN_DEG, FREE_DEG_S, SETTLE_S, "approach")
+        writing.add(above, OPEN_DEG, FREE_DEG_S, SETTLE_S, "approach")
         # Straight down: the grasp point's way along the vertical, in steps, the gripper's yaw kept.
         down = above
         top = np.array([grasp_point[0], grasp_point[1], approach[2]])
         for index in range(1, DESCENT_STEPS + 1):
             point = top + (grasp_point - top) * index / DESCENT_STEPS
-            down = pose(point, down)
-            add(down, OPEN_DEG, NEAR_DEG_S, SETTLE_S if index == DESCENT_STEPS else 0.0, "descend")
-        add(down, CLOSED_DEG, FREE_DEG_S, CLOSE_S, "close")
+            down = writing.pose(point, down)
+            writing.add(down, OPEN_DEG, NEAR_DEG_S, SETTLE_S if index == DESCENT_STEPS else 0.0, "descend")
+        writing.add(down, CLOSED_DEG, FREE_DEG_S, CLOSE_S, "close")
         lifted = down
         for index in range(1, 3):
-            lifted = pose(grasp_point + [0, 0, LIFT_ABOVE_M * index / 2], lifted, held=True)
-            add(lifted, CLOSED_DEG, NEAR_DEG_S, SETTLE_S if index == 2 else 0.0, "lift", "held" if index == 2 else "")
+            lifted = writing.pose(grasp_point + [0, 0, LIFT_ABOVE_M * index / 2], lifted, held=True)
+            writing.add(lifted, CLOSED_DEG, NEAR_DEG_S, SETTLE_S if index == 2 else 0.0, "lift", "held" if index == 2 else "")
+        self._carry(writing, grasp_point, lifted, np.array(seen.box_xyz_m), release)
+        return writing.waypoints
+
+    def plan_held(self, seen: CubeSeen, start_deg: Sequence[float], noise: float = 0.0,
+                  draw: random.Random | None = None) -> list[Waypoint]:
+        """The waypoints that put the cube `seen`, held in the jaws (holds_cube), into its box from the arm at
+        `start_deg`: up to the lift's height where it is lower, then the plan's carry, lowering and release,
+        the jaws kept at the yaw they hold it at (the expert taking over from whatever held it)."""
+        writing = _Writing(self, start_deg, noise, draw or random.Random(0))
+        release = self._release_point(seen, writing)
+        arm = [float(angle) for angle in start_deg[:NUM_ARM_JOINTS]]
+        writing.yaw = self.jaws_yaw_rad(arm)
+        floor_point = np.array([seen.cube_xyz_m[0], seen.cube_xyz_m[1], self.task.cube.half_size_m])
+        box_centre = np.array(seen.box_xyz_m)
+        inner_m = self.task.box.inner_half_m - self.task.cube.half_size_m
+        if np.all(np.abs(floor_point[:2] - box_centre[:2]) < inner_m):  # over the box already: down and let go
+            release[:2] = box_centre[:2] + np.clip(floor_point[:2] - box_centre[:2], -inner_m + 0.01, inner_m - 0.01)
+            self._put_in(writing, arm, release, 0.0)
+            return writing.waypoints
+        lifted = tuple(arm)
+        if seen.cube_xyz_m[2] < floor_point[2] + LIFT_ABOVE_M:
+            lifted = self.held_at(floor_point + [0, 0, LIFT_ABOVE_M], arm)
+            writing.add(lifted, CLOSED_DEG, NEAR_DEG_S, SETTLE_S, "lift", "held")
+        self._carry(writing, floor_point, lifted, np.array(seen.box_xyz_m), release)
+        return writing.waypoints
+
+    def _release_point(self, seen: CubeSeen, writing: "_Writing") -> np.ndarray:
+        """Where the cube's centre is let go: low in the box, well inside its walls."""
+        half, box = self.task.cube.half_size_m, self.task.box
+        box_centre = np.array(seen.box_xyz_m)
+        release = box_centre + [0, 0, box.floor_thickness_m + RELEASE_ABOVE_FLOOR_M + half]
+        release[:2] += writing.jitter(NOISE_RELEASE_M, 2)
+        inner = box.inner_half_m - half - 0.01  # the cube well inside the walls when let go
+        release[:2] = box_centre[:2] + np.clip(release[:2] - box_centre[:2], -inner, inner)
+        return release
+
+    def _carry(self, writing: "_Writing", grasp_point: np.ndarray, lifted: Sequence[float], box_centre: np.ndarray,
+               release: np.ndarray) -> None:
+        """From the cube lifted above `grasp_point` (its centre's place on the floor) with the arm at `lifted`:
+        over the box, down into it, the jaws open, up and home."""
+        carry_z = box_centre[2] + self.task.box.wall_height_m + CARRY_CLEARANCE_M + self.task.cube.half_size_m
         # Over the box: through a point halfway, high, so the cube clears the box's near wall.
-        via = (grasp_point + box_centre) / 2 + jitter(NOISE_CARRY_M)
+        via = (grasp_point + box_centre) / 2 + writing.jitter(NOISE_CARRY_M)
         # The noise raises it, never lowers it.
         via[2] = max(carry_z, grasp_point[2] + LIFT_ABOVE_M) + abs(via[2] - (grasp_point[2] + box_centre[2]) / 2)
         # Carried, the jaws turn with the arm's pan, so the wrist need not roll (a held cube may face any way).
-        carried = pose(via, lifted, held=True, turned_rad=pan_rad(via) - pan_rad(grasp_point))
-        add(carried, CLOSED_DEG, FREE_DEG_S * 0.6, 0.0, "carry")
+        carried = writing.pose(via, lifted, held=True, turned_rad=pan_rad(via) - pan_rad(grasp_point))
+        writing.add(carried, CLOSED_DEG, FREE_DEG_S * 0.6, 0.0, "carry")
         at_box_rad = pan_rad(release) - pan_rad(grasp_point)
-        over_box = pose(np.array([release[0], release[1], carry_z]), carried, held=True, turned_rad=at_box_rad)
-        add(over_box, CLOSED_DEG, FREE_DEG_S * 0.6, SETTLE_S, "carry", "held")
-        lowered = pose(release, over_box, held=True, turned_rad=at_box_rad)
-        add(lowered, CLOSED_DEG, NEAR_DEG_S, SETTLE_S, "lower")
-        add(lowered, OPEN_DEG, FREE_DEG_S, OPEN_S, "release")
-        up = pose(np.array([release[0], release[1], carry_z + 0.02]), lowered, held=True, turned_rad=at_box_rad)
-        add(up, OPEN_DEG, NEAR_DEG_S, 0.0, "retreat")
-        add(HOME_POSE_DEG[:NUM_ARM_JOINTS], HOME_POSE_DEG[NUM_ARM_JOINTS], FREE_DEG_S, 0.5, "home")
-        return waypoints
+        over_box = writing.pose(np.array([release[0], release[1], carry_z]), carried, held=True, turned_rad=at_box_rad)
+        writing.add(over_box, CLOSED_DEG, FREE_DEG_S * 0.6, SETTLE_S, "carry", "held")
+        self._put_in(writing, over_box, release, at_box_rad)
+
+    def _put_in(self, writing: "_Writing", over_box: Sequence[float], release: np.ndarray, turned_rad: float) -> None:
+        """From the cube held over the box (the arm at `over_box`): down to `release`, the jaws open, up and home."""
+        carry_z = release[2] - self.task.box.floor_thickness_m - RELEASE_ABOVE_FLOOR_M + self.task.box.wall_height_m + CARRY_CLEARANCE_M
+        lowered = writing.pose(release, over_box, held=True, turned_rad=turned_rad)
+        writing.add(lowered, CLOSED_DEG, NEAR_DEG_S, SETTLE_S, "lower")
+        writing.add(lowered, OPEN_DEG, FREE_DEG_S, OPEN_S, "release")
+        up = writing.pose(np.array([release[0], release[1], carry_z + 0.02]), lowered, held=True, turned_rad=turned_rad)
+        writing.add(up, OPEN_DEG, NEAR_DEG_S, 0.0, "retreat")
+        writing.add(HOME_POSE_DEG[:NUM_ARM_JOINTS], HOME_POSE_DEG[NUM_ARM_JOINTS], FREE_DEG_S, 0.5, "home")
+
+    def jaws_yaw_rad(self, arm_deg: Sequence[float]) -> float:
+        """The yaw of the jaws' axis (the tip frame's x, on the table) with the arm at `arm_deg`."""
+        _, rows = self.kinematics.frame_m(TIP_LINK_INDEX, arm_deg)
+        x_axis = np.asarray(rows).reshape(3, 3)[:, 0]
+        return math.atan2(x_axis[1], x_axis[0])
+
+    def grasp_point_m(self, arm_deg: Sequence[float]) -> np.ndarray:
+        """Where a cube held in the jaws has its centre, with the arm at `arm_deg` (base frame, metres)."""
+        tip_xyz, rows = self.kinematics.frame_m(TIP_LINK_INDEX, arm_deg)
+        return np.asarray(tip_xyz) + np.asarray(rows).reshape(3, 3) @ self.grasp.point_in_tip_m
+
+    def holds_cube(self, seen: CubeSeen, joints_deg: Sequence[float]) -> bool:
+        """Whether the jaws hold the cube now: shut on it, the cube off the floor, its centre at the grasp point."""
+        off_floor = seen.cube_xyz_m[2] > self.task.cube.half_size_m + HELD_OFF_FLOOR_M
+        shut = len(joints_deg) > NUM_ARM_JOINTS and joints_deg[NUM_ARM_JOINTS] < HELD_JAWS_BELOW_DEG
+        near = float(np.linalg.norm(self.grasp_point_m(joints_deg[:NUM_ARM_JOINTS]) - np.asarray(seen.cube_xyz_m))) < HELD_WITHIN_M
+        return off_floor and shut and near
 
     def held_at(self, point_m: np.ndarray, seed_deg: Sequence[float]) -> tuple[float, ...]:
         """Arm angles that put the grasp point at `point_m` with the gripper turned about as at `seed_deg`,
@@ -247,6 +287,35 @@ class Planner:
         first = [Waypoint(opened, move_time_s(now_deg, opened, FREE_DEG_S), 0.0, "release"),
                  Waypoint(lifted, move_time_s(opened, lifted, NEAR_DEG_S), 0.0, "retreat")]
         return first + self.plan(seen, lifted, noise, draw)
+
+
+class _Writing:
+    """A plan being written: its waypoints from `start_deg`, the noise's draws, the jaws' yaw once chosen."""
+
+    def __init__(self, planner: Planner, start_deg: Sequence[float], noise: float, draw: random.Random):
+        self.planner, self.noise, self.draw = planner, noise, draw
+        self.waypoints: list[Waypoint] = []
+        self.last = tuple(float(angle) for angle in start_deg)
+        self.yaw = 0.0
+
+    def jitter(self, scale_m: float, count: int = 3) -> np.ndarray:
+        return np.array([self.draw.gauss(0.0, scale_m * self.noise) for _ in range(count)]) if self.noise > 0 else np.zeros(count)
+
+    def pace(self) -> float:
+        """A move's duration, stretched by the noise (never hurried: a hurried carry flings)."""
+        return 1.0 + abs(self.draw.gauss(0.0, NOISE_TIME * self.noise)) if self.noise > 0 else 1.0
+
+    def add(self, arm_deg: Sequence[float], gripper_deg: float, speed_deg_s: float, hold_s: float, phase: str,
+            check: str = "") -> None:
+        targets = (*(float(angle) for angle in arm_deg), float(gripper_deg))
+        self.waypoints.append(Waypoint(targets, move_time_s(self.last, targets, speed_deg_s) * self.pace(), hold_s, phase, check))
+        self.last = targets
+
+    def pose(self, point: np.ndarray, seed_deg: Sequence[float], held: bool = False, turned_rad: float = 0.0) -> tuple[float, ...]:
+        """The arm angles that put the grasp point at `point`, the jaws at the plan's yaw (turned by `turned_rad`);
+        a held cube where that cannot point straight down goes there tilted (Planner.held_at)."""
+        found = self.planner.grasp.pose_at_yaw(point.tolist(), self.yaw + turned_rad, seed_deg, max_starts=NEAR_STARTS)
+        return found.arm_deg if found.exact or not held else self.planner.held_at(point, seed_deg)
 
 
 @dataclass
@@ -280,7 +349,13 @@ class Expert:
         if self._missing:
             bearing, distance_m = self._draw.uniform(-math.pi, math.pi), self._draw.uniform(*MISS_ASIDE_M)
             aside_m = (distance_m * math.cos(bearing), distance_m * math.sin(bearing))
-        self._begin(now_s, joints_deg, self.planner.plan(seen_in(object_state), joints_deg, self.noise, self._draw, aside_m))
+        seen = seen_in(object_state)
+        if not self._missing and self.planner.holds_cube(seen, joints_deg):  # taking over a cube already held
+            # The jaws keep squeezing from the start: their measured angle, where the cube stops them, is no squeeze.
+            squeezing = (*joints_deg[:NUM_ARM_JOINTS], CLOSED_DEG)
+            self._begin(now_s, squeezing, self.planner.plan_held(seen, joints_deg, self.noise, self._draw))
+            return
+        self._begin(now_s, joints_deg, self.planner.plan(seen, joints_deg, self.noise, self._draw, aside_m))
 
     def _begin(self, now_s: float, joints_deg: Sequence[float], plan: list[Waypoint]) -> None:
         self.plan, self._index, self._checked = plan, 0, set()
