@@ -7,7 +7,10 @@ frame 0 is a new episode (a reset): a fresh plan for the layout it shows, its no
 the layout's seed. Its clock is the frame's
 index over the frame rate, so the same layout gives the same episode however fast the machine.
 While it plays a miss on purpose (SO101_EXPERT_MISSES) its answers say `not_written`: the
-runner keeps the recovery that follows, not the miss.
+runner keeps the recovery that follows, not the miss. With a learner (SO101_EXPERT_LEARNER, DAgger:
+`so101 demos --learner`), a trained state policy drives each episode first, its answers not written,
+and at a frame drawn from the episode's seed the expert takes over from wherever the learner left the
+arm and the cube: what is written is the expert's way on from the states the learner reaches.
 At the prompt (`so101 teleop --task`), it stands between the prompt and the body, as the leader
 does: what the prompt sends (`typed_cmd`) goes on to the body as it is; `expert_cmd` `run` has it
 do the task once from where things are, a target every `tick` (40 ms) by the wall clock, until
@@ -33,10 +36,11 @@ from dora import Node  # noqa: E402
 
 from so101.assets import ModelFilesError  # noqa: E402
 from so101.runtime.lockstep import NOT_WRITTEN_KEY, FrameParts, FrameTag, LastAnswer, frame_tag  # noqa: E402
+from so101.policy.features import joint_targets_deg, observation  # noqa: E402
 from so101.runtime.logs import send_diagnostics_to  # noqa: E402
 from so101.runtime.node_events import STREAM_KEY, cannot_start, inputs_until_stop  # noqa: E402
 from so101.tasks import task_named  # noqa: E402
-from so101.tasks.expert import Expert, Planner, planner_for  # noqa: E402
+from so101.tasks.expert import Expert, Planner, planner_for, takeover_frame  # noqa: E402
 from so101.tasks.settings import ExpertSettings  # noqa: E402
 
 NODE_ID = "expert"
@@ -57,6 +61,26 @@ TEXT = {
 }
 
 
+def load_learner(settings: ExpertSettings):
+    """The learner's policy (so101.policy.loaded, in the policy environment's Python) where there is one, else
+    None; ValueError in one line for one that cannot load or reads what the expert's frame lacks (pictures)."""
+    if settings.learner is None:
+        return None
+    from so101.policy.features import inputs_for
+    from so101.policy.loaded import LoadedPolicy, PolicyFailed
+
+    task = task_named(settings.task)
+    try:
+        loaded = LoadedPolicy(settings.learner, "cpu", task.instruction, threads=1)
+    except PolicyFailed as error:
+        raise ValueError(str(error)) from None
+    needed = inputs_for(loaded.input_shapes, loaded.output_shapes, task.object_state_names, None)
+    if not set(needed) <= set(OBSERVED):
+        raise ValueError(f"the learner {settings.learner} reads {', '.join(needed)}: a learner reads the arm and "
+                         f"the objects only ({', '.join(OBSERVED)}), as a state policy does")
+    return loaded
+
+
 def main() -> int:
     send_diagnostics_to("stdout")
     try:
@@ -64,22 +88,35 @@ def main() -> int:
         planner: Planner = planner_for(task_named(settings.task))
         # The plans' kinematics use MuJoCo's maths: imported now, while the body starts, not in the first episode.
         import so101.bodies.mujoco_model  # noqa: F401
+        learner = load_learner(settings)
     except (ValueError, ModelFilesError) as error:
         return cannot_start(error, NODE_ID)
     text = TEXT[settings.lang]
     frames = FrameParts(OBSERVED)
     expert: Expert | None = None
-    answered: LastAnswer[tuple[float, ...]] = LastAnswer()  # lockstep
+    answered: LastAnswer[tuple[tuple[float, ...], bool]] = LastAnswer()  # lockstep: (targets, not written)
+    takeover = 0  # lockstep, with a learner: the frame of this episode at which the expert takes over
     latest: dict[str, list[float]] = {}  # at the prompt: the newest of each observed input
     started_s: float | None = None  # at the prompt: when `run` came; None: not driving
     node = Node()
 
-    def plan_for(tag: FrameTag) -> Expert:
-        """The expert of `tag`'s episode: a frame 0 is a new episode, a fresh plan from its seed."""
-        nonlocal expert
-        if expert is None or tag.frame == 0:
+    def answer(tag: FrameTag, frame: dict[str, list[float]]) -> tuple[tuple[float, ...], bool]:
+        """`tag`'s six targets, and whether they are not to be written: a frame 0 is a new episode, a fresh plan
+        from its seed (with a learner, the learner's first, until the takeover frame drawn from the seed)."""
+        nonlocal expert, takeover
+        if tag.frame == 0:
+            expert = None
+            if learner is not None:
+                learner.reset()
+                takeover = takeover_frame(tag.seed, settings.takeover_s, settings.lockstep_fps)
+        if learner is not None and tag.frame < takeover:
+            action, _ = learner.act(observation(frame, None))
+            return tuple(joint_targets_deg(action)), True
+        if expert is None:
             expert = Expert(planner, noise=settings.noise, seed=tag.seed, misses=settings.misses)
-        return expert
+        targets_deg = expert.targets(tag.frame / settings.lockstep_fps, frame["joint_state"] + frame["gripper_state"],
+                                     frame["object_state"])
+        return targets_deg, expert.rehearsing
 
     def say(line: str) -> None:
         logger.warning(line)
@@ -93,10 +130,9 @@ def main() -> int:
                 frame = frames.add(input_id, tag, event["value"].to_pylist())
                 if frame is None:
                     continue
-                targets_deg = answered.to(tag, lambda: plan_for(tag).targets(
-                    tag.frame / settings.lockstep_fps, frame["joint_state"] + frame["gripper_state"], frame["object_state"]))
+                targets_deg, not_written = answered.to(tag, lambda: answer(tag, frame))
                 node.send_output("joint_cmd", pa.array(targets_deg, type=pa.float64()),
-                                 {**tag.metadata(), STREAM_KEY: 1, NOT_WRITTEN_KEY: int(expert is not None and expert.rehearsing)})
+                                 {**tag.metadata(), STREAM_KEY: 1, NOT_WRITTEN_KEY: int(not_written)})
             elif input_id in OBSERVED:
                 latest[input_id] = event["value"].to_pylist()
             elif input_id == "typed_cmd":

@@ -287,6 +287,25 @@ def test_eval_scores_a_policy_in_lockstep_episode_by_episode(policy_python, kind
                         lines[6]), lines[6]
 
 
+def test_demos_with_a_learner_write_the_experts_way_on_from_where_the_learner_left_the_arm(tmp_path, policy_python):
+    """DAgger (so101 demos --learner): the learner drives until the takeover frame drawn from the seed (44 for seed
+    21), unwritten; the expert finishes from there, and only its frames are written, the first of them where the
+    learner left the arm."""
+    import pyarrow.parquet as pq
+
+    from so101.tasks.expert import takeover_frame
+
+    done = subprocess.run([str(SO101), "demos", str(tmp_path / "dagger"), "--task", "cube_to_box", "--episodes", "1",
+                           "--seed", "21", "--no-video", "--learner", str(TINY_POLICY), "--policy-python", str(policy_python)],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert "taking over from the learner" in done.stdout.splitlines()[0]
+    frames = int(re.search(r"^episode 0 \(seed 21\): success in [\d.]+ s, (\d+) frames, kept$", done.stdout, re.M).group(1))
+    written = pq.read_table(next((tmp_path / "dagger" / "data").rglob("*.parquet"))).to_pydict()
+    assert takeover_frame(21, 12.0, 25) == 44 and len(written["frame_index"]) == frames - 44
+    assert max(abs(angle) for angle in written[STATE_KEY][0][:5]) > 3.0  # the learner moved the arm off home
+
+
 def test_a_python_without_lerobot_refuses_the_policy_node_in_one_line(tmp_path):
     done = subprocess.run([str(SO101), "eval", "--task", "cube_to_box", "--policy", str(TINY_POLICY), "--policy-python",
                            sys.executable, "--episodes", "1", "--lang", "en"], capture_output=True, text=True, timeout=120)

@@ -28,9 +28,9 @@ os.environ.setdefault("HF_HUB_OFFLINE", "1")  # a local dataset and policy need 
 import numpy as np  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path[:0] = [str(ROOT), str(ROOT / "nodes")]
+sys.path[:0] = [str(ROOT)]
 
-from policy import LoadedPolicy, PolicyFailed  # noqa: E402 (nodes/policy.py: the node's own loading, pre- and post-processors)
+from so101.policy.loaded import LoadedPolicy, PolicyFailed  # noqa: E402 (the policy node's own loading, pre- and post-processors)
 
 from so101.dataset.features import ACTION_KEY, ENVIRONMENT_KEY, MOTOR_NAMES, STATE_KEY  # noqa: E402
 from so101.dataset.layout import DatasetError  # noqa: E402

@@ -18,7 +18,7 @@ import time
 from pathlib import Path
 
 from so101.observe import OBSERVE_HELP
-from so101.runtime.argtypes import add_camera_size_option, observed_list
+from so101.runtime.argtypes import add_camera_size_option, number, observed_list
 from so101.launch.lockstep import add_common_arguments, expert_driver, fail, flows_for, log_place, refuse_real, run_flows, work_folder
 from so101.launch.on_cluster import cluster_place
 from so101.dataset.settings import DEFAULT_IMAGE_SIZE
@@ -38,6 +38,16 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
     parser.add_argument("--no-video", action="store_true", help="leave the cameras out (a state-only dataset)")
     parser.add_argument("--observe", type=observed_list, default=None, metavar="LIST", help=OBSERVE_HELP)
     add_camera_size_option(parser, DEFAULT_IMAGE_SIZE, "the cameras' picture size")
+    parser.add_argument("--learner", type=Path, default=None, metavar="DIR",
+                        help="DAgger: a trained state policy (a LeRobot folder, or so101 learn's) drives each episode "
+                             "first, unwritten, and the expert takes over from where it left things at a moment drawn "
+                             "from the seed; what is written is the expert's way on (an episode the learner finished "
+                             "alone writes nothing)")
+    parser.add_argument("--takeover-s", type=number(lambda value: 0 < value <= 60, "seconds above 0, at most 60"),
+                        default=12.0, metavar="S",
+                        help="--learner: the expert takes over between 0 and S simulated seconds in (default 12)")
+    parser.add_argument("--policy-python", type=Path, default=None, metavar="PY",
+                        help="--learner: the Python that runs it, with LeRobot (default so101 policy-env's)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -51,6 +61,17 @@ def run(args: argparse.Namespace) -> int:
     refusal = refuse_real("demos", args.body)
     if refusal:
         return fail(refusal)
+    learner = None
+    if args.learner is not None:
+        from so101.policy.choice import choose_policy
+
+        try:
+            learner = choose_policy(args.learner, args.policy_python, args.task, task_named(args.task).object_state_names)
+        except ValueError as error:
+            return fail(f"so101 demos: --learner: {error}")
+        if learner.picture_size is not None:
+            return fail(f"so101 demos: --learner {args.learner} sees pictures: a learner reads the arm and the objects "
+                        "only (a state policy, or the policy of so101 learn's folder)")
     place = cluster_place(args, "the runners keep the episodes")
     if isinstance(place, str):
         return fail(f"so101 demos: {place}")
@@ -74,13 +95,15 @@ def run(args: argparse.Namespace) -> int:
     work = work_folder("demos")
     pictures = tuple(input_id for input_id, key in (("image", IMAGE_KEY), ("wrist_image", WRIST_IMAGE_KEY))
                      if key in video_sizes)
-    flows = flows_for(args, work, expert_driver(args), pictures, picture_size,
+    flows = flows_for(args, work, expert_driver(args, learner), pictures, picture_size,
                       lambda folder: {"SO101_SPOOL_DIR" if merged else "SO101_RECORD_DIR": str(folder / "spool" if merged else root),
                                       "SO101_KEEP": args.keep, OBSERVE_ENV_VAR: str(observed)})
     cameras = (f"{' and '.join(name for name in ('front', 'wrist') if getattr(observed, name))} {flows[0].picture_size}"
                if flows[0].picture_size else "no video")
     workers = f", {args.workers} workers merged in seed order" if merged else ""
-    print(f"demos: {args.task} on {args.body} by the expert (noise {args.noise:g}, misses {args.misses:g}), seeds {args.seed}.."
+    taking_over = (f", taking over from the learner {learner.folder} between 0 and {args.takeover_s:g} s in"
+                   if learner is not None else "")
+    print(f"demos: {args.task} on {args.body} by the expert (noise {args.noise:g}, misses {args.misses:g}{taking_over}), seeds {args.seed}.."
           f"{args.seed + args.episodes - 1}, observing {observed} ({cameras}), into {root}{workers} "
           f"(logs: {log_place(args, work)})", flush=True)
     started = time.monotonic()

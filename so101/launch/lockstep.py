@@ -23,7 +23,7 @@ import sys
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path, PurePath
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
 from so101.bodies.camera_file import CAMERA_POSES_ENV_VAR
 from so101.bodies.looks import DEFAULT_LOOKS, LOOKS_CHOICES
@@ -39,6 +39,9 @@ from so101.runtime.dora_run import REFUSAL, Dataflow, port_held_problem, refusal
 from so101.runtime.lockstep import DEFAULT_LOCKSTEP_FPS
 from so101.tasks import TASKS
 from so101.tasks.episodes import DEFAULT_TIME_LIMIT_S, EpisodeClock, Outcome, read_outcomes, seeds_for, split_seeds
+
+if TYPE_CHECKING:
+    from so101.policy.choice import ChosenPolicy
 
 EPISODES_NODE_FILE = ROOT / "nodes" / "episodes.py"
 BODY_FRAME_OUTPUTS = ["joint_state", "gripper_state", "object_state", "task_status"]
@@ -113,10 +116,16 @@ class Driver:
     perception_env: dict[str, str] | None = None
 
 
-def expert_driver(args: argparse.Namespace) -> Driver:
-    return Driver("expert", EXPERT_NODE_FILE, ("joint_state", "gripper_state", "object_state"),
-                  {"SO101_TASK": args.task, "SO101_EXPERT_NOISE": repr(args.noise),
-                   "SO101_EXPERT_MISSES": repr(args.misses)})
+def expert_driver(args: argparse.Namespace, learner: "ChosenPolicy | None" = None) -> Driver:
+    """The expert as the driver; with `learner` (DAgger: `so101 demos --learner`), under the policy environment's
+    Python, the learner driving each episode until the expert takes over (SO101_EXPERT_LEARNER)."""
+    env = {"SO101_TASK": args.task, "SO101_EXPERT_NOISE": repr(args.noise), "SO101_EXPERT_MISSES": repr(args.misses)}
+    if learner is None:
+        return Driver("expert", EXPERT_NODE_FILE, ("joint_state", "gripper_state", "object_state"), env)
+    env.update({"SO101_EXPERT_LEARNER": str(learner.folder), "SO101_EXPERT_TAKEOVER_S": repr(args.takeover_s),
+                "HF_HUB_OFFLINE": "1", "OMP_NUM_THREADS": "1"})
+    return Driver("expert", EXPERT_NODE_FILE, ("joint_state", "gripper_state", "object_state"), env,
+                  python=str(learner.python))
 
 
 @dataclass(frozen=True)

@@ -399,6 +399,12 @@ class Expert:
         return self.plan[self._index].phase if self.plan else ""
 
 
+def takeover_frame(seed: int, most_s: float, fps: float) -> int:
+    """The frame at which the expert takes over from a learner (DAgger) in the episode of layout `seed`: drawn
+    evenly from 0 to `most_s` seconds, the same for the same seed."""
+    return int(random.Random(f"takeover {seed}").uniform(0.0, most_s) * fps)
+
+
 def planner_for(task: CubeToBox, assets_dir: str | None = None) -> Planner:
     """A planner of `task` on the project's kinematics, grasping with the fixed jaw's pad as the simulators have it."""
     from so101 import assets

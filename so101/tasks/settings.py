@@ -66,6 +66,13 @@ class ExpertSettings(EnvironSettings):
         "SO101_LOCKSTEP_FPS", "25", "the body's lockstep frame rate: the expert's clock is frames / fps",
         read_lockstep_fps)
     lang: str = setting(LANG_ENV_VAR, DEFAULT_LANGUAGE, "log language, `zh` or `en`", read_language)
+    learner: Path | None = setting(
+        "SO101_EXPERT_LEARNER", "", "a trained state policy's folder (DAgger, `so101 demos --learner`): it drives each "
+        "episode first, unwritten, and the expert takes over from where it left things; empty = none "
+        "(the node then runs under the policy environment's Python)", read_optional_path)
+    takeover_s: float = setting(
+        "SO101_EXPERT_TAKEOVER_S", "12", "with a learner: the expert takes over at a moment drawn from the episode's "
+        "seed, from 0 to this many simulated seconds", read_positive_number)
 
 
 @dataclass(frozen=True)
