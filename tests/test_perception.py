@@ -148,7 +148,8 @@ def test_learn_refuses_in_one_line_and_touches_nothing(tmp_path, setup, extra, m
     elif setup == "other options":
         out.mkdir()
         settings = {"task": "cube_to_box", "sees": True, "body": "mujoco", "episodes": 300, "pictures": 40000,
-                    "eyes_steps": 4000, "policy_steps": 6500, "seed": 1, "candidates": 2, "validation": 20}
+                    "eyes_steps": 4000, "policy_steps": 6500, "seed": 1, "candidates": 2, "rounds": 1,
+                    "round_episodes": 100, "round_steps": 2000, "validation": 20}
         (out / "so101_learn.json").write_text(json.dumps({"settings": settings, "done": {"demos": 180.0}}))
     before = sorted(path.name for path in out.iterdir()) if out.exists() else None
     python = extra.split()[-1] if extra else str(fake_policy_env(tmp_path))
@@ -158,15 +159,20 @@ def test_learn_refuses_in_one_line_and_touches_nothing(tmp_path, setup, extra, m
     assert (sorted(path.name for path in out.iterdir()) if out.exists() else None) == before
 
 
-def test_learn_keeps_the_candidate_that_scored_best_on_the_validation_layouts(tmp_path):
+def test_learn_keeps_the_policy_that_scored_best_on_the_validation_layouts(tmp_path):
     from so101.cli.learn import Learning, validation_successes
 
     assert validation_successes("episode 0 ...\nsuccess: 17/20 (85%, 95% CI 64–95%, Wilson), mean time to success 9.1 s\n") == 17
     assert validation_successes("so101 eval: the policy reads: observation.state\n") is None
-    settings = {"seed": 3, "candidates": 3}
-    learning = Learning(tmp_path, tmp_path, settings, {}, Path("python"), {"3": 15, "4": 18, "5": 18})
-    assert learning.seeds == [3, 4, 5] and learning.chosen_seed() == 4  # a tie goes to the first seed
-    assert Learning(tmp_path, tmp_path, {"seed": 1, "candidates": 1}, {}, Path("python"), {}).chosen_seed() == 1
+    learning = Learning(tmp_path, tmp_path, {"seed": 3, "candidates": 3, "rounds": 2}, {}, Path("python"),
+                        {"seed3": 15, "seed4": 18, "seed5": 18})
+    assert learning.candidates() == ["seed3", "seed4", "seed5"]
+    assert learning.best() == "seed4"  # a tie goes to the first seed; the rounds are not scored yet
+    learning.scores.update({"round1": 18, "round2": 19})
+    assert learning.best() == "round2" and learning.trained("round2") == tmp_path / "round2/checkpoints/last/pretrained_model"
+    learning.scores["round2"] = 18
+    assert learning.best() == "seed4"  # a round must beat what it learned from
+    assert Learning(tmp_path, tmp_path, {"seed": 1, "candidates": 1}, {}, Path("python"), {}).best() == "seed1"
 
 
 # -- a seeing recipe's folder, and the dataflows that run it ---------------------------------------------------

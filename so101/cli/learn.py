@@ -40,6 +40,8 @@ STATE_FILE = "so101_learn.json"
 HELD_OUT_SEED = 900_000  # the held-out pictures' demonstrations: layouts no score uses
 # The layouts the candidates are scored on to choose one: no score in the docs uses them (those are 1000-1049).
 VALIDATION_SEED = 800_000
+# DAgger's layouts (so101 demos --learner): round r's are DAGGER_SEED + (r - 1) * episodes onward, apart from all above.
+DAGGER_SEED = 700_000
 # The state policy's recipe (docs/loop/policy.md): a small ACT on the joints and the objects' state.
 STATE_POLICY_ARGS = (
     "--policy.type=act", "--policy.device=cpu", "--policy.push_to_hub=false", "--policy.dim_model=128",
@@ -76,6 +78,14 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
                              "(default 2)")
     parser.add_argument("--validation", type=whole_number(1, 10_000), default=20, metavar="N",
                         help="episodes each candidate is scored on when there are several (default 20)")
+    parser.add_argument("--rounds", type=whole_number(0, 20), default=1, metavar="R",
+                        help="DAgger rounds after the candidates: the best policy so far drives, the expert takes over "
+                             "from where it left things (so101 demos --learner), and the policy goes on training on "
+                             "all the demonstrations so far; the best on the validation layouts is kept (default 1)")
+    parser.add_argument("--round-episodes", type=whole_number(1, 100_000), default=100, metavar="N",
+                        help="--rounds: episodes driven by the learner in each round (default 100)")
+    parser.add_argument("--round-steps", type=whole_number(1, 1_000_000), default=2000, metavar="N",
+                        help="--rounds: lerobot-train's steps in each round, from the policy before (default 2000)")
     parser.add_argument("--policy-python", type=Path, default=None, metavar="PY",
                         help=f"the policy environment's Python, with LeRobot (default {python_in(default_dir())}, "
                              "which so101 policy-env makes)")
@@ -93,7 +103,9 @@ def run(args: argparse.Namespace) -> int:
     settings = {"task": args.task, "sees": args.sees, "body": args.body, "episodes": args.episodes,
                 "pictures": args.pictures if args.sees else 0, "eyes_steps": args.eyes_steps if args.sees else 0,
                 "policy_steps": args.policy_steps, "seed": args.seed, "candidates": args.candidates,
-                "validation": args.validation if args.candidates > 1 else 0}
+                "rounds": args.rounds, "round_episodes": args.round_episodes if args.rounds else 0,
+                "round_steps": args.round_steps if args.rounds else 0,
+                "validation": args.validation if args.candidates > 1 or args.rounds else 0}
     state_file = out / STATE_FILE
     if out.exists() and not state_file.is_file() and any(out.iterdir()):
         return _fail(f"{out} is not empty and not a folder `so101 learn` began: give a new folder")
@@ -126,8 +138,12 @@ def run(args: argparse.Namespace) -> int:
             learning.stage("held-out demos", lambda: learning.demos(work / "held-out-demos", 20, HELD_OUT_SEED))
             learning.stage("pictures", lambda: learning.pictures(args.pictures))
         learning.stage("training", lambda: learning.train(args.policy_steps, args.eyes_steps if args.sees else 0))
-        if args.candidates > 1:
-            learning.stage("validation", lambda: learning.validate(args.validation))
+        if settings["validation"]:
+            learning.stage("validation", lambda: learning.validate(learning.candidates(), args.validation))
+        for number in range(1, args.rounds + 1):
+            learning.stage(f"round {number} demos", lambda: learning.dagger_demos(number, args.round_episodes))
+            learning.stage(f"round {number} training", lambda: learning.dagger_train(number, args.round_steps))
+            learning.stage(f"round {number} validation", lambda: learning.validate([f"round{number}"], args.validation))
         learning.stage("folder", lambda: learning.assemble())
     except KeyboardInterrupt:
         learning.stop_children()
@@ -137,8 +153,9 @@ def run(args: argparse.Namespace) -> int:
     except StageFailed as error:
         learning.stop_children()
         return _fail(str(error))
-    if args.candidates > 1:
-        print(f"learn: kept the state policy of seed {learning.chosen_seed()}", flush=True)
+    if settings["validation"]:
+        print(f"learn: kept {learning.describe(learning.best())}, {learning.scores[learning.best()]}/{args.validation} on "
+              "the validation layouts", flush=True)
     print(f"learn: done in {time.monotonic() - started:.0f} s this run "
           f"({', '.join(f'{name} {seconds:.0f} s' for name, seconds in learning.done.items())}). "
           f"Score it: so101 eval --task {args.task} --policy {out if args.sees else out / POLICY_DIR} --episodes 50 --seed 1000", flush=True)
@@ -154,7 +171,7 @@ class Learning:
     def __init__(self, out: Path, work: Path, settings: dict, done: dict[str, float], python: Path,
                  scores: dict[str, int]):
         self.out, self.work, self.settings, self.done, self.python = out, work, settings, done, python
-        self.scores = scores  # each candidate's successes on the validation layouts, by its seed (a string: JSON's keys)
+        self.scores = scores  # each policy's successes on the validation layouts, by its name (`seed1`, `round1`)
         self.children: list[subprocess.Popen] = []
 
     @property
@@ -240,9 +257,52 @@ class Learning:
                    str(self.work / "pictures-held-out.npz"), "--count", "1500", "--seed", "77", "--held-out"]
         self.wait([(self.start(command, log), log, "drawing the held-out pictures")])
 
-    def trained(self, seed: int) -> Path:
-        """The state policy of training seed `seed`, as lerobot-train leaves it."""
-        return self.work / f"state-policy-seed{seed}" / "checkpoints" / "last" / "pretrained_model"
+    def candidates(self) -> list[str]:
+        """The names of the state policies trained from scratch, one per seed."""
+        return [f"seed{seed}" for seed in self.seeds]
+
+    def trained(self, name: str) -> Path:
+        """The state policy `name` (a candidate, `seed1`, or a DAgger round's, `round1`), as lerobot-train leaves it."""
+        folder = f"state-policy-{name}" if name.startswith("seed") else name
+        return self.work / folder / "checkpoints" / "last" / "pretrained_model"
+
+    @staticmethod
+    def describe(name: str) -> str:
+        return f"the state policy of seed {name[4:]}" if name.startswith("seed") else f"the state policy of DAgger {name[:5]} {name[5:]}"
+
+    def best(self) -> str:
+        """The policy kept: the most validation successes; on a tie the earlier (a candidate before a round, the
+        first seed before the next); without a validation, the first candidate."""
+        names = self.candidates() + [f"round{number}" for number in range(1, self.settings.get("rounds", 0) + 1)]
+        scored = [name for name in names if name in self.scores] or names[:1]
+        return max(scored, key=lambda name: (self.scores.get(name, -1), -names.index(name)))
+
+    def dagger_demos(self, number: int, episodes: int) -> None:
+        """Round `number`'s demonstrations: the demonstrations so far, copied, and `episodes` more in which the best
+        policy so far drives first and the expert takes over (so101 demos --learner)."""
+        before = self.out / "demos" if number == 1 else self.work / f"round{number - 1}-demos"
+        folder = self.work / f"round{number}-demos"
+        shutil.rmtree(folder, ignore_errors=True)  # a round that did not finish starts again from the copy
+        shutil.copytree(before, folder)
+        log = self.work / f"round{number}-demos.log"
+        command = [sys.executable, "-m", "so101.cli", "demos", str(folder), "--task", self.settings["task"],
+                   "--body", self.settings["body"], "--episodes", str(episodes),
+                   "--seed", str(DAGGER_SEED + (number - 1) * episodes), "--no-video", "--workers", "2",
+                   "--learner", str(self.trained(self.best())), "--policy-python", str(self.python)]
+        print(f"learn: round {number}: {self.describe(self.best())} drives, the expert takes over", flush=True)
+        self.wait([(self.start(command, log, OFFLINE), log, f"so101 demos --learner (round {number})")])
+
+    def dagger_train(self, number: int, steps: int) -> None:
+        """Round `number`'s policy: the best so far, trained `steps` more on all the round's demonstrations."""
+        trained = self.work / f"round{number}"
+        shutil.rmtree(trained, ignore_errors=True)
+        log = self.work / f"round{number}.log"
+        command = [str(self.python.parent / "lerobot-train"), f"--policy.path={self.trained(self.best())}",
+                   f"--dataset.repo_id=local/{self.out.name}-round{number}", f"--dataset.root={self.work / f'round{number}-demos'}",
+                   "--policy.device=cpu", "--policy.push_to_hub=false", "--batch_size=64", "--num_workers=0",
+                   "--wandb.enable=false", f"--seed={self.settings['seed']}", f"--steps={steps}", f"--save_freq={steps}",
+                   f"--output_dir={trained}"]
+        self.wait([(self.start(command, log, {**OFFLINE, **ONE_THREAD}), log, f"lerobot-train (round {number})")])
 
     def train(self, policy_steps: int, eyes_steps: int) -> None:
         children = []
@@ -269,35 +329,31 @@ class Learning:
               f"{', '.join(str(log) for _, log, _ in children)}", flush=True)
         self.wait(children)
 
-    def validate(self, episodes: int) -> None:
-        """Each candidate scored by `so101 eval` on `episodes` validation layouts, as the folder it would make
+    def validate(self, names: list[str], episodes: int) -> None:
+        """Each policy of `names` scored by `so101 eval` on `episodes` validation layouts, as the folder it would make
         runs (a seeing recipe behind its eyes, in varied looks); each score is kept as it comes."""
-        for seed in self.seeds:
-            if str(seed) in self.scores:
+        for name in names:
+            if name in self.scores:
                 continue
-            folder = self.work / f"candidate-seed{seed}"
+            folder = self.work / f"candidate-{name}"
             shutil.rmtree(folder, ignore_errors=True)
-            self.assemble_into(folder, self.trained(seed))
-            log = self.work / f"validation-seed{seed}.log"
+            self.assemble_into(folder, self.trained(name))
+            log = self.work / f"validation-{name}.log"
             command = [sys.executable, "-m", "so101.cli", "eval", "--task", self.settings["task"],
                        "--body", self.settings["body"], "--policy", str(folder if self.settings["sees"] else folder / POLICY_DIR),
                        "--policy-python", str(self.python), "--episodes", str(episodes), "--seed", str(VALIDATION_SEED),
                        "--workers", "2", *(("--looks", "varied") if self.settings["sees"] else ())]
-            self.wait([(self.start(command, log, OFFLINE), log, f"so101 eval (the candidate of seed {seed})")])
+            self.wait([(self.start(command, log, OFFLINE), log, f"so101 eval ({self.describe(name)})")])
             successes = validation_successes(log.read_text(encoding="utf-8", errors="replace"))
             if successes is None:
-                raise StageFailed(f"so101 eval (the candidate of seed {seed}) printed no score line (log: {log})")
-            self.scores[str(seed)] = successes
+                raise StageFailed(f"so101 eval ({self.describe(name)}) printed no score line (log: {log})")
+            self.scores[name] = successes
             self.save()
-            print(f"learn: the state policy of seed {seed}: {successes}/{episodes} on the validation layouts "
+            print(f"learn: {self.describe(name)}: {successes}/{episodes} on the validation layouts "
                   f"(seeds {VALIDATION_SEED}-{VALIDATION_SEED + episodes - 1})", flush=True)
 
-    def chosen_seed(self) -> int:
-        """The candidate kept: the most validation successes, the first seed on a tie (the only one alone)."""
-        return max(self.seeds, key=lambda seed: (self.scores.get(str(seed), -1), -seed))
-
     def assemble(self) -> None:
-        self.assemble_into(self.out, self.trained(self.chosen_seed()))
+        self.assemble_into(self.out, self.trained(self.best()))
 
     def assemble_into(self, folder: Path, policy: Path) -> None:
         for name in (POLICY_DIR, EYES_DIR):
@@ -311,7 +367,7 @@ class Learning:
             write_recipe(folder, {"recipe": "eyes + state policy", "task": self.settings["task"],
                                   "body": self.settings["body"], "eyes": EYES_DIR, "policy": POLICY_DIR,
                                   "eyes_held_out": eyes.get("trained", {}).get("held_out", {}),
-                                  "policy_seed": self.chosen_seed(), "validation": self.scores,
+                                  "kept": self.best(), "validation": self.scores,
                                   "stages_s": self.done})
 
 
