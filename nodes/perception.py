@@ -5,7 +5,8 @@ and the arm's joints (`joint_state`), it sends `object_state`, the task's ten nu
 publishes them: the cube's centre and yaw as the eyes see it (so101.perception.estimate: a pixel, a
 height, and the camera's geometry checked against the box and the gripper's tip), the box where the
 task stands it. The policy behind it reads this `object_state`, never the simulator's. While the cube's
-map is unsure (the arm hides it), the cube stays where it was last seen. In lockstep (`so101 eval`) it
+map is unsure (the arm hides it), the cube stays where it was last seen: within an episode (lockstep), or
+at the prompt from one `policy on` (`policy_cmd`) or layout (`task_status`'s seed) to the next. In lockstep (`so101 eval`) it
 answers each frame once its picture and joints are in, tagged with it; at the prompt it sends one for
 each picture, with the newest joints. Runs under the policy environment's Python (PyTorch).
 Settings: so101.perception.settings.PerceptionSettings.
@@ -53,6 +54,7 @@ def main() -> int:
     frames = FrameParts(("image", "joint_state"))
     episode: int | None = None
     joints: Any = None
+    layout: object = None  # at the prompt, with a task: the seed of the layout laid out, from task_status
     node = Node()
 
     def send(picture: Any, arm_deg: Any, metadata: dict[str, Any]) -> None:
@@ -71,6 +73,13 @@ def main() -> int:
                     eyes.reset()
                 episode = tag.episode
                 send(frame["image"], frame["joint_state"], tag.metadata())
+            elif input_id == "policy_cmd" and list(value[:1]) == ["on"]:
+                eyes.reset()  # a new drive: the cube may have moved since the last one
+            elif input_id == "task_status":
+                seed = (event.get("metadata") or {}).get("seed")
+                if seed != layout:
+                    eyes.reset()  # a new layout (`reset` at the prompt): the old cube's place no longer holds
+                layout = seed
             elif input_id == "joint_state":
                 joints = value
             elif input_id == "image" and joints is not None:

@@ -133,6 +133,17 @@ def test_a_fit_that_fails_leaves_the_file_there_and_says_why_in_one_line(tmp_pat
                    "so101 cameras: --fit NAME needs --from DATASET: the episode whose pictures and joint states are fitted",
                    f"so101 cameras: --near {kept}: not a camera file: not JSON (Expecting value, line 1)"]
     assert kept.read_text(encoding="utf-8") == "mine\n"
+    # An option of another mode, or a negative episode: one line each, nothing done.
+    for argv, said in ((["--fit", "front", "--from", str(tmp_path), "--port", "/dev/ttyACM0"], "--port goes with --align NAME"),
+                       (["--default", "front", "--from", str(tmp_path)], "--from goes with --fit NAME"),
+                       (["--default", "front", "--episode", "2"], "--episode goes with --fit NAME"),
+                       (["--fit", "front", "--size", "64x48"], "--size goes with --default NAME"),
+                       (["--port", "/dev/ttyACM0"], "--port goes with --align NAME")):
+        assert main(["cameras", *argv]) == 2
+        assert capsys.readouterr().err == f"so101 cameras: {said}\n", argv
+    with pytest.raises(SystemExit):
+        main(["cameras", "--fit", "front", "--from", str(tmp_path), "--episode", "-1"])
+    assert "--episode: " in capsys.readouterr().err
 
 
 @pytest.mark.dataflow
@@ -157,7 +168,7 @@ def test_the_fit_recovers_the_camera_an_episode_was_drawn_from_and_redraws_its_f
     fit = subprocess.run([*so101, "cameras", "--fit", "front", "--from", str(root), "-o", str(fitted)],
                          capture_output=True, text=True)
     assert fit.returncode == 0, fit.stdout + fit.stderr
-    assert fit.stdout.splitlines()[-1] == f"wrote {fitted}"
+    assert fit.stdout == "" and fit.stderr.splitlines()[-1] == f"wrote {fitted}"
     info = json.loads((root / "meta" / "info.json").read_text(encoding="utf-8"))
     truth = camera_file_from(info["so101_episode_cameras"][0]["front"], "front")
     refit = read_camera_file(fitted, "front")

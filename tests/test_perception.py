@@ -159,6 +159,32 @@ def test_learn_refuses_in_one_line_and_touches_nothing(tmp_path, setup, extra, m
     assert (sorted(path.name for path in out.iterdir()) if out.exists() else None) == before
 
 
+def test_learn_on_a_machine_without_a_policy_environment_makes_it_first(tmp_path, monkeypatch, capsys):
+    import argparse
+
+    from so101.cli import learn
+    from so101.policy.environment import PolicyEnvError
+
+    made = []
+
+    def build(folder, say):
+        made.append(folder)
+        say("+ python -m venv ...")
+        raise PolicyEnvError("`pip install ...` failed: no network")
+
+    monkeypatch.setattr(learn, "default_dir", lambda: tmp_path / "env")
+    monkeypatch.setattr(learn, "build", build)
+    parser = argparse.ArgumentParser()
+    learn.add_arguments(parser, "learn")
+    assert learn.run(parser.parse_args([str(tmp_path / "out"), "--task", "cube_to_box"])) == 2
+    out, err = capsys.readouterr()
+    assert made == [tmp_path / "env"] and out.splitlines() == [
+        f"learn: no policy environment yet: making it in {tmp_path / 'env'} as `so101 policy-env` does (LeRobot and "
+        "torch, several GB to download; once per machine)...", "learn: + python -m venv ..."]
+    assert err == "so101 learn: the policy environment could not be made: `pip install ...` failed: no network\n"
+    assert not (tmp_path / "out").exists()
+
+
 def test_learn_keeps_the_policy_that_scored_best_on_the_validation_layouts(tmp_path):
     from so101.cli.learn import Learning, validation_successes
 

@@ -17,6 +17,7 @@ import sys
 from pathlib import Path
 
 from so101.cameras.listing import find_cameras, listing_lines, picture_file_name
+from so101.runtime.argtypes import whole_number
 
 # A camera's first pictures are often dark or half-exposed while it adjusts: this many are let go first.
 WARM_UP_PICTURES = 10
@@ -39,7 +40,8 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
                             "picture of the arm (--port, or so101 fake-arm) over it, to move the camera into place")
     parser.add_argument("--from", dest="dataset", type=Path, metavar="DATASET", default=None,
                         help="--fit: the LeRobot dataset whose episode's video and joint states are fitted")
-    parser.add_argument("--episode", type=int, metavar="N", default=0, help="--fit: the episode fitted (default 0)")
+    parser.add_argument("--episode", type=whole_number(0, 10**9), metavar="N", default=None,
+                        help="--fit: the episode fitted (default 0)")
     parser.add_argument("--near", type=Path, metavar="FILE", default=None,
                         help="--fit: start from this camera file (a rough measurement) instead of the simulated camera's")
     parser.add_argument("-o", "--output", type=Path, metavar="FILE", default=None,
@@ -62,7 +64,6 @@ def _camera_option(text: str) -> tuple[str, str]:
 def add_align_arguments(parser: argparse.ArgumentParser) -> None:
     """--align's: the real camera, the arm, where the simulated camera stands, the fitted file, the browser view."""
     from so101.launch.camera_poses import add_camera_pose_option
-    from so101.runtime.argtypes import whole_number
     from so101.web.settings import DEFAULT_HOST, DEFAULT_PORT
 
     parser.add_argument("--camera", dest="align_camera", type=_camera_option, metavar="NAME=SOURCE", default=None,
@@ -136,14 +137,14 @@ def fit(args: argparse.Namespace) -> int:
     except CameraFileError as error:
         return fail(f"--near {error}")
     try:
-        fitted = fit_from_dataset(args.dataset.expanduser(), start, args.episode, log=print)
+        fitted = fit_from_dataset(args.dataset.expanduser(), start, args.episode or 0, log=say)
     except (CameraFitError, CameraFileError) as error:
         return fail(str(error))
     from so101.perception.camera_moves import move_in_words
 
     # Against the simulated camera, the one demonstrations are drawn from unless --camera-pose says otherwise.
     words = move_in_words(fitted, default_camera_file(args.fit))
-    print(f"to stand where the simulated {args.fit} camera does: {words}")
+    say(f"to stand where the simulated {args.fit} camera does: {words}")
     text = fitted.as_json()
     if args.output is None:
         sys.stdout.write(text)
@@ -155,20 +156,30 @@ def fit(args: argparse.Namespace) -> int:
         partial.replace(target)
     except OSError as error:
         return fail(f"{target} cannot be written ({error.strerror or error})")
-    print(f"wrote {target}")
+    say(f"wrote {target}")
     return 0
 
 
-ALIGN_OPTIONS = (("--camera", "align_camera"), ("--port", "port"), ("--calibration", "calibration"),
-                 ("--fitted", "fitted"))
+def say(line: str) -> None:
+    """A line for the person, on standard error: standard output holds a camera file alone (`> front.json`)."""
+    print(line, file=sys.stderr, flush=True)
 
 
-def align_option_given(args: argparse.Namespace) -> str | None:
-    """The first of --align's own options given (none: None)."""
-    for option, dest in ALIGN_OPTIONS:
-        if getattr(args, dest) is not None:
-            return option
-    return "--camera-pose" if args.camera_poses else None
+LISTING = "the cameras' listing (no --default, --fit or --align)"
+# Each mode's own options: (the option, its argparse name, the mode it goes with).
+OWN_OPTIONS = (("--from", "dataset", "--fit NAME"), ("--episode", "episode", "--fit NAME"), ("--near", "near", "--fit NAME"),
+               ("-o", "output", "--fit NAME"), ("--size", "size", "--default NAME"), ("--save", "save", LISTING),
+               ("--camera", "align_camera", "--align NAME"), ("--port", "port", "--align NAME"),
+               ("--calibration", "calibration", "--align NAME"), ("--fitted", "fitted", "--align NAME"),
+               ("--camera-pose", "camera_poses", "--align NAME"))
+
+
+def misplaced_option(args: argparse.Namespace, mode: str) -> str | None:
+    """One line for the first option given that belongs to another mode than `mode` (none: None)."""
+    for option, dest, goes_with in OWN_OPTIONS:
+        if goes_with != mode and getattr(args, dest):
+            return f"{option} goes with {goes_with}"
+    return None
 
 
 def align(args: argparse.Namespace) -> int:
@@ -176,11 +187,6 @@ def align(args: argparse.Namespace) -> int:
     from so101.launch.camera_align import AlignError, AlignRequest, run_align
 
     name = args.align
-    for option, value, goes_with in (("--from", args.dataset, "--fit NAME"), ("--near", args.near, "--fit NAME"),
-                                     ("-o", args.output, "--fit NAME"), ("--size", args.size, "--default NAME"),
-                                     ("--save", args.save, "the cameras' listing (no --align)")):
-        if value is not None:
-            return fail(f"{option} goes with {goes_with}")
     if args.align_camera is None:
         return fail(f"--align {name} needs --camera {name}=SOURCE: the real camera (/dev/video0, its index 0, "
                     "or a video file)")
@@ -212,18 +218,17 @@ def align(args: argparse.Namespace) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
+    mode = ("--default NAME" if args.default is not None else "--fit NAME" if args.fit is not None
+            else "--align NAME" if args.align is not None else LISTING)
+    misplaced = misplaced_option(args, mode)
+    if misplaced is not None:
+        return fail(misplaced)
     if args.default is not None:
         return print_default(args.default, args.size)
     if args.fit is not None:
         return fit(args)
     if args.align is not None:
         return align(args)
-    for option, value in (("--from", args.dataset), ("--near", args.near), ("-o", args.output)):
-        if value is not None:
-            return fail(f"{option} goes with --fit NAME")
-    misplaced = align_option_given(args)
-    if misplaced is not None:
-        return fail(f"{misplaced} goes with --align NAME")
     cameras = find_cameras()
     for line in listing_lines(cameras):
         print(line)

@@ -31,7 +31,7 @@ from typing import Callable
 
 from so101.bodies.registry import SIMULATED_BODIES
 from so101.perception.recipe import EYES_DIR, POLICY_DIR, write_recipe
-from so101.policy.environment import OFFLINE, default_dir, python_in, with_checkout
+from so101.policy.environment import OFFLINE, PolicyEnvError, build, default_dir, python_in, with_checkout
 from so101.runtime.argtypes import whole_number
 from so101.runtime.dataflow import ROOT
 from so101.tasks import TASKS
@@ -94,6 +94,15 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
 def run(args: argparse.Namespace) -> int:
     out = args.out.expanduser().resolve()
     python = (args.policy_python or python_in(default_dir())).expanduser()
+    if not python.exists() and args.policy_python is None:  # the first time on this machine: made here, once
+        print(f"learn: no policy environment yet: making it in {default_dir()} as `so101 policy-env` does (LeRobot "
+              "and torch, several GB to download; once per machine)...", flush=True)
+        started = time.monotonic()
+        try:
+            build(default_dir(), say=lambda line: print(f"learn: {line}", flush=True))
+        except PolicyEnvError as error:
+            return _fail(f"the policy environment could not be made: {error}")
+        print(f"learn: policy environment made in {time.monotonic() - started:.0f} s", flush=True)
     if not python.exists():
         return _fail(f"{python} does not exist: make the policy environment with `so101 policy-env`, or give "
                      "--policy-python PY")

@@ -354,15 +354,20 @@ def with_perception(descriptor: dict, body_node_id: str, perception_env: dict[st
                     root: PurePath = ROOT, watched_by_policy: bool = False) -> dict:
     """with_policy's dataflow with a seeing recipe's eyes (nodes/perception.py, under the policy environment's
     `python`) between the front camera and the policy: they take the newest front picture and the body's
-    joints, and the policy's object_state is theirs, not the body's. `watched_by_policy` (a real camera):
-    the policy takes the front picture too, to stop when it goes silent (SO101_POLICY_CAMERAS)."""
+    joints, and the policy's object_state is theirs, not the body's. They forget where they last saw the cube
+    at each `policy on` (the prompt's `policy_cmd`) and each new layout (the body's `task_status`, with a task).
+    `watched_by_policy` (a real camera): the policy takes the front picture too, to stop when it goes silent
+    (SO101_POLICY_CAMERAS)."""
     pictures = picture_sources(descriptor)
     node = {
         "id": PERCEPTION_NODE_ID, **node_launch(PERCEPTION_NODE_FILE, root, python),
         "inputs": {"image": {"source": pictures["image"], "queue_size": 1},
-                   "joint_state": _queued(f"{body_node_id}/joint_state", STATE_QUEUE)},
+                   "joint_state": _queued(f"{body_node_id}/joint_state", STATE_QUEUE),
+                   "policy_cmd": {"source": f"{PROMPT_NODE_ID}/policy_cmd", "queue_size": 10}},
         "outputs": ["object_state"], "env": perception_env,
     }
+    if body_task(descriptor, body_node_id):
+        node["inputs"]["task_status"] = {"source": f"{body_node_id}/task_status", "queue_size": 100}
     policy = _node(descriptor, POLICY_NODE_ID)
     _retarget(policy, "object_state", f"{PERCEPTION_NODE_ID}/object_state")
     if watched_by_policy:
