@@ -147,7 +147,7 @@ def test_learn_refuses_in_one_line_and_touches_nothing(tmp_path, setup, extra, m
         (out / "mine.txt").write_text("kept")
     elif setup == "other options":
         out.mkdir()
-        settings = {"task": "cube_to_box", "sees": True, "body": "mujoco", "episodes": 300, "pictures": 40000,
+        settings = {"task": "cube_to_box", "sees": True, "body": "mujoco", "physics": "fixed", "episodes": 300, "pictures": 40000,
                     "eyes_steps": 4000, "policy_steps": 6500, "seed": 1, "candidates": 2, "rounds": 1,
                     "round_episodes": 100, "round_steps": 2000, "validation": 20}
         (out / "so101_learn.json").write_text(json.dumps({"settings": settings, "done": {"demos": 180.0}}))

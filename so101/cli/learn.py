@@ -61,6 +61,11 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
                              "policy then reads no simulator state); without it, a state policy that reads the "
                              "simulator's object_state")
     parser.add_argument("--body", choices=SIMULATED_BODIES, default="pybullet", help="the simulator (default pybullet)")
+    parser.add_argument("--physics", choices=("fixed", "varied"), default="fixed",
+                        help="the demonstrations' physics, and the validation's: fixed (default, the simulator's own) or "
+                             "varied (each layout's seed draws the cube's size, mass and friction, the servos, a "
+                             "calibration off by up to 2°: docs/loop/physics.md); the eyes' pictures are drawn with "
+                             "each episode's")
     parser.add_argument("--episodes", type=whole_number(10, 100_000), default=300, metavar="N",
                         help="demonstrations (default 300)")
     parser.add_argument("--pictures", type=whole_number(100, 1_000_000), default=40_000, metavar="N",
@@ -109,7 +114,7 @@ def run(args: argparse.Namespace) -> int:
     trainer = python.parent / "lerobot-train"
     if not trainer.exists():
         return _fail(f"{python} has no lerobot-train beside it: give the Python of a policy environment (so101 policy-env)")
-    settings = {"task": args.task, "sees": args.sees, "body": args.body, "episodes": args.episodes,
+    settings = {"task": args.task, "sees": args.sees, "body": args.body, "physics": args.physics, "episodes": args.episodes,
                 "pictures": args.pictures if args.sees else 0, "eyes_steps": args.eyes_steps if args.sees else 0,
                 "policy_steps": args.policy_steps, "seed": args.seed, "candidates": args.candidates,
                 "rounds": args.rounds, "round_episodes": args.round_episodes if args.rounds else 0,
@@ -249,7 +254,7 @@ class Learning:
         log = self.work / f"{folder.name}.log"
         command = [sys.executable, "-m", "so101.cli", "demos", str(folder), "--task", self.settings["task"],
                    "--body", self.settings["body"], "--episodes", str(episodes), "--seed", str(seed), "--no-video",
-                   "--workers", "2"]
+                   "--workers", "2", "--physics", self.settings["physics"]]
         self.wait([(self.start(command, log), log, "so101 demos")])
 
     def pictures(self, count: int) -> None:
@@ -297,6 +302,7 @@ class Learning:
         command = [sys.executable, "-m", "so101.cli", "demos", str(folder), "--task", self.settings["task"],
                    "--body", self.settings["body"], "--episodes", str(episodes),
                    "--seed", str(DAGGER_SEED + (number - 1) * episodes), "--no-video", "--workers", "2",
+                   "--physics", self.settings["physics"],
                    "--learner", str(self.trained(self.best())), "--policy-python", str(self.python)]
         print(f"learn: round {number}: {self.describe(self.best())} drives, the expert takes over", flush=True)
         self.wait([(self.start(command, log, OFFLINE), log, f"so101 demos --learner (round {number})")])
@@ -351,7 +357,8 @@ class Learning:
             command = [sys.executable, "-m", "so101.cli", "eval", "--task", self.settings["task"],
                        "--body", self.settings["body"], "--policy", str(folder if self.settings["sees"] else folder / POLICY_DIR),
                        "--policy-python", str(self.python), "--episodes", str(episodes), "--seed", str(VALIDATION_SEED),
-                       "--workers", "2", *(("--looks", "varied") if self.settings["sees"] else ())]
+                       "--workers", "2", "--physics", self.settings["physics"],
+                       *(("--looks", "varied") if self.settings["sees"] else ())]
             self.wait([(self.start(command, log, OFFLINE), log, f"so101 eval ({self.describe(name)})")])
             successes = validation_successes(log.read_text(encoding="utf-8", errors="replace"))
             if successes is None:
