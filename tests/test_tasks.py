@@ -132,6 +132,8 @@ def test_a_typed_seed_must_be_a_whole_number(text):
     (["--observe", "state,front"], "so101 teleop: --observe says what a recording's frames show: it goes with --record DIR"),
     (["--record", "DIR", "--observe", "state,environment,front"],
      "so101 teleop: --observe state,environment,front: environment is a task's objects: it goes with --task"),
+    (["--task", "cube_to_box", "--looks", "varied"], "so101 teleop: --looks varied goes with --task NAME on a simulated "
+     "body, and --record DIR or a --policy that sees: the task's cameras draw only for them"),
 ])
 def test_teleop_refuses_a_task_it_cannot_run_in_one_line_before_starting_anything(tmp_path, capsys, options, message):
     from so101.cli import main as cli

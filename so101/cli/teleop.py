@@ -171,9 +171,10 @@ def run(args: argparse.Namespace) -> int:
     elif args.policy_python is not None:
         print("so101 teleop: --policy-python goes with --policy DIR", file=sys.stderr)
         return 2
-    if args.looks != DEFAULT_LOOKS and (args.task is None or args.record is None or not launch.body.simulated):
-        print(f"so101 teleop: --looks {args.looks} goes with --task NAME and --record DIR on a simulated body: "
-              "the task's cameras draw only while recording", file=sys.stderr)
+    if args.looks != DEFAULT_LOOKS and (args.task is None or not launch.body.simulated or (
+            args.record is None and not any(node["id"] == CAMERA_NODE_ID for node in descriptor["nodes"]))):
+        print(f"so101 teleop: --looks {args.looks} goes with --task NAME on a simulated body, and --record DIR or a "
+              "--policy that sees: the task's cameras draw only for them", file=sys.stderr)
         return 2
     if args.physics != DEFAULT_PHYSICS and (args.task is None or not launch.body.simulated):
         print("so101 teleop: --physics varies a task's simulated physics: it goes with --task NAME on a simulated body",
@@ -192,7 +193,7 @@ def run(args: argparse.Namespace) -> int:
         if not problem and cameras:
             add_real_cameras(descriptor, cameras, args.image_size, args.image_size, args.camera_fps)
         problem = problem or add_recorder(descriptor, launch.body, args.record.expanduser().resolve(), args.fps,
-                                          args.lang, args.task, args.image_size, args.looks, observed,
+                                          args.lang, args.task, args.image_size, observed,
                                           names, args.camera_lost)
         if problem:
             print(f"so101 teleop: {problem}", file=sys.stderr)
@@ -203,6 +204,10 @@ def run(args: argparse.Namespace) -> int:
         print("so101 teleop: --camera-pose draws a task's simulated cameras: it goes with --task NAME on a simulated "
               "body, and --record DIR or a --policy that sees", file=sys.stderr)
         return 2
+    if args.looks != DEFAULT_LOOKS:  # the camera draws them (for the recording, or the policy's eyes), the recorder keeps them
+        for node in descriptor["nodes"]:
+            if node["id"] in (CAMERA_NODE_ID, "recorder"):
+                node["env"] = {**node.get("env", {}), "SO101_LOOKS": args.looks}
     if args.physics != DEFAULT_PHYSICS:  # the body has it, the camera draws its cube and calibration, the recorder keeps it
         for node in descriptor["nodes"]:
             if node["id"] in (launch.body.node_id, CAMERA_NODE_ID, "recorder"):
@@ -299,9 +304,8 @@ def add_leader(descriptor: dict, body: BodyKind, port: str | None, calibration_f
 
 
 def add_recorder(descriptor: dict, body: BodyKind, dataset_dir: Path, fps: int, lang: str,
-                 task: str | None, image_size: tuple[int, int], looks: str = DEFAULT_LOOKS,
-                 observed: Observed | None = None, real_cameras: tuple[str, ...] = (),
-                 camera_lost: str = "save") -> str | None:
+                 task: str | None, image_size: tuple[int, int], observed: Observed | None = None,
+                 real_cameras: tuple[str, ...] = (), camera_lost: str = "save") -> str | None:
     """The recorder (and a simulation's camera) added to `descriptor`; or why DIR cannot take
     these episodes, in one line, before anything starts. `real_cameras`: the real arm's, whose nodes
     the dataflow has (so101.launch.real_cameras)."""
@@ -323,7 +327,5 @@ def add_recorder(descriptor: dict, body: BodyKind, dataset_dir: Path, fps: int, 
     if real_cameras and pictures:  # their own nodes, already in the dataflow
         recorder_env.update({"SO101_RECORD_CAMERAS": ",".join(real_cameras), "SO101_RECORD_CAMERA_LOST": camera_lost})
     camera_env = {"SO101_RECORD_IMAGE_SIZE": size_text} if pictures and body.simulated else None
-    if camera_env is not None and looks != DEFAULT_LOOKS:  # the camera draws them, the recorder keeps them
-        camera_env["SO101_LOOKS"] = recorder_env["SO101_LOOKS"] = looks
     with_recorder(descriptor, body.node_id, recorder_env, camera_env, picture_hz=fps)
     return None
