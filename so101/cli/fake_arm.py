@@ -449,22 +449,27 @@ def run(args: argparse.Namespace) -> int:
     text = TEXT[args.lang]
     arm = FakeArm(ids=args.ids, speed_steps_s=args.speed)
     raise_priority()  # the servos' stand-in: a busy machine should starve the driver, not the servos
+
+    def faults() -> None:
+        for servo_id in args.silent:
+            if servo_id in arm.ids:
+                arm.silence(servo_id)
+        for servo_id in args.corrupt:
+            if servo_id in arm.ids:
+                arm.corrupt(servo_id)
+        if args.fault_after:
+            out.say_aside(text["faults_on"].format(silent=", ".join(map(str, args.silent)) or text["none"],
+                                                   corrupt=", ".join(map(str, args.corrupt)) or text["none"]))
+
+    if not args.fault_after:
+        # Before the port is served: a driver that opens it as soon as it is printed meets the faults already on
+        # (on a busy machine it once pinged --silent 6 before they were, and 6 answered).
+        faults()
     arm.on_calibration = lambda: out.say_aside(text["calibrating"])
     arm.start()
     try:
         out.say(arm.port)
         out.say(text["about"].format(count=len(arm.ids), ids=", ".join(map(str, arm.ids))))
-
-        def faults() -> None:
-            for servo_id in args.silent:
-                if servo_id in arm.ids:
-                    arm.silence(servo_id)
-            for servo_id in args.corrupt:
-                if servo_id in arm.ids:
-                    arm.corrupt(servo_id)
-            if args.fault_after:
-                out.say_aside(text["faults_on"].format(silent=", ".join(map(str, args.silent)) or text["none"],
-                                                 corrupt=", ".join(map(str, args.corrupt)) or text["none"]))
 
         def unplug() -> None:
             arm.close_port()
@@ -480,11 +485,8 @@ def run(args: argparse.Namespace) -> int:
         missing = [i for i in args.silent + args.corrupt if i not in arm.ids]
         if missing:
             out.say(text["not_on_bus"].format(ids=", ".join(map(str, missing))))
-        if args.silent or args.corrupt:
-            if args.fault_after:
-                timers.append(threading.Timer(args.fault_after, faults))
-            else:
-                faults()
+        if (args.silent or args.corrupt) and args.fault_after:
+            timers.append(threading.Timer(args.fault_after, faults))
         if args.close_after is not None:
             timers.append(threading.Timer(args.close_after, unplug))
         for timer in timers:
