@@ -323,6 +323,8 @@ def test_a_full_disk_stops_demos_in_one_line_and_the_saved_episodes_stay_whole(t
      "argument --physics: unknown physics 'heavy'; use fixed, varied, or a JSON file of ranges"),
     (["demos", "DIR", "--task", "cube_to_box", "--physics", "/no/ranges.json"],
      "argument --physics: cannot read physics ranges /no/ranges.json"),
+    (["demos", "DIR", "--task", "cube_to_box", "--takeover-s", "5"], "--takeover-s goes with --learner DIR"),
+    (["demos", "DIR", "--task", "cube_to_box", "--learner", "/no/policy"], "--learner: /no/policy is not a folder"),
 ])
 def test_bad_input_is_one_line_and_starts_nothing(tmp_path, args, message):
     other = tmp_path / "other"

@@ -44,7 +44,7 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
                              "from the seed; what is written is the expert's way on (an episode the learner finished "
                              "alone writes nothing)")
     parser.add_argument("--takeover-s", type=number(lambda value: 0 < value <= 60, "seconds above 0, at most 60"),
-                        default=12.0, metavar="S",
+                        default=None, metavar="S",
                         help="--learner: the expert takes over between 0 and S simulated seconds in (default 12)")
     parser.add_argument("--policy-python", type=Path, default=None, metavar="PY",
                         help="--learner: the Python that runs it, with LeRobot (default so101 policy-env's)")
@@ -62,6 +62,10 @@ def run(args: argparse.Namespace) -> int:
     if refusal:
         return fail(refusal)
     learner = None
+    if args.learner is None and (args.takeover_s is not None or args.policy_python is not None):
+        return fail(f"so101 demos: {'--takeover-s' if args.takeover_s is not None else '--policy-python'} goes with "
+                    "--learner DIR")
+    args.takeover_s = 12.0 if args.takeover_s is None else args.takeover_s
     if args.learner is not None:
         from so101.policy.choice import choose_policy
 
