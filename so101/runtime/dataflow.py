@@ -359,15 +359,13 @@ def with_perception(descriptor: dict, body_node_id: str, perception_env: dict[st
     `watched_by_policy` (a real camera): the policy takes the front picture too, to stop when it goes silent
     (SO101_POLICY_CAMERAS)."""
     pictures = picture_sources(descriptor)
-    node = {
-        "id": PERCEPTION_NODE_ID, **node_launch(PERCEPTION_NODE_FILE, root, python),
-        "inputs": {"image": {"source": pictures["image"], "queue_size": 1},
-                   "joint_state": _queued(f"{body_node_id}/joint_state", STATE_QUEUE),
-                   "policy_cmd": {"source": f"{PROMPT_NODE_ID}/policy_cmd", "queue_size": 10}},
-        "outputs": ["object_state"], "env": perception_env,
-    }
+    inputs: dict[str, object] = {"image": {"source": pictures["image"], "queue_size": 1},
+                                 "joint_state": _queued(f"{body_node_id}/joint_state", STATE_QUEUE),
+                                 "policy_cmd": {"source": f"{PROMPT_NODE_ID}/policy_cmd", "queue_size": 10}}
     if body_task(descriptor, body_node_id):
-        node["inputs"]["task_status"] = {"source": f"{body_node_id}/task_status", "queue_size": 100}
+        inputs["task_status"] = {"source": f"{body_node_id}/task_status", "queue_size": 100}
+    node = {"id": PERCEPTION_NODE_ID, **node_launch(PERCEPTION_NODE_FILE, root, python), "inputs": inputs,
+            "outputs": ["object_state"], "env": perception_env}
     policy = _node(descriptor, POLICY_NODE_ID)
     _retarget(policy, "object_state", f"{PERCEPTION_NODE_ID}/object_state")
     if watched_by_policy:
