@@ -42,13 +42,16 @@ HELD_OUT_SEED = 900_000  # the held-out pictures' demonstrations: layouts no sco
 VALIDATION_SEED = 800_000
 # DAgger's layouts (so101 demos --learner): round r's are DAGGER_SEED + (r - 1) * episodes onward, apart from all above.
 DAGGER_SEED = 700_000
+# How lerobot-train runs here, from scratch or on from a policy (a DAgger round): on the CPU, offline.
+TRAINING_ARGS = ("--policy.device=cpu", "--policy.push_to_hub=false", "--batch_size=64", "--num_workers=0",
+                 "--wandb.enable=false")
 # The state policy's recipe (docs/loop/policy.md): a small ACT on the joints and the objects' state.
 STATE_POLICY_ARGS = (
-    "--policy.type=act", "--policy.device=cpu", "--policy.push_to_hub=false", "--policy.dim_model=128",
+    "--policy.type=act", "--policy.dim_model=128",
     "--policy.n_heads=4", "--policy.dim_feedforward=512", "--policy.n_encoder_layers=2", "--policy.n_decoder_layers=1",
     "--policy.use_vae=false", "--policy.chunk_size=20", "--policy.n_action_steps=20", "--policy.optimizer_lr=3e-4",
     '--policy.normalization_mapping={"VISUAL": "MEAN_STD", "STATE": "MEAN_STD", "ENV": "MEAN_STD", "ACTION": "MEAN_STD"}',
-    "--batch_size=64", "--num_workers=0", "--wandb.enable=false",
+    *TRAINING_ARGS,
 )
 ONE_THREAD = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 # A DAgger round trains on from the policy before at a tenth of the recipe's rate: at the recipe's own 3e-4 a
@@ -317,9 +320,8 @@ class Learning:
         log = self.work / f"round{number}.log"
         command = [str(self.python.parent / "lerobot-train"), f"--policy.path={self.trained(self.best())}",
                    f"--dataset.repo_id=local/{self.out.name}-round{number}", f"--dataset.root={self.work / f'round{number}-demos'}",
-                   f"--policy.optimizer_lr={ROUND_LR}", "--policy.device=cpu", "--policy.push_to_hub=false",
-                   "--batch_size=64", "--num_workers=0",
-                   "--wandb.enable=false", f"--seed={self.settings['seed']}", f"--steps={steps}", f"--save_freq={steps}",
+                   f"--policy.optimizer_lr={ROUND_LR}", *TRAINING_ARGS, f"--seed={self.settings['seed']}",
+                   f"--steps={steps}", f"--save_freq={steps}",
                    f"--output_dir={trained}"]
         self.wait([(self.start(command, log, {**OFFLINE, **ONE_THREAD}), log, f"lerobot-train (round {number})")])
 
