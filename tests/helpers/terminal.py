@@ -59,7 +59,9 @@ class Terminal:
             time.sleep(0.2)
 
     def command(self, text: str, reply: str, timeout_s: float = 20) -> re.Match:
-        """Type `text` at the prompt and wait for `reply` (a pattern) right below it, past `seen`."""
+        """Once the prompt `>` shows past `seen`, type `text` and wait for `reply` (a pattern) right below it.
+        A person types when they see the prompt: keys typed before it is printed are echoed ahead of it."""
+        self.wait_for(r"^>$", timeout_s, after=self.seen)
         self.type_line(text)
         match = self.wait_for(rf"^> {re.escape(text)}\n{reply}$", timeout_s, after=self.seen)
         self.seen = match.end()
