@@ -31,7 +31,7 @@ from so101.prompt.join import join_dataflow  # noqa: E402
 from so101.prompt.links import link_other_nodes  # noqa: E402
 from so101.prompt.poses import PoseStore  # noqa: E402
 from so101.prompt.settings import PromptSettings, environment_help  # noqa: E402
-from so101.prompt.terminal import dora_logs_aside, line_editing  # noqa: E402
+from so101.prompt.terminal import dora_logs_aside, line_editing, release_at_prompt  # noqa: E402
 from so101.runtime.logs import send_diagnostics_to  # noqa: E402
 
 NODE_ID = "keyboard_control"
@@ -87,6 +87,9 @@ class EventPump(threading.Thread):
 def run_prompt(control: KeyboardControl, interactive: bool, history_file: Path) -> None:
     """The read loop: a person at a terminal, or a script on stdin."""
     save_history = line_editing(history_file) if interactive else (lambda: None)
+    # At a terminal with readline, held news is shown once the next prompt is drawn, and redraws it below;
+    # shown before input() drew it, it would be drawn twice ("> > ").
+    released_at_prompt = interactive and release_at_prompt(control.release_news)
     try:
         while True:
             if interactive:
@@ -101,10 +104,12 @@ def run_prompt(control: KeyboardControl, interactive: bool, history_file: Path) 
                     return
                 line = line.rstrip("\n")
                 say(f"> {line}")
-            with control.news_after_replies():  # a node's quick answer prints below the line that asked
-                replies, quit_now = control.handle_line(line)
-                for reply in replies:
-                    say(reply)
+            control.hold_news()  # a node's quick answer prints below the line that asked
+            replies, quit_now = control.handle_line(line)
+            for reply in replies:
+                say(reply)
+            if not released_at_prompt:
+                control.release_news()
             if quit_now:
                 return
     except KeyboardInterrupt:  # Ctrl-C, or the dataflow stopped

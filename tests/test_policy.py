@@ -353,10 +353,11 @@ def test_the_prompt_says_how_to_ask_the_policy_and_without_one_how_to_start_it()
     control.show_news = screen.append
     control.tell_policy = lambda word: control.on_event(
         {"type": "INPUT", "id": "policy_status", "value": __import__("pyarrow").array([f"[policy] act: {word}"])})
-    with control.news_after_replies():
-        replies, _ = control.handle_line("policy off")
-        screen.extend(replies)
-        assert screen == ["  → told the policy: off"]
+    control.hold_news()
+    replies, _ = control.handle_line("policy off")
+    screen.extend(replies)
+    assert screen == ["  → told the policy: off"]
+    control.release_news()  # at a terminal: once the next prompt is drawn
     assert screen == ["  → told the policy: off", "  [policy] act: off"]
 
 
@@ -381,6 +382,7 @@ def test_at_the_prompt_the_policy_drives_and_a_typed_command_takes_over(tmp_path
         terminal.wait_for(re.escape("  [policy] act is driving: any move you type takes over; policy off stops it"),
                           timeout_s=10, after=terminal.seen)
         time.sleep(3.0)
+        assert not re.search(r"^> >", terminal.screen(), re.M), terminal.screen()  # news drew the prompt once
         driven = [float(angle) for angle in terminal.command("state", state).groups()]
         assert max(abs(angle) for angle in driven) > 2.0, driven  # the policy moved the arm
         terminal.command("0 40", re.escape("  → joint 0 (shoulder_pan) → 40°"))

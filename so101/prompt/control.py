@@ -7,7 +7,6 @@ and key jogging load on first use only, to keep the prompt's start-up quick.
 
 from __future__ import annotations
 
-import contextlib
 import math
 import os
 import subprocess
@@ -67,7 +66,7 @@ class KeyboardControl:
         self.news_shown = 0  # lines of news printed while jogging (jog draws its status line again)
         # Prints a line of news at once (the leader's, on `leader_status`); None: nowhere to show it.
         self.show_news: Callable[[str], None] | None = None
-        # News that came while a typed line was being answered, shown after its replies (news_after_replies).
+        # News that came while a typed line was being answered: shown once the prompt is back (hold_news).
         self._held_news: list[str] | None = None
         self._news_lock = threading.Lock()
         # The line to a body running a task (`so101 teleop --task`); None: the dataflow runs none.
@@ -77,19 +76,20 @@ class KeyboardControl:
         # Sends a word ("on", "off") to the policy node, where the dataflow has one.
         self.tell_policy: Callable[[str], None] | None = None
 
-    @contextlib.contextmanager
-    def news_after_replies(self):
-        """Inside the block (a typed line answered and its replies printed), news waits and is shown
-        after it: `policy on` prints its own reply before the policy's answer to it, however fast that came."""
+    def hold_news(self) -> None:
+        """From a typed line until `release_news`, news waits: `policy on` prints its own reply before the
+        policy's answer to it, however fast that came, and news never lands between the prompt's lines."""
         with self._news_lock:
-            self._held_news = []
-        try:
-            yield
-        finally:
-            with self._news_lock:
-                held, self._held_news = self._held_news, None
-            for line in held:
-                self.news(line)
+            if self._held_news is None:
+                self._held_news = []
+
+    def release_news(self) -> None:
+        """Shows the news held since `hold_news`, and news from now on at once. At a terminal, readline
+        calls it once the next prompt is drawn (nodes/keyboard_control.py), so news redraws that prompt."""
+        with self._news_lock:
+            held, self._held_news = self._held_news or [], None
+        for line in held:
+            self.news(line)
 
     def news(self, line: str) -> None:
         """Shows a line of news, or holds it while a typed line is answered (jog shows it at once)."""

@@ -153,6 +153,24 @@ def line_editing(history_file: Path) -> Callable[[], None]:
     return save
 
 
+def release_at_prompt(release: Callable[[], None]) -> bool:
+    """Calls `release` each time input() has drawn its prompt (readline's pre-input hook); False where
+    there is no readline, and the caller releases after its replies instead."""
+    try:
+        import readline
+    except ImportError:
+        return False
+
+    def hook() -> None:
+        try:
+            release()
+        except Exception as error:  # an exception here would be lost inside readline
+            log.warning("  (news not shown: %s)", error)
+
+    readline.set_pre_input_hook(hook)
+    return True
+
+
 # Key jogging: single key presses, straight from the terminal (termios; works over SSH, in tmux
 # and headless, with no X11 keyboard hook).
 _NAMED_BYTES = {b" ": "space", b"\t": "tab", b"\r": "enter", b"\n": "enter", b"\x7f": "backspace"}
