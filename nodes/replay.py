@@ -5,9 +5,11 @@
 state, moves the arm from where it stands to the episode's first action along a straight line
 with no joint faster than 30°/s, waits for it to settle, then sends one `joint_cmd` (all six
 joints) per frame at the dataset's rate. Its last line compares each frame's action with the
-state the body reached by the next frame: `tracking error (deg): p50 A, p99 B, max C`.
-Settings: so101.dataset.settings.ReplaySettings (SO101_REPLAY_DIR, SO101_REPLAY_EPISODE,
-SO101_LANG; SO101_DAEMON_PORT as the prompt's).
+state the body reached by the next frame: `tracking error (deg): p50 A, p99 B, max C`; then the
+body's joints against the recording's own states at the same instants: `versus the recording: ...`.
+The joints are read in the dataset's units (so101.dataset.units). Settings:
+so101.dataset.settings.ReplaySettings (SO101_REPLAY_DIR, SO101_REPLAY_EPISODE, SO101_REPLAY_UNITS,
+SO101_REPLAY_CALIBRATION, SO101_LANG; SO101_DAEMON_PORT as the prompt's).
 """
 
 from __future__ import annotations
@@ -26,11 +28,12 @@ if str(ROOT) not in sys.path:
 import numpy as np  # noqa: E402
 import pyarrow as pa  # noqa: E402
 
-from so101.dataset.features import ACTION_KEY, from_lerobot  # noqa: E402
+from so101.dataset.features import ACTION_KEY, STATE_KEY  # noqa: E402
 from so101.dataset.layout import DatasetError  # noqa: E402
 from so101.dataset.reader import Dataset  # noqa: E402
 from so101.dataset.replay import (  # noqa: E402
     RAMP_SPEED_DEG_S, SETTLE_TIMEOUT_S, ramp_deg, send_time_s, settled, tracking_errors_deg, tracking_line,
+    versus_recording_line,
 )
 from so101.dataset.settings import ReplaySettings  # noqa: E402
 from so101.prompt.join import join_dataflow  # noqa: E402
@@ -107,9 +110,9 @@ class Body:
         self.node.send_output("joint_cmd", pa.array([float(angle) for angle in angles_deg], type=pa.float64()))
 
 
-def play(body: Body, actions_deg: np.ndarray, fps: int, text: dict) -> str:
+def play(body: Body, actions_deg: np.ndarray, fps: int, text: dict, states_deg: np.ndarray | None = None) -> list[str]:
     """The move to the first frame, then every frame at its time (a period after the last one when
-    late); returns the tracking line."""
+    late); returns the tracking line, and with the recording's `states_deg` the line comparing them."""
     deadline = time.monotonic() + FIRST_STATE_WAIT_S
     while body.state_deg() is None:
         if time.monotonic() >= deadline:
@@ -137,7 +140,10 @@ def play(body: Body, actions_deg: np.ndarray, fps: int, text: dict) -> str:
         body.send(action)
     body.wait_until(sent_s + period_s)
     reached_deg[-1] = body.reached_deg()
-    return tracking_line(tracking_errors_deg(actions_deg, reached_deg))
+    lines = [tracking_line(tracking_errors_deg(actions_deg, reached_deg))]
+    if states_deg is not None and len(states_deg) > 1:
+        lines.append(versus_recording_line(reached_deg, states_deg))
+    return lines
 
 
 def main() -> int:
@@ -146,12 +152,13 @@ def main() -> int:
         settings = ReplaySettings.from_environ(os.environ)
         prompt_settings = PromptSettings.from_environ(os.environ)
         dataset = Dataset.open(settings.root)
-        frames = dataset.episode_frames(settings.episode)
+        units = dataset.joint_units(settings.units or None, settings.calibration, settings.episode)
+        joints_deg = dataset.episode_joints_deg(settings.episode, units)
     except (ValueError, DatasetError) as error:
         print(f"{REPLAY_NODE_ID}: {error}", file=sys.stderr)
         return 2
     text = TEXT[settings.lang]
-    actions_deg = from_lerobot(frames[ACTION_KEY])
+    actions_deg = joints_deg[ACTION_KEY]
     summary = dataset.episodes[[each.index for each in dataset.episodes].index(settings.episode)]
     print(text["episode"].format(episode=settings.episode, root=settings.root, frames=len(actions_deg),
                                  fps=dataset.fps, seconds=len(actions_deg) / dataset.fps,
@@ -163,7 +170,7 @@ def main() -> int:
             return 1
         _KEPT_TO_EXIT.append(node)
         try:
-            print(play(Body(node), actions_deg, dataset.fps, text), flush=True)
+            print("\n".join(play(Body(node), actions_deg, dataset.fps, text, joints_deg.get(STATE_KEY))), flush=True)
         except Stopped:
             print(text["stopped"], file=sys.stderr, flush=True)
             return 1

@@ -36,6 +36,7 @@ from so101.dataset.features import (
 from so101.dataset.layout import DatasetError
 from so101.dataset.reader import Dataset
 from so101.dataset.stats import QUANTILE_BINS
+from so101.dataset.units import UNITS_KEY
 from so101.dataset.writer import DatasetWriter
 from tests.helpers.images import png_size
 
@@ -190,7 +191,8 @@ def test_the_files_are_lerobots(recorded: Path) -> None:
     info = read_json(recorded / "meta/info.json")
     assert list(info) == ["codebase_version", "robot_type", "total_episodes", "total_frames", "total_tasks",
                           "chunks_size", "data_files_size_in_mb", "video_files_size_in_mb", "fps", "splits",
-                          "data_path", "video_path", "features"]
+                          "data_path", "video_path", "features", UNITS_KEY]
+    assert info[UNITS_KEY] == "degrees"  # ours, beside LeRobot's keys: its own datasets do not say
     assert (info["codebase_version"], info["robot_type"], info["fps"]) == ("v3.0", ROBOT_TYPE, FPS)
     assert (info["total_episodes"], info["total_frames"], info["total_tasks"]) == (3, 98, 2)
     assert (info["chunks_size"], info["data_files_size_in_mb"], info["video_files_size_in_mb"]) == (1000, 100, 200)

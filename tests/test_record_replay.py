@@ -27,6 +27,16 @@ from tests.helpers.terminal import Terminal, calibrate_in_tmux, send_keys, start
 pytestmark = [pytest.mark.person]
 
 TRACKING_LINE = r"^tracking error \(deg\): p50 (\d+\.\d\d), p99 (\d+\.\d\d), max (\d+\.\d\d)$"
+# The last line: the body's joints against the recording's own states, at the same instants.
+VERSUS_LINE = r"^versus the recording: p50 (\d+\.\d\d), p99 (\d+\.\d\d) \(deg\)$"
+
+
+def replay_lines(stdout: str) -> tuple[re.Match, re.Match]:
+    """The replay's two last lines, matched: the tracking error, then how the body followed the recording."""
+    lines = stdout.strip().splitlines()
+    tracking, versus = re.match(TRACKING_LINE, lines[-2]), re.match(VERSUS_LINE, lines[-1])
+    assert tracking and versus, stdout
+    return tracking, versus
 
 
 @pytest.mark.skipif(shutil.which("tmux") is None, reason="tmux is not installed (.ci/run installs it)")
@@ -99,14 +109,14 @@ def test_a_person_records_two_episodes_quits_and_replays_one_on_both_simulators(
              "--log", str(tmp_path / f"replay-{body}.log")],
             capture_output=True, text=True, timeout=180)
         assert replay.returncode == 0, replay.stdout + replay.stderr
-        last = replay.stdout.strip().splitlines()[-1]
-        match = re.match(TRACKING_LINE, last)
-        assert match, replay.stdout
+        match, versus = replay_lines(replay.stdout)
         p50, p99, worst = (float(value) for value in match.groups())
         # The body follows the actions within a few degrees most of the time (half the episode is
         # held at ±40°); the worst is a frame just after a step, no more than the step itself.
         largest_step_deg = float(np.abs(np.diff(actions_deg, axis=0)).max())
-        assert p50 < 3.0 and worst <= largest_step_deg + 1.0, (body, last, largest_step_deg)
+        assert p50 < 3.0 and worst <= largest_step_deg + 1.0, (body, replay.stdout, largest_step_deg)
+        # ... and where the recording's body was, at the same instants (PyBullet's, recorded at the prompt)
+        assert float(versus.group(1)) < 3.0, (body, replay.stdout)
 
 
 def recorded_episode(dataset_dir: Path, actions_deg: np.ndarray) -> None:
@@ -153,7 +163,7 @@ def test_replay_onto_the_emulated_arm_is_ramped_and_stays_inside_its_limits(tmp_
             done.set()
             watcher.join()
     assert replay.returncode == 0, replay.stdout + replay.stderr
-    assert re.match(TRACKING_LINE, replay.stdout.strip().splitlines()[-1]), replay.stdout
+    replay_lines(replay.stdout)
     pan = calibration["shoulder_pan"]
     pan_goals = [goal[0] for _, _, goal in goals if goal[0]]
     assert pan_goals and min(pan_goals) >= pan.range_min and max(pan_goals) <= pan.range_max
@@ -226,8 +236,7 @@ def test_a_person_drives_the_simulation_from_the_emulated_leader_records_and_rep
         [str(SO101), "replay", str(dataset_dir), "--episode", "0", "--mode", "direct", "--lang", "en",
          "--log", str(tmp_path / "replay.log")], capture_output=True, text=True, timeout=180)
     assert replay.returncode == 0, replay.stdout + replay.stderr
-    match = re.match(TRACKING_LINE, replay.stdout.strip().splitlines()[-1])
-    assert match, replay.stdout
+    match, _ = replay_lines(replay.stdout)
     # A hand's smooth motion, not typed steps: the body tracks it within a few degrees throughout.
     p50, p99, worst = (float(value) for value in match.groups())
     assert p50 < 3.0 and worst < 15.0, replay.stdout

@@ -17,6 +17,7 @@ import sys
 from pathlib import Path
 
 from so101.cameras.listing import find_cameras, listing_lines, picture_file_name
+from so101.dataset.units import UNITS, UNITS_HELP
 from so101.runtime.argtypes import whole_number
 
 # A camera's first pictures are often dark or half-exposed while it adjusts: this many are let go first.
@@ -40,6 +41,7 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
                             "picture of the arm (--port, or so101 fake-arm) over it, to move the camera into place")
     parser.add_argument("--from", dest="dataset", type=Path, metavar="DATASET", default=None,
                         help="--fit: the LeRobot dataset whose episode's video and joint states are fitted")
+    parser.add_argument("--units", choices=UNITS, default=None, help="--fit: " + UNITS_HELP)
     parser.add_argument("--episode", type=whole_number(0, 10**9), metavar="N", default=None,
                         help="--fit: the episode fitted (default 0)")
     parser.add_argument("--near", type=Path, metavar="FILE", default=None,
@@ -72,7 +74,8 @@ def add_align_arguments(parser: argparse.ArgumentParser) -> None:
                         help="--align: the arm's serial port (/dev/ttyACM0, ...; `so101 fake-arm` prints an emulated "
                              "one); read only, torque off: the arm is moved by hand")
     parser.add_argument("--calibration", type=Path, metavar="FILE", default=None,
-                        help="--align: the arm's calibration JSON (from `so101 calibrate`, or LeRobot's so101_follower one)")
+                        help="--align: the arm's calibration JSON (from `so101 calibrate`, or LeRobot's so101_follower one); "
+                        "--fit: the recording follower's, for joints in normalized units")
     add_camera_pose_option(parser)
     parser.add_argument("--fitted", type=Path, metavar="FILE", default=None,
                         help="--align: where the real camera stands, fitted (`so101 cameras --fit`): then it says in "
@@ -137,7 +140,8 @@ def fit(args: argparse.Namespace) -> int:
     except CameraFileError as error:
         return fail(f"--near {error}")
     try:
-        fitted = fit_from_dataset(args.dataset.expanduser(), start, args.episode or 0, log=say)
+        fitted = fit_from_dataset(args.dataset.expanduser(), start, args.episode or 0, log=say, units=args.units,
+                                  calibration=args.calibration and args.calibration.expanduser())
     except (CameraFitError, CameraFileError) as error:
         return fail(str(error))
     from so101.perception.camera_moves import move_in_words
@@ -170,14 +174,15 @@ LISTING = "the cameras' listing (no --default, --fit or --align)"
 OWN_OPTIONS = (("--from", "dataset", "--fit NAME"), ("--episode", "episode", "--fit NAME"), ("--near", "near", "--fit NAME"),
                ("-o", "output", "--fit NAME"), ("--size", "size", "--default NAME"), ("--save", "save", LISTING),
                ("--camera", "align_camera", "--align NAME"), ("--port", "port", "--align NAME"),
-               ("--calibration", "calibration", "--align NAME"), ("--fitted", "fitted", "--align NAME"),
+               ("--calibration", "calibration", "--align NAME or --fit NAME"), ("--units", "units", "--fit NAME"),
+               ("--fitted", "fitted", "--align NAME"),
                ("--camera-pose", "camera_poses", "--align NAME"))
 
 
 def misplaced_option(args: argparse.Namespace, mode: str) -> str | None:
     """One line for the first option given that belongs to another mode than `mode` (none: None)."""
     for option, dest, goes_with in OWN_OPTIONS:
-        if goes_with != mode and getattr(args, dest):
+        if mode not in goes_with.split(" or ") and getattr(args, dest):
             return f"{option} goes with {goes_with}"
     return None
 

@@ -1,8 +1,10 @@
 """`so101 dataset DIR`: what a LeRobot v3.0 dataset holds; `--plot N` draws episode N's joints.
 
-Reads any LeRobot v3.0 dataset (ours or LeRobot's own) with so101.dataset.reader. The plot
-shows, per joint, the action (what the arm was told) against observation.state (where it was),
-in LeRobot's units: degrees for the five arm joints, 0-100 for the gripper.
+Reads any LeRobot v3.0 dataset (ours or LeRobot's own) with so101.dataset.reader, and says in
+which units its joints are read (so101.dataset.units: its meta, `--units`, or values that can only
+be degrees). The plot shows, per joint, the action (what the arm was told) against
+observation.state (where it was), in degrees for the five arm joints (normalized ones made
+degrees) and LeRobot's 0-100 for the gripper; a dataset whose units cannot be known is not drawn.
 """
 
 from __future__ import annotations
@@ -14,9 +16,10 @@ from pathlib import Path
 import numpy as np
 
 from so101.runtime import argtypes
-from so101.dataset.features import ACTION_KEY, GRIPPER_RANGE, STATE_KEY
+from so101.dataset.features import ACTION_KEY, GRIPPER_RANGE, STATE_KEY, to_lerobot
 from so101.dataset.layout import DatasetError
 from so101.dataset.reader import Dataset
+from so101.dataset.units import UNITS, UNITS_HELP, JointUnits
 
 PLOT_SIZE_IN = (12.0, 8.0)
 PLOT_DPI = 100  # 1200 x 800 pixels
@@ -28,14 +31,18 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
                         help="also draw episode N's six joints, action against observation.state over time (PNG)")
     parser.add_argument("--out", type=Path, default=None, metavar="FILE",
                         help="the PNG --plot writes (default out/episode-N.png)")
+    parser.add_argument("--units", choices=UNITS, default=None, help=UNITS_HELP)
+    parser.add_argument("--calibration", type=Path, default=None, metavar="FILE",
+                        help="--units normalized: the recording follower's LeRobot calibration JSON, whose ranges make "
+                        "the joints degrees (default: the URDF's joint ranges)")
 
 
 def _shape_text(shape: list[int]) -> str:
     return "(" + ", ".join(str(size) for size in shape) + ("," if len(shape) == 1 else "") + ")"
 
 
-def summary_lines(dataset: Dataset) -> list[str]:
-    """The dataset in lines: its episodes, totals, tasks and features."""
+def summary_lines(dataset: Dataset, units_line: str = "") -> list[str]:
+    """The dataset in lines: its episodes, totals, tasks, features and (`units_line`) its joints' units."""
     total_s = dataset.total_frames / dataset.fps
     lines = [f"{dataset.root}: LeRobot {dataset.info.get('codebase_version', '?')} dataset, "
              f"robot {dataset.robot_type or 'unknown'}, {dataset.fps} fps"]
@@ -58,17 +65,18 @@ def summary_lines(dataset: Dataset) -> list[str]:
         if feature["dtype"] == "video" and video:
             line += f"  {video.get('video.codec', '?')} {video.get('video.width', '?')}x{video.get('video.height', '?')}"
         lines.append(line)
-    return lines
+    return lines + ([units_line] if units_line else [])
 
 
-def write_plot(dataset: Dataset, index: int, out: Path) -> None:
+def write_plot(dataset: Dataset, index: int, out: Path, units: JointUnits) -> None:
     """Episode `index`'s joints over time: action and observation.state, one panel per joint."""
     frames = dataset.episode_frames(index)
     missing = [key for key in (ACTION_KEY, STATE_KEY) if key not in frames]
     if missing:
         raise DatasetError(f"{dataset.root} has no {' or '.join(missing)}: --plot draws action against "
                            "observation.state")
-    actions, states = frames[ACTION_KEY], frames[STATE_KEY]
+    joints_deg = dataset.episode_joints_deg(index, units)
+    actions, states = (np.array([to_lerobot(frame) for frame in joints_deg[key]]) for key in (ACTION_KEY, STATE_KEY))
     times_s = frames["frame_index"] / dataset.fps if "frame_index" in frames else np.arange(len(actions)) / dataset.fps
     names = dataset.features[ACTION_KEY].get("names") or [f"joint {i}" for i in range(actions.shape[1])]
     episode = next(e for e in dataset.episodes if e.index == index)
@@ -104,18 +112,26 @@ def write_plot(dataset: Dataset, index: int, out: Path) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    units: JointUnits | None = None
     try:
         dataset = Dataset.open(args.root)
         if args.plot is not None:
             dataset.episode_frames(args.plot)  # an episode that does not exist: say so before drawing
+        try:
+            units = dataset.joint_units(args.units, args.calibration, args.plot)
+            units_line = units.how
+        except DatasetError as error:
+            if args.plot is not None or args.units or args.calibration:
+                raise
+            units_line = f"joints: {str(error).removeprefix(f'{dataset.root}: ')}"
     except DatasetError as error:
         print(f"so101 dataset: {error}", file=sys.stderr)
         return 2
-    print("\n".join(summary_lines(dataset)))
-    if args.plot is not None:
+    print("\n".join(summary_lines(dataset, units_line)))
+    if args.plot is not None and units is not None:
         out = args.out if args.out is not None else Path(f"out/episode-{args.plot}.png")
         try:
-            write_plot(dataset, args.plot, out)
+            write_plot(dataset, args.plot, out, units)
         except DatasetError as error:
             print(f"so101 dataset: {error}", file=sys.stderr)
             return 2

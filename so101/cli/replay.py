@@ -3,7 +3,9 @@
 Runs the body's dataflow (as `so101 teleop` does, with the same --body, --port, --calibration and
 --mode) with the replay node (nodes/replay.py) in the prompt's place, in the foreground: it moves
 the arm slowly to the episode's first frame, plays every frame at the dataset's rate, and ends
-with the tracking error. The dataset is checked before anything starts.
+with the tracking error and how the body followed the recording's own states. The dataset, its
+episode and its joints' units (so101.dataset.units: `--units`, `--calibration`) are checked before
+anything starts.
 """
 
 from __future__ import annotations
@@ -13,6 +15,8 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
+from so101.bodies.registry import BODIES
+from so101.dataset.units import UNITS, UNITS_HELP
 from so101.runtime.argtypes import add_language_option, whole_number
 from so101.launch.beside_prompt import (
     TEXT as TELEOP_TEXT, add_body_arguments, add_log_option, add_web_arguments, add_web_view, prepare, run_beside,
@@ -32,6 +36,8 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
     parser.add_argument("--episode", type=whole_number(0, 10**9), default=0, metavar="N",
                         help="the episode to play (default 0; `so101 dataset DIR` lists them)")
     add_body_arguments(parser)
+    parser.add_argument("--units", choices=UNITS, default=None, help=UNITS_HELP + "; normalized ones are made degrees "
+                        "with --calibration's ranges (for a simulated body, --calibration is the recording follower's)")
     add_language_option(parser, "the messages")
     add_web_arguments(parser)
     add_log_option(parser)
@@ -42,11 +48,17 @@ def run(args: argparse.Namespace) -> int:
     from so101.dataset.reader import Dataset
 
     dataset_dir = args.dataset.expanduser().resolve()
-    try:  # a wrong folder or episode is said here, before a dataflow starts
-        Dataset.open(dataset_dir).episode_frames(args.episode)
+    calibration = args.calibration and args.calibration.expanduser().resolve()
+    try:  # a wrong folder, episode or units are said here, before a dataflow starts
+        dataset = Dataset.open(dataset_dir)
+        dataset.episode_frames(args.episode)
+        units = dataset.joint_units(args.units, calibration, args.episode)
     except DatasetError as error:
         print(f"so101 replay: {error}", file=sys.stderr)
         return 2
+    print(units.how, flush=True)
+    if BODIES[args.body].simulated:  # a simulated body has no calibration of its own: it was the recording's
+        args = argparse.Namespace(**{**vars(args), "calibration": None})
     launch = prepare(args, "replay", REPLAY_NODE_FILE)
     if launch is None:
         return 2
@@ -54,6 +66,7 @@ def run(args: argparse.Namespace) -> int:
     descriptor = with_replay(dataflow_copy(launch.node_env, launch.body.dataflow_file), launch.body.node_id)
     web_line = add_web_view(args, descriptor, launch.body, "replay")
     ready_marks = (LOADED_MARKS, WEB_VIEW_MARKS) if web_line else (LOADED_MARKS,)
-    env = dict(launch.env, SO101_REPLAY_DIR=str(dataset_dir), SO101_REPLAY_EPISODE=str(args.episode))
+    env = dict(launch.env, SO101_REPLAY_DIR=str(dataset_dir), SO101_REPLAY_EPISODE=str(args.episode),
+               SO101_REPLAY_UNITS=args.units or "", SO101_REPLAY_CALIBRATION=str(calibration or ""))
     print(text["starting"].format(mode=launch.mode, log=launch.log), flush=True)
     return run_beside(replace(launch, env=env), descriptor, REPLAY_NODE_FILE, text, ready_marks, web_line)

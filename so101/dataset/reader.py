@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import fcntl
+import json
 from pathlib import Path
 from typing import Any, Iterator
 
@@ -12,8 +13,11 @@ import pyarrow.parquet as pq
 
 from so101.dataset import video as videos
 from so101.dataset.commit import consistent_view, flock
-from so101.dataset.layout import (DATA_PATH, EPISODES_DIR, TASKS_PATH, DatasetError, describe, load_info,
+from so101.dataset.features import ACTION_KEY, STATE_KEY, from_lerobot
+from so101.dataset.layout import (DATA_PATH, EPISODES_DIR, STATS_PATH, TASKS_PATH, DatasetError, describe, load_info,
                                   read_episode_rows, read_tasks, summary, video_keys)
+from so101.dataset.units import JointUnits, joint_units
+from so101.feetech.calibration import CalibrationError, load_calibration
 from so101.dataset.video import Image
 
 
@@ -86,6 +90,38 @@ class Dataset:
             order = np.argsort(frames["frame_index"], kind="stable")
             frames = {key: values[order] for key, values in frames.items()}
         return frames
+
+    def joint_units(self, said: str | None = None, calibration_file: Path | None = None,
+                    episode: int | None = None) -> JointUnits:
+        """How this dataset's joints read as degrees (so101.dataset.units.joint_units): its meta, `said`
+        (--units) with the recording follower's `calibration_file`, or its values: its statistics'
+        extremes, else episode `episode`'s frames. DatasetError in one line."""
+        try:
+            calibration = None if calibration_file is None else load_calibration(calibration_file)
+        except CalibrationError as error:
+            raise DatasetError(str(error)) from None
+        extremes = self._joint_extremes()
+        if extremes is None:
+            first = self.episodes[0].index if self.episodes else 0
+            frames = self.episode_frames(first if episode is None else episode)
+            extremes = np.concatenate([frames[key] for key in (ACTION_KEY, STATE_KEY) if key in frames] or [np.zeros((0, 6))])
+        try:
+            return joint_units(self.info, extremes, said, calibration, str(calibration_file or ""))
+        except DatasetError as error:
+            raise type(error)(f"{self.root}: {error}") from None
+
+    def episode_joints_deg(self, index: int, units: JointUnits) -> dict[str, np.ndarray]:
+        """Episode `index`'s action and observation.state (those it has) in this project's degrees, (L, 6)."""
+        frames = self.episode_frames(index)
+        return {key: from_lerobot(units.as_degrees(frames[key])) for key in (ACTION_KEY, STATE_KEY) if key in frames}
+
+    def _joint_extremes(self) -> np.ndarray | None:
+        try:
+            stats = json.loads((self.root / STATS_PATH).read_text(encoding="utf-8"))
+            return np.array([stats[key][end] for key in (ACTION_KEY, STATE_KEY) if key in stats for end in ("min", "max")],
+                            dtype=np.float64).reshape(-1, 6)
+        except (OSError, ValueError, KeyError, TypeError):
+            return None
 
     def episode_images(self, index: int, key: str) -> Iterator[Image]:
         """The episode's pictures of video feature `key`, decoded, (H, W, 3) uint8, in frame order."""

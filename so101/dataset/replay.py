@@ -62,3 +62,12 @@ def tracking_line(errors_deg: npt.ArrayLike) -> str:
     errors = [float(error) for error in np.ravel(errors_deg)]
     return (f"tracking error (deg): p50 {percentile(errors, 0.50):.2f}, p99 {percentile(errors, 0.99):.2f}, "
             f"max {max(errors):.2f}")
+
+
+def versus_recording_line(reached_deg: npt.ArrayLike, recorded_states_deg: npt.ArrayLike) -> str:
+    """How the body followed the recording: its joints just before frame i+1's action went out against the
+    recording's observation.state of frame i+1, read at the same instant (LeRobot reads the state, then
+    sends that frame's action). On a real recording, the body against the real arm."""
+    reached, recorded = np.asarray(reached_deg, dtype=np.float64), np.asarray(recorded_states_deg, dtype=np.float64)
+    errors = [float(error) for error in tracking_errors_deg(reached[:-1], recorded[1:])]
+    return f"versus the recording: p50 {percentile(errors, 0.50):.2f}, p99 {percentile(errors, 0.99):.2f} (deg)"

@@ -15,6 +15,7 @@ from so101.tasks.settings import read_task
 from so101.dataset.features import DEFAULT_FPS
 from so101.lang import DEFAULT_LANGUAGE, ENV_VAR as LANG_ENV_VAR
 from so101.dataset.recording import CAMERA_LOST_CHOICES
+from so101.dataset.units import UNITS
 from so101.observe import ALL_OBSERVED, OBSERVE_ENV_VAR, Observed, parse_observed
 from so101.cameras.sources import parse_real_cameras
 from so101.runtime.settings import (
@@ -90,4 +91,9 @@ class ReplaySettings(EnvironSettings):
     root: Path = setting("SO101_REPLAY_DIR", "", "the dataset's folder", read_file_path,
                          required="(so101 replay DIR) to the dataset's folder")
     episode: int = setting("SO101_REPLAY_EPISODE", "0", "the episode to play", read_whole_number)
+    units: str = setting("SO101_REPLAY_UNITS", "", "the dataset's joint units where its meta does not say: "
+                         "degrees or normalized (empty: its meta's, or its values')", read_choice(("",) + UNITS))
+    calibration: Path | None = setting("SO101_REPLAY_CALIBRATION", "", "the recording follower's LeRobot calibration "
+                                       "JSON, for joints in normalized units (empty: the URDF's ranges)",
+                                       read_optional_path)
     lang: str = setting(LANG_ENV_VAR, DEFAULT_LANGUAGE, "message language, `zh` or `en`", read_language)

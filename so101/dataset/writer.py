@@ -30,6 +30,7 @@ from so101.dataset.layout import (CODEBASE_VERSION, DATA_PATH, DEFAULT_CHUNK_SIZ
                                   read_episode_rows, read_tasks, recorder_features, summary, tasks_table,
                                   video_keys, write_json)
 from so101.dataset.parquet_append import ParquetEnd
+from so101.dataset.units import DEGREES, UNITS_KEY
 from so101.dataset.stats import (STAT_KEYS, Stats, aggregate_stats, image_histogram, image_stats, stats_from_json,
                                  stats_to_json, vector_stats)
 
@@ -191,6 +192,7 @@ class DatasetWriter:
                     "chunks_size": chunks_size, "data_files_size_in_mb": data_mb, "video_files_size_in_mb": video_mb,
                     "fps": fps, "splits": {}, "data_path": DATA_PATH,
                     "video_path": VIDEO_PATH if video_sizes else None, "features": want,
+                    UNITS_KEY: DEGREES,  # LeRobot's own datasets do not say (so101.dataset.units)
                 }
                 (root / "meta").mkdir(exist_ok=True)
                 place_durably(root, INFO_PATH, info, [])

@@ -357,10 +357,12 @@ def chosen_frames(length: int, count: int | None = None) -> list[int]:
 
 
 def fit_from_dataset(root: Path, start: CameraFile, episode: int = 0,
-                     log: Callable[[str], None] = lambda line: None) -> CameraFile:
+                     log: Callable[[str], None] = lambda line: None, units: str | None = None,
+                     calibration: Path | None = None) -> CameraFile:
     """`start`'s camera fitted to episode `episode` of the LeRobot dataset at `root` (its video
-    observation.images.NAME and its observation.state), from `start`."""
-    from so101.dataset.features import ENVIRONMENT_KEY, STATE_KEY, from_lerobot
+    observation.images.NAME and its observation.state, read in its units: so101.dataset.units, with
+    `units` and the recording follower's `calibration` where its meta does not say), from `start`."""
+    from so101.dataset.features import ENVIRONMENT_KEY, STATE_KEY
     from so101.dataset.layout import PHYSICS_KEY, DatasetError
     from so101.dataset.reader import Dataset
 
@@ -369,7 +371,9 @@ def fit_from_dataset(root: Path, start: CameraFile, episode: int = 0,
     try:
         dataset = Dataset.open(root)
         columns = dataset.episode_frames(episode)
-        states = from_lerobot(columns[STATE_KEY])
+        if STATE_KEY not in columns:
+            raise CameraFitError(f"{root} has no {STATE_KEY}: the fit draws the arm where each frame's state says")
+        states = dataset.episode_joints_deg(episode, dataset.joint_units(units, calibration, episode))[STATE_KEY]
         objects = columns.get(ENVIRONMENT_KEY)  # a simulated task's: where the cube was
         chosen = chosen_frames(len(states))
         wanted = set(chosen)
