@@ -80,6 +80,8 @@ def test_normalized_joints_become_the_degrees_lerobot_would_have_written_with_th
      "gripper (an SO-101 follower has"),
     (["cameras", "--fit", "front", "--from", str(MADE), "--units", "normalized", "--calibration", "{leader}"],
      "so101 cameras: {leader}: no calibration for shoulder_pan"),
+    (["physics", "--fit", "--from", str(MADE), "--units", "normalized", "--calibration", "{leader}"],
+     "so101 physics: {leader}: no calibration for shoulder_pan"),
 ])
 def test_a_command_reading_joints_of_unknown_units_refuses_in_one_line(tmp_path, args, line):
     leader = tmp_path / "other_arm.json"  # another arm's motor names

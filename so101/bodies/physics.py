@@ -79,6 +79,19 @@ class PhysicsRanges:
 
 
 DEFAULT_RANGES = PhysicsRanges()
+# Why each default range is what it is (`so101 physics` prints them; docs/loop/physics.md says more).
+RANGE_REASONS = {
+    "cube_size_m": "ManiSkill's SO-100 grasp task draws 22-28 mm; the jaws open 40 mm between the pads",
+    "cube_mass_kg": "a printed cube with sparse infill (10 g) to a metal one (50 g)",
+    "cube_friction": "slippery printed plastic to rubbery: the cube's own coefficient, against the jaws and the floor",
+    "servo_stiffness": "times the simulator's own gain: LeRobot halves the STS3215's P coefficient, and owners tune it",
+    "servo_damping": "times the simulator's own damping",
+    "command_delay_s": "0-2 frames at 25 fps: a bus round trip, the servo's loop, a busy host "
+                       "(a real follower can trail by more: `so101 physics --fit` measures yours)",
+    "speed_limit_deg_s": "an STS3215 loaded, up to its 0.222 s per 60 degrees unloaded",
+    "calibration_deg": "each joint's zero, as a calibration by hand puts it (plus or minus)",
+    "gripper_torque_nm": "LeRobot's half torque limit (about 1.7 N.m) to the servo's full 3.35 N.m",
+}
 
 
 def _finite(value: object) -> bool:

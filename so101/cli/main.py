@@ -33,6 +33,8 @@ SUBCOMMANDS = {
     "eval": ("so101.cli.evaluate", "score the expert, an idle arm or a trained policy on a task's seeded layouts, in lockstep: success rate with its 95% interval"),
     "learn": ("so101.cli.learn", "from nothing to a trained policy: demonstrations, (--sees) eyes taught by the simulator, lerobot-train; prints the folder --policy takes"),
     "policy-env": ("so101.cli.policy_env", "build (once) and check the environment that runs trained LeRobot policies (--policy-python)"),
+    "physics": ("so101.cli.physics", "the ranges varied physics draws from, and why; --fit measures a recording's servos "
+                "(delay, speed limit, time constant, sag) and writes ranges centred on them"),
     "cameras": ("so101.cli.cameras", "list the cameras (V4L2: path, name, sizes and frame rates), save a picture from "
                 "each; print, fit (--fit) and line up (--align) where a camera stands against the simulated one"),
     "fake-arm": ("so101.cli.fake_arm", "an emulated SO-101 servo bus on a pseudo-terminal, for trying the real-arm driver without hardware"),

@@ -1,0 +1,106 @@
+"""A recording's servos identified (so101.bodies.servo_fit, `so101 physics --fit`): a known servo recovered,
+the ranges file it writes taken by --physics, and the recordings it cannot fit refused in one line."""
+
+from __future__ import annotations
+
+import json
+import re
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from so101.bodies.physics import physics_ranges
+from so101.bodies.servo_fit import fit_joint, simulate
+from so101.dataset.features import ACTION_KEY, STATE_KEY, to_lerobot
+from so101.dataset.writer import DatasetWriter
+from tests.helpers.dataflow import error_lines, run_so101
+
+FPS = 30
+MADE = Path(__file__).parent / "data" / "lerobot_made"
+
+
+def commands_deg(seed: int, frames: int = 360) -> np.ndarray:
+    """A hand's commands: a slow swing with steps in it (the steps reach the speed limit)."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(frames) / FPS
+    return 30 * np.sin(2 * np.pi * 0.3 * t + rng.uniform(0, 6)) + 15 * np.sign(np.sin(2 * np.pi * 0.1 * t))
+
+
+def followed(actions: np.ndarray, delay: int, closing: float, speed: float, offset: float, seed: int) -> np.ndarray:
+    states = simulate(actions, np.array(actions[0]), delay, np.array([closing]), np.array([speed]), np.array([offset]),
+                      FPS)[:, 0]
+    return states + np.random.default_rng(seed).normal(0, 0.2, len(states))  # a servo's read noise
+
+
+@pytest.mark.parametrize("delay, closing, speed, offset", [(4, 0.3, 120.0, -2.5), (1, 0.6, np.inf, 1.0)])
+def test_the_fit_recovers_a_known_servo(delay, closing, speed, offset):
+    episodes = [(actions, followed(actions, delay, closing, speed, offset, seed))
+                for seed, actions in enumerate(commands_deg(seed) for seed in range(3))]
+    fit = fit_joint("shoulder_lift", episodes, FPS)
+    assert fit.delay_frames == delay and abs(fit.closing - closing) < 0.05 * closing + 0.02, fit
+    assert abs(fit.offset_deg - offset) < 0.3, fit
+    assert (np.isinf(fit.speed_deg_s) if np.isinf(speed) else abs(fit.speed_deg_s / speed - 1) < 0.15), fit
+    assert fit.error_after_deg < 0.3 < 2.0 < fit.error_before_deg, fit
+
+
+def write_recording(root: Path, episodes: int, follow) -> None:
+    with DatasetWriter.open(root, FPS, {}) as writer:
+        for seed in range(episodes):
+            actions = np.stack([commands_deg(seed + joint) for joint in range(6)], axis=1)
+            actions[:, 5] = 40 + actions[:, 5] / 2  # the gripper within its range
+            states = np.stack([follow(actions[:, joint], seed) for joint in range(6)], axis=1)
+            episode = writer.start_episode("a sweep")
+            for action, state in zip(actions, states):
+                episode.add_frame({ACTION_KEY: to_lerobot(action), STATE_KEY: to_lerobot(state)})
+            episode.save()
+
+
+def test_physics_fit_writes_ranges_centred_on_the_servo_that_physics_files_take(tmp_path):
+    recording, ranges_file = tmp_path / "real", tmp_path / "fitted.json"
+    write_recording(recording, 3, lambda actions, seed: followed(actions, 4, 0.3, 120.0, -2.0, seed))
+    done = run_so101("physics", "--fit", "--from", str(recording), "-o", str(ranges_file))
+    assert done.returncode == 0, done.stderr
+    lines = done.stdout.splitlines()
+    assert lines[0].startswith(f"fit: episodes 0, 1 of {recording} (720 frames at 30 fps); joints in degrees (stated")
+    assert re.match(r"  shoulder_pan +4 frames, 133 ms +(9\d) ms +1[12]\d deg/s +-2\.\d\d +9\.\d\d -> 0\.1\d$", lines[2]), lines[2]
+    assert lines[-2].startswith("held out, episode 2: p50 "), done.stdout
+    ranges = physics_ranges(str(ranges_file))
+    assert ranges is not None and ranges.command_delay_s == (0.1, 0.1667)  # 3 to 5 frames at 30 fps
+    assert 0.85 * 102 < ranges.speed_limit_deg_s[0] < 0.85 * 138 and ranges.speed_limit_deg_s[1] / ranges.speed_limit_deg_s[0] == pytest.approx(1.15 / 0.85, rel=1e-3)
+    assert lines[-1] == (f"wrote {ranges_file}: command_delay_s 0.1-0.1667 (the body's median delay, 4 frames, ± one), "
+                         f"speed_limit_deg_s {ranges.speed_limit_deg_s[0]:g}-{ranges.speed_limit_deg_s[1]:g} (the median "
+                         f"limit of 5 joints, ±15%); the rest the defaults. Use it: --physics {ranges_file}")
+
+
+@pytest.mark.parametrize("case, line", [
+    ("no state", "so101 physics: {root} has no observation.state: a fit follows the states after the actions"),
+    ("still", "so101 physics: no arm joint could be fitted: shoulder_pan is commanded across 0.0° only: a fit needs a "
+              "joint that moves (at least 3°)"),
+    ("leading", "so101 physics: the fit does not converge: its model follows the recording no better than the commands "
+                "do (p50 "),
+    ("no fit", "so101 physics: --from goes with --fit"),
+])
+def test_a_recording_that_cannot_be_fitted_is_refused_in_one_line_and_nothing_is_written(tmp_path, case, line):
+    root, ranges_file = tmp_path / "recording", tmp_path / "fitted.json"
+    if case == "no state":
+        shutil.copytree(MADE, root)
+        info = json.loads((root / "meta/info.json").read_text())
+        del info["features"][STATE_KEY]
+        (root / "meta/info.json").write_text(json.dumps(info))
+    elif case == "still":
+        with DatasetWriter.open(root, FPS, {}) as writer:
+            episode = writer.start_episode("still")
+            for _ in range(60):
+                episode.add_frame({ACTION_KEY: to_lerobot([10, 20, 30, 0, 0, 50]), STATE_KEY: to_lerobot([10, 20, 30, 0, 0, 50])})
+            episode.save()
+    elif case == "leading":  # states that come before their actions: no servo does that
+        write_recording(root, 2, lambda actions, seed: np.concatenate([actions[5:], np.full(5, actions[-1])]))
+    else:
+        root.mkdir()
+    args = ["physics", "--from", str(root), "-o", str(ranges_file)]
+    done = run_so101(*(args if case == "no fit" else ["physics", "--fit", *args[1:]]))
+    assert done.returncode == 2 and error_lines(done.stderr) == [error_lines(done.stderr)[0]], done.stderr
+    assert error_lines(done.stderr)[0].startswith(line.format(root=root)), done.stderr
+    assert not ranges_file.exists()
