@@ -356,3 +356,34 @@ def test_a_data_file_that_disagrees_with_the_metadata_is_one_line(tmp_path):
         Dataset.open(tmp_path / "set").episode_frames(0)
     assert str(refused.value) == (f"episode 0 has 5 frames in its metadata but 3 rows in {data_file}: "
                                   "the dataset's files disagree")
+
+
+def test_a_v21_dataset_is_converted_by_lerobots_own_converter_and_then_read(tmp_path, policy_python):
+    """`so101 dataset DIR --convert`: LeRobot 0.4.4's converter, in place; the original kept as DIR_old;
+    refused in one line, before anything runs, where the converter would replace a folder."""
+    from so101.dataset.reader import Dataset
+    from tests.helpers.dataflow import error_lines, run_so101
+
+    root = tmp_path / "their_data"
+    episodes = make_episodes(with_video=False)[:3]
+    lw.write_v21_dataset(root, episodes, FPS)
+    refused = run_so101("dataset", str(root))
+    assert error_lines(refused.stderr) == [f"so101 dataset: {root} is a LeRobot v2.1 dataset: this reads and writes v3.0 "
+                                           f"(`so101 dataset {root} --convert` runs LeRobot's own converter on it)"]
+    (tmp_path / "their_data_old").mkdir()
+    refused = run_so101("dataset", str(root), "--convert", "--policy-python", str(policy_python))
+    assert refused.returncode == 2 and error_lines(refused.stderr) == [
+        f"so101 dataset: {tmp_path / 'their_data_old'} exists, and LeRobot's converter would replace it: move it away first"]
+    (tmp_path / "their_data_old").rmdir()
+
+    done = run_so101("dataset", str(root), "--convert", "--policy-python", str(policy_python))
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert done.stdout.splitlines()[-1] == (f"converted: {root} is v3.0 (3 episodes, {sum(LENGTHS[:3])} frames); "
+                                            f"the v2.1 original is kept in {tmp_path / 'their_data_old'}")
+    assert json.loads((tmp_path / "their_data_old/meta/info.json").read_text())["codebase_version"] == "v2.1"
+    dataset = Dataset.open(root)
+    assert [episode.tasks for episode in dataset.episodes] == [(task,) for task in TASKS[:3]]
+    for number, episode in enumerate(episodes):
+        frames = dataset.episode_frames(number)
+        for key in ("action", "observation.state"):
+            np.testing.assert_array_equal(frames[key], episode[key])

@@ -32,6 +32,11 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
     parser.add_argument("--out", type=Path, default=None, metavar="FILE",
                         help="the PNG --plot writes (default out/episode-N.png)")
     parser.add_argument("--units", choices=UNITS, default=None, help=UNITS_HELP)
+    parser.add_argument("--convert", action="store_true",
+                        help="make a LeRobot v2.1 dataset v3.0 in place, with LeRobot's own converter (in the policy "
+                        "environment, offline); the original is kept beside it as DIR_old")
+    parser.add_argument("--policy-python", type=Path, default=None, metavar="PY",
+                        help="--convert: the policy environment's Python, with LeRobot (default: so101 policy-env's)")
     parser.add_argument("--calibration", type=Path, default=None, metavar="FILE",
                         help="--units normalized: the recording follower's LeRobot calibration JSON, whose ranges make "
                         "the joints degrees (default: the URDF's joint ranges)")
@@ -111,7 +116,42 @@ def write_plot(dataset: Dataset, index: int, out: Path, units: JointUnits) -> No
     plt.close(figure)
 
 
+def convert(args: argparse.Namespace) -> int:
+    from so101.dataset.convert import check_convertible, convert_to_v30
+    from so101.policy.environment import PolicyEnvError, check, default_dir, python_in
+
+    root = args.root.expanduser().resolve()
+    try:
+        check_convertible(root)
+    except DatasetError as error:
+        print(f"so101 dataset: {error}", file=sys.stderr)
+        return 2
+    try:
+        python = check((args.policy_python or python_in(default_dir())).expanduser()).python
+    except PolicyEnvError as error:
+        print(f"so101 dataset: --convert runs LeRobot's converter in the policy environment: {error}", file=sys.stderr)
+        return 2
+    print(f"converting {root} to LeRobot v3.0 with LeRobot's own converter ({python})...", flush=True)
+    try:
+        kept = convert_to_v30(root, python, Path("out") / f"convert-{root.name}.log")
+        dataset = Dataset.open(root)
+    except DatasetError as error:
+        print(f"so101 dataset: {error}", file=sys.stderr)
+        return 2
+    print(f"converted: {root} is v3.0 ({len(dataset.episodes)} episodes, {dataset.total_frames} frames); "
+          f"the v2.1 original is kept in {kept}")
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
+    if args.convert:
+        if args.plot is not None:
+            print("so101 dataset: --convert and --plot N: convert first, then plot", file=sys.stderr)
+            return 2
+        return convert(args)
+    if args.policy_python is not None:
+        print("so101 dataset: --policy-python goes with --convert", file=sys.stderr)
+        return 2
     units: JointUnits | None = None
     try:
         dataset = Dataset.open(args.root)

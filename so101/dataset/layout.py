@@ -136,7 +136,7 @@ def load_info(root: Path) -> dict[str, Any]:
     version = str(info.get("codebase_version", "?"))
     if not version.startswith("v3."):
         raise DatasetError(f"{root} is a LeRobot {version} dataset: this reads and writes v3.0 "
-                           "(LeRobot converts older ones with lerobot.datasets.v30.convert_dataset_v21_to_v30)")
+                           f"(`so101 dataset {root} --convert` runs LeRobot's own converter on it)")
     return info
 
 

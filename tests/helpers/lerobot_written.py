@@ -625,3 +625,40 @@ def psnr(a: np.ndarray, b: np.ndarray) -> float:
     """Peak signal-to-noise ratio of two uint8 pictures, in dB (inf when equal)."""
     mse = float(np.mean((a.astype(np.float64) - b.astype(np.float64)) ** 2))
     return float("inf") if mse == 0 else 10 * np.log10(255.0**2 / mse)
+
+
+def write_v21_dataset(root: Path, episodes: list[dict], fps: int) -> None:
+    """A LeRobot v2.1 dataset without video, laid out as LeRobot 0.3 wrote one (one parquet file per episode,
+    meta/*.jsonl): `episodes` as make_episodes' (task, action, observation.state). For the converter's test."""
+    features = {key: {"dtype": "float32", "shape": [6], "names": MOTOR_NAMES} for key in ("action", "observation.state")}
+    features.update(json.loads(json.dumps(DEFAULT_FEATURES)))
+    tasks = list(dict.fromkeys(episode["task"] for episode in episodes))
+    (root / "meta").mkdir(parents=True)
+    (root / "data/chunk-000").mkdir(parents=True)
+    index, episode_lines, stats_lines = 0, [], []
+    for number, episode in enumerate(episodes):
+        length = len(episode["action"])
+        frames = np.arange(length)
+        columns = {"action": episode["action"], "observation.state": episode["observation.state"],
+                   "timestamp": (frames / fps).astype(np.float32), "frame_index": frames,
+                   "episode_index": np.full(length, number), "index": index + frames,
+                   "task_index": np.full(length, tasks.index(episode["task"]))}
+        table = pa.table({key: pa.array(list(values), type=pa.list_(pa.float32())) if values.ndim == 2 else pa.array(values)
+                          for key, values in columns.items()})
+        pq.write_table(table, root / f"data/chunk-000/episode_{number:06d}.parquet")
+        episode_lines.append({"episode_index": number, "tasks": [episode["task"]], "length": length})
+        stats_lines.append({"episode_index": number, "stats": {
+            key: {"min": np.atleast_1d(values.min(0)).tolist(), "max": np.atleast_1d(values.max(0)).tolist(),
+                  "mean": np.atleast_1d(values.mean(0)).tolist(), "std": np.atleast_1d(values.std(0)).tolist(),
+                  "count": [length]}
+            for key, values in columns.items()}})
+        index += length
+    info = {"codebase_version": "v2.1", "robot_type": "so101_follower", "total_episodes": len(episodes),
+            "total_frames": index, "total_tasks": len(tasks), "total_videos": 0, "total_chunks": 1, "chunks_size": 1000,
+            "fps": fps, "splits": {"train": f"0:{len(episodes)}"},
+            "data_path": "data/chunk-{episode_chunk:03d}/episode_{episode_index:06d}.parquet", "video_path": None,
+            "features": features}
+    (root / "meta/info.json").write_text(json.dumps(info, indent=4))
+    for name, lines in (("episodes", episode_lines), ("episodes_stats", stats_lines),
+                        ("tasks", [{"task_index": i, "task": task} for i, task in enumerate(tasks)])):
+        (root / f"meta/{name}.jsonl").write_text("".join(json.dumps(line) + "\n" for line in lines))
