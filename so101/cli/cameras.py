@@ -170,11 +170,11 @@ def say(line: str) -> None:
 
 
 LISTING = "the cameras' listing (no --default, --fit or --align)"
-# Each mode's own options: (the option, its argparse name, the mode it goes with).
+# Each mode's own options: (the option, its argparse name, the mode, or modes, it goes with).
 OWN_OPTIONS = (("--from", "dataset", "--fit NAME"), ("--episode", "episode", "--fit NAME"), ("--near", "near", "--fit NAME"),
                ("-o", "output", "--fit NAME"), ("--size", "size", "--default NAME"), ("--save", "save", LISTING),
                ("--camera", "align_camera", "--align NAME"), ("--port", "port", "--align NAME"),
-               ("--calibration", "calibration", "--align NAME or --fit NAME"), ("--units", "units", "--fit NAME"),
+               ("--calibration", "calibration", ("--align NAME", "--fit NAME")), ("--units", "units", "--fit NAME"),
                ("--fitted", "fitted", "--align NAME"),
                ("--camera-pose", "camera_poses", "--align NAME"))
 
@@ -182,8 +182,9 @@ OWN_OPTIONS = (("--from", "dataset", "--fit NAME"), ("--episode", "episode", "--
 def misplaced_option(args: argparse.Namespace, mode: str) -> str | None:
     """One line for the first option given that belongs to another mode than `mode` (none: None)."""
     for option, dest, goes_with in OWN_OPTIONS:
-        if mode not in goes_with.split(" or ") and getattr(args, dest):
-            return f"{option} goes with {goes_with}"
+        modes = goes_with if isinstance(goes_with, tuple) else (goes_with,)
+        if mode not in modes and getattr(args, dest):
+            return f"{option} goes with {' or '.join(modes)}"
     return None
 
 
