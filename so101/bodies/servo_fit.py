@@ -7,7 +7,7 @@ action sent (LeRobot's order), and the joint
 - turns no faster than `speed_deg_s`;
 - rests `offset_deg` off its goal (gravity against a proportional servo: the sag).
 Simulated open loop from the episode's first state with its actions, it is fitted to the states by a
-grid over delay, closing and speed (all joints and candidates at once, numpy), the offset from the
+grid over delay, closing and speed (a joint's candidates all at once, numpy), the offset from the
 residual. Pure numpy: `so101 physics --fit` reads the dataset and writes the ranges
 (so101.bodies.physics) centred on the fit.
 """

@@ -135,8 +135,9 @@ def fit(args: argparse.Namespace) -> int:
         return fail(f"the fit does not converge: its model follows the recording no better than the commands do "
                     f"(p50 {after:.2f} deg against {before:.2f} deg); nothing written")
     if held_out is not None:
-        scored = [model_errors(each, joints[held_out][ACTION_KEY][:, number], joints[held_out][STATE_KEY][:, number])
-                  for number, each in enumerate(fits)]
+        column = {joint.name: number for number, joint in enumerate(ACTUATED_JOINTS)}
+        scored = [model_errors(each, joints[held_out][ACTION_KEY][:, column[each.joint]],
+                               joints[held_out][STATE_KEY][:, column[each.joint]]) for each in fits]
         print(f"held out, episode {held_out}: p50 {np.median([s[0] for s in scored]):.2f} deg before -> "
               f"{np.median([s[1] for s in scored]):.2f} deg after (the joints' medians)")
     ranges, said = fitted_ranges(fits)
