@@ -60,7 +60,7 @@ from so101.runtime.argtypes import (
 )
 from so101.runtime.dataflow import (
     CAMERA_NODE_ID, LEADER_READY_MARKS, LOADED_MARKS, PERCEPTION_NODE_ID, POLICY_READY_MARKS, PROMPT_NODE_FILE, ROOT,
-    WEB_VIEW_MARKS, dataflow_copy,
+    WEB_VIEW_MARKS, dataflow_copy, tell_nodes,
     with_camera, with_expert, with_leader, with_perception, with_policy, with_recorder, with_task,
 )
 from so101.runtime.lockstep import DEFAULT_LOCKSTEP_FPS
@@ -205,9 +205,9 @@ def run(args: argparse.Namespace) -> int:
               "body, and --record DIR or a --policy that sees", file=sys.stderr)
         return 2
     if args.looks != DEFAULT_LOOKS:  # the camera draws them (for the recording, or the policy's eyes), the recorder keeps them
-        set_env(descriptor, (CAMERA_NODE_ID, "recorder"), "SO101_LOOKS", args.looks)
+        tell_nodes(descriptor, (CAMERA_NODE_ID, "recorder"), {"SO101_LOOKS": args.looks})
     if args.physics != DEFAULT_PHYSICS:  # the body has it, the camera draws its cube and calibration, the recorder keeps it
-        set_env(descriptor, (launch.body.node_id, CAMERA_NODE_ID, "recorder"), PHYSICS_ENV_VAR, args.physics)
+        tell_nodes(descriptor, (launch.body.node_id, CAMERA_NODE_ID, "recorder"), {PHYSICS_ENV_VAR: args.physics})
     web_line = add_web_view(args, descriptor, launch.body, "teleop")
     if web_line:
         ready_marks += (WEB_VIEW_MARKS,)
@@ -218,13 +218,6 @@ def run(args: argparse.Namespace) -> int:
         print(text["starting_cluster"].format(coordinator=f"{place.coordinator_addr}:{place.coordinator_port}",
                                               mode=launch.mode, here=place.here, policy=policy, log=launch.log), flush=True)
     return run_beside(launch, descriptor, PROMPT_NODE_FILE, text, ready_marks, web_line, place)
-
-
-def set_env(descriptor: dict, node_ids: tuple[str, ...], name: str, value: str) -> None:
-    """The setting `name` = `value` given to each of the dataflow's nodes `node_ids` that it has."""
-    for node in descriptor["nodes"]:
-        if node["id"] in node_ids:
-            node["env"] = {**node.get("env", {}), name: value}
 
 
 def add_policy(descriptor: dict, body: BodyKind, args: argparse.Namespace) -> str | None:

@@ -8,6 +8,7 @@ import argparse
 from typing import cast
 
 from so101.bodies.camera_file import CAMERA_POSES_ENV_VAR, CameraFile, CameraFileError, camera_pose_given, camera_poses_text
+from so101.runtime.dataflow import tell_nodes
 
 CAMERA_POSE_HELP = ("draw the simulated camera NAME (front or wrist) from where FILE puts it: a camera file from "
                     "`so101 cameras --fit` or `--default` (repeat for both cameras; default: the simulator's own)")
@@ -47,9 +48,4 @@ def camera_poses_env(poses: dict[str, CameraFile]) -> dict[str, str]:
 def draw_from_poses(descriptor: dict, poses: dict[str, CameraFile], drawing: tuple[str, ...]) -> bool:
     """`poses` told to the nodes of `descriptor` named in `drawing` (those that draw, keep or read a task's
     simulated pictures); False when it has none of them (nothing would be drawn from there)."""
-    told = False
-    for node in descriptor["nodes"]:
-        if node["id"] in drawing:
-            node["env"] = {**node.get("env", {}), **camera_poses_env(poses)}
-            told = True
-    return told
+    return tell_nodes(descriptor, drawing, camera_poses_env(poses))

@@ -127,6 +127,16 @@ def dataflow_copy(node_env: dict[str, str], dataflow_file: Path = DATAFLOW_FILE,
     return descriptor
 
 
+def tell_nodes(descriptor: dict, node_ids: tuple[str, ...], env: dict[str, str]) -> bool:
+    """`env` over the own settings of each of the dataflow's nodes named in `node_ids`; False when it has none of them."""
+    told = False
+    for node in descriptor["nodes"]:
+        if node["id"] in node_ids:
+            node["env"] = {**(node.get("env") or {}), **env}
+            told = True
+    return told
+
+
 def has_dynamic_node(dataflow_file: Path | None, node_id: str) -> bool:
     """Whether the dataflow in `dataflow_file` waits for `node_id` to join it (`path: dynamic`);
     False for a file that cannot be read as one."""
