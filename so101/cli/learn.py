@@ -29,10 +29,11 @@ import time
 from pathlib import Path
 from typing import Callable
 
+from so101.bodies.physics import physics_mode
 from so101.bodies.registry import SIMULATED_BODIES
 from so101.perception.recipe import EYES_DIR, POLICY_DIR, write_recipe
 from so101.policy.environment import OFFLINE, PolicyEnvError, build, default_dir, python_in, with_checkout
-from so101.runtime.argtypes import whole_number
+from so101.runtime.argtypes import parsed_by, whole_number
 from so101.runtime.dataflow import ROOT
 from so101.tasks import TASKS
 
@@ -67,11 +68,12 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
                              "policy then reads no simulator state); without it, a state policy that reads the "
                              "simulator's object_state")
     parser.add_argument("--body", choices=SIMULATED_BODIES, default="pybullet", help="the simulator (default pybullet)")
-    parser.add_argument("--physics", choices=("fixed", "varied"), default="fixed",
-                        help="the demonstrations' physics, and the validation's: fixed (default, the simulator's own) or "
+    parser.add_argument("--physics", type=parsed_by(physics_mode), default="fixed", metavar="fixed|varied|FILE.json",
+                        help="the demonstrations' physics, and the validation's: fixed (default, the simulator's own), "
                              "varied (each layout's seed draws the cube's size, mass and friction, the servos, a "
-                             "calibration off by up to 2°: docs/loop/physics.md); the eyes' pictures are drawn with "
-                             "each episode's")
+                             "calibration off by up to 2°: docs/loop/physics.md) or a ranges file to vary within (one "
+                             "`so101 physics --fit` wrote, for your arm; the folder keeps its ranges); the eyes' "
+                             "pictures are drawn with each episode's")
     parser.add_argument("--episodes", type=whole_number(10, 100_000), default=300, metavar="N",
                         help="demonstrations (default 300)")
     parser.add_argument("--pictures", type=whole_number(100, 1_000_000), default=40_000, metavar="N",
