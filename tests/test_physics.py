@@ -12,7 +12,7 @@ import pytest
 
 from so101.bodies.command_path import CommandPath
 from so101.bodies.physics import (
-    DEFAULT_RANGES, PhysicsError, PhysicsRanges, draw_physics, physics_for, physics_from_metadata, physics_metadata,
+    DEFAULT_RANGES, PhysicsError, PhysicsRanges, centred, draw_physics, physics_for, physics_from_metadata, physics_metadata,
     physics_mode,
 )
 from so101.bodies.registry import BODIES, SIMULATED_BODIES
@@ -131,6 +131,25 @@ def test_both_simulators_apply_the_seeds_physics_and_report_as_its_calibration(b
         assert np.allclose(np.degrees(joints), np.array(simulation.joint_angles_deg()) - physics.calibration_offsets_deg)
         simulation.reset_task(seed + 1)
         assert simulation.physics == draw_physics(seed + 1)
+    finally:
+        simulation.close()
+
+
+@pytest.mark.parametrize("body", SIMULATED_BODIES)
+def test_the_arm_alone_takes_a_ranges_files_centre_its_goals_late_and_slower(body):
+    """What `so101 replay --physics FILE` gives the body: no task, the ranges' centre, the calibration exact."""
+    ranges = centred(PhysicsRanges(command_delay_s=(0.1, 0.2), speed_limit_deg_s=(50.0, 70.0)))
+    assert ranges.command_delay_s == (0.15, 0.15) and ranges.calibration_deg == 0.0
+    simulation = BODIES[body].body_class()(mode="direct", renders=False, time_step_s=TICK_PERIOD_S,
+                                           physics=json.dumps(asdict(ranges)))
+    try:
+        assert simulation.physics is not None and simulation.physics.command_delay_s == 0.15
+        start = simulation.joint_angles_deg()[0]
+        simulation.set_targets_deg([start + 30, *HOME_POSE_DEG[1:]])
+        simulation.step(round(0.14 / TICK_PERIOD_S))
+        assert abs(simulation.joint_angles_deg()[0] - start) < 0.5  # the goal not taken yet
+        simulation.step(round(0.26 / TICK_PERIOD_S))  # 0.25 s of motion at most: 15 degrees at 60 deg/s
+        assert 8 < simulation.joint_angles_deg()[0] - start < 16
     finally:
         simulation.close()
 

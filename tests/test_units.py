@@ -82,8 +82,10 @@ def test_normalized_joints_become_the_degrees_lerobot_would_have_written_with_th
      "so101 cameras: {leader}: no calibration for shoulder_pan"),
     (["physics", "--fit", "--from", str(MADE), "--units", "normalized", "--calibration", "{leader}"],
      "so101 physics: {leader}: no calibration for shoulder_pan"),
+    (["replay", str(MADE), "--units", "degrees", "--body", "real", "--physics", "varied"],
+     "so101 replay: --physics sets a simulated body's servos: the real arm has its own"),
 ])
-def test_a_command_reading_joints_of_unknown_units_refuses_in_one_line(tmp_path, args, line):
+def test_a_command_reading_joints_it_cannot_use_refuses_in_one_line(tmp_path, args, line):
     leader = tmp_path / "other_arm.json"  # another arm's motor names
     leader.write_text(json.dumps({f"motor_{index}": {} for index in range(6)}))
     done = run_so101(*[arg.format(leader=leader) for arg in args])

@@ -114,6 +114,8 @@ class SO101MuJoCo:
         self.scene: TaskScene | None = None if task is None else task.mujoco_scene(self.model, self.data, seed)
         if self.scene is not None and physics != DEFAULT_PHYSICS:
             self.reset_task(seed)
+        elif physics != DEFAULT_PHYSICS:  # the arm alone (a replay): its servos and command path
+            self._take_physics(physics_for(physics, seed))
 
     @classmethod
     def from_settings(cls, settings: MuJoCoSettings, node: NodeSettings, task: SceneTask | None = None,

@@ -186,6 +186,14 @@ class Physics:
         return metadata
 
 
+def centred(ranges: PhysicsRanges) -> PhysicsRanges:
+    """`ranges` drawn to their centres, the calibration exact: one physics, whatever the seed (a replay set
+    against a recording)."""
+    middles = {spec.name: (round(sum(value) / 2, 6),) * 2 for spec in fields(ranges)
+               if isinstance(value := getattr(ranges, spec.name), tuple)}
+    return PhysicsRanges(**middles, calibration_deg=0.0)
+
+
 def draw_physics(seed: int, ranges: PhysicsRanges = DEFAULT_RANGES) -> Physics:
     """The physics of episode seed `seed` (a whole number >= 0) within `ranges`."""
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:

@@ -223,6 +223,9 @@ class SO101Sim:
             )
         if self.scene is not None and physics != DEFAULT_PHYSICS:
             self.reset_task(seed)
+        elif physics != DEFAULT_PHYSICS:  # the arm alone (a replay): its servos and command path
+            self.physics = physics_for(physics, seed)
+            self._command = CommandPath(self.physics, HOME_POSE_DEG)
 
     # -- set-up helpers --------------------------------------------------------------
     def _load_arm(self, physics_urdf: Path, assets_dir: Path | str | None, with_pads: bool,

@@ -15,7 +15,7 @@ from typing import Any
 
 from so101.runtime.argtypes import add_language_option, number
 from so101.feetech import sts3215
-from so101.feetech.fake_arm import ALL_IDS, DEFAULT_SPEED_STEPS_S, MECHANICS, FakeArm
+from so101.feetech.fake_arm import ALL_IDS, DEFAULT_SPEED_STEPS_S, MECHANICS, FakeArm, Response
 from so101.feetech.fake_arm.process import raise_priority
 from so101.feetech.hand import FIGURE_EIGHT_EASE_S, FIGURE_EIGHT_PERIOD_S, Keyframes, figure_eight_deg, load_keyframes
 
@@ -170,6 +170,7 @@ def _servo_id(text: str) -> int:
 
 
 _seconds = number(lambda value: 0 <= value < 1e6, "a time: use seconds, 0 or more")
+_response_ms = number(lambda value: 0 <= value <= 2000, "a number of milliseconds from 0 to 2000")
 _speed = number(lambda value: 0 < value <= 100_000,
                  "a speed: use steps per second, more than 0 (the default is 3000)")
 # A figure eight faster than a loop a second is no hand's; slower than 10 minutes looks still.
@@ -205,6 +206,16 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
         "--speed", type=_speed, default=DEFAULT_SPEED_STEPS_S, metavar="STEPS_PER_S",
         help="the motors' top speed in encoder steps per second, used when Goal_Velocity is 0 "
         "(default 3000 ≈ 264°/s, an STS3215's no-load speed at 7.4 V)",
+    )
+    parser.add_argument(
+        "--delay-ms", type=_response_ms, default=0.0, metavar="MS",
+        help="each servo acts on a new goal this late while it runs, as a real follower trails its commands "
+        "(about 130 on a LeRobot recording); default 0",
+    )
+    parser.add_argument(
+        "--time-constant-ms", type=_response_ms, default=0.0, metavar="MS",
+        help="each servo closes the last of a gap with this time constant, as a P loop does; default 0: "
+        "at top speed right onto the goal",
     )
     parser.add_argument(
         "--hand", type=_hand_script, default=None, metavar="figure8|FILE",
@@ -447,7 +458,8 @@ def run(args: argparse.Namespace) -> int:
     out = _Output(PROMPT if interactive else "")
     timers: list[threading.Timer] = []
     text = TEXT[args.lang]
-    arm = FakeArm(ids=args.ids, speed_steps_s=args.speed)
+    arm = FakeArm(ids=args.ids, speed_steps_s=args.speed,
+                  response=Response(delay_s=args.delay_ms / 1000, time_constant_s=args.time_constant_ms / 1000))
     raise_priority()  # the servos' stand-in: a busy machine should starve the driver, not the servos
 
     def faults() -> None:

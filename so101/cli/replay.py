@@ -11,17 +11,19 @@ anything starts.
 from __future__ import annotations
 
 import argparse
+import json
 import sys
-from dataclasses import replace
+from dataclasses import asdict, replace
 from pathlib import Path
 
+from so101.bodies.physics import PHYSICS_ENV_VAR, centred, physics_mode, physics_ranges
 from so101.bodies.registry import BODIES
 from so101.dataset.units import UNITS, UNITS_HELP
-from so101.runtime.argtypes import add_language_option, whole_number
+from so101.runtime.argtypes import add_language_option, parsed_by, whole_number
 from so101.launch.beside_prompt import (
     TEXT as TELEOP_TEXT, add_body_arguments, add_log_option, add_web_arguments, add_web_view, prepare, run_beside,
 )
-from so101.runtime.dataflow import LOADED_MARKS, REPLAY_NODE_FILE, WEB_VIEW_MARKS, dataflow_copy, with_replay
+from so101.runtime.dataflow import LOADED_MARKS, REPLAY_NODE_FILE, WEB_VIEW_MARKS, dataflow_copy, tell_nodes, with_replay
 
 TEXT = {
     lang: {**lines, "ready": "", "ready_real": "", "stopping": "", "stopped": "",
@@ -38,6 +40,10 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
     add_body_arguments(parser)
     parser.add_argument("--units", choices=UNITS, default=None, help=UNITS_HELP + "; normalized ones are made degrees "
                         "with --calibration's ranges (for a simulated body, --calibration is the recording follower's)")
+    parser.add_argument("--physics", type=parsed_by(physics_mode), default=None, metavar="FILE.json|varied",
+                        help="a simulated body: replay under these physics ranges' centre (the servos' delay, speed "
+                             "limit, gains and the gripper's force; the calibration exact), such as a file `so101 "
+                             "physics --fit` wrote, to set its `versus the recording` against the default's")
     add_language_option(parser, "the messages")
     add_web_arguments(parser)
     add_log_option(parser)
@@ -57,6 +63,9 @@ def run(args: argparse.Namespace) -> int:
         print(f"so101 replay: {error}", file=sys.stderr)
         return 2
     print(units.how, flush=True)
+    physics = replay_physics(args.physics, args.body)
+    if physics is None:
+        return 2
     if BODIES[args.body].simulated:  # a simulated body has no calibration of its own: it was the recording's
         args = argparse.Namespace(**{**vars(args), "calibration": None})
     launch = prepare(args, "replay", REPLAY_NODE_FILE)
@@ -64,9 +73,29 @@ def run(args: argparse.Namespace) -> int:
         return 2
     text = TEXT[args.lang]
     descriptor = with_replay(dataflow_copy(launch.node_env, launch.body.dataflow_file), launch.body.node_id)
+    if physics != "fixed":
+        tell_nodes(descriptor, (launch.body.node_id,), {PHYSICS_ENV_VAR: physics})
     web_line = add_web_view(args, descriptor, launch.body, "replay")
     ready_marks = (LOADED_MARKS, WEB_VIEW_MARKS) if web_line else (LOADED_MARKS,)
     env = dict(launch.env, SO101_REPLAY_DIR=str(dataset_dir), SO101_REPLAY_EPISODE=str(args.episode),
                SO101_REPLAY_UNITS=args.units or "", SO101_REPLAY_CALIBRATION=str(calibration or ""))
     print(text["starting"].format(mode=launch.mode, log=launch.log), flush=True)
     return run_beside(replace(launch, env=env), descriptor, REPLAY_NODE_FILE, text, ready_marks, web_line)
+
+
+def replay_physics(mode: str | None, body: str) -> str | None:
+    """The body's physics as its node is told it: "fixed" without --physics, else the ranges' centre as JSON
+    text, said in one line; None (after one line on stderr) where the body cannot take it."""
+    if mode is None or mode == "fixed":
+        return "fixed"
+    if not BODIES[body].simulated:
+        print("so101 replay: --physics sets a simulated body's servos: the real arm has its own", file=sys.stderr)
+        return None
+    ranges = physics_ranges(mode)
+    if ranges is None:
+        return "fixed"
+    centre = centred(ranges)
+    print(f"replay: physics at the ranges' centre: command delay {centre.command_delay_s[0] * 1000:.0f} ms, speed limit "
+          f"{centre.speed_limit_deg_s[0]:g} deg/s, servo stiffness x{centre.servo_stiffness[0]:g}, damping "
+          f"x{centre.servo_damping[0]:g}, calibration exact", flush=True)
+    return json.dumps(asdict(centre), sort_keys=True)

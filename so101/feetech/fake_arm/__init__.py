@@ -9,9 +9,9 @@ from so101.feetech.fake_arm.mechanics import (
 )
 from so101.feetech.fake_arm.process import FakeArmProcess
 from so101.feetech.fake_arm.protocol import checksum, instruction_packet
-from so101.feetech.fake_arm.servo import DEFAULT_SPEED_STEPS_S
+from so101.feetech.fake_arm.servo import DEFAULT_SPEED_STEPS_S, Response
 
 __all__ = [
-    "ALL_IDS", "DEFAULT_SPEED_STEPS_S", "MECHANICAL_TABLE", "MECHANICS", "FakeArm", "FakeArmProcess", "Mechanics",
+    "ALL_IDS", "DEFAULT_SPEED_STEPS_S", "MECHANICAL_TABLE", "MECHANICS", "FakeArm", "FakeArmProcess", "Mechanics", "Response",
     "calibrate_as_at_the_factory", "checksum", "instruction_packet", "joint_deg", "physical_steps",
 ]

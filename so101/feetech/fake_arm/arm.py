@@ -4,7 +4,8 @@ Six Feetech STS3215 servos (IDs 1-6) answer Feetech's serial protocol (protocol.
 pseudo-terminal such as /dev/pts/7, so the real-arm driver, `so101 calibrate` and their tests run
 without hardware. It emulates the protocol, the register table (servo.py, so101/feetech/sts3215.py)
 and an assembled arm's hard stops (mechanics.py); it is not a physics model: no gravity, no load, no
-inertia, a constant speed. Motion is computed lazily from the clock whenever a register is read or
+inertia, a constant speed (or, given a servo.Response, goals taken late and a gap closed with a time
+constant, for a fit to find). Motion is computed lazily from the clock whenever a register is read or
 written. Torque off, a hand can move the joints (hand_paths.py: `move_by_hand`, `sweep`, and
 `play_hand`, which plays a script of angles such as so101/feetech/hand.py's figure eight: the
 emulator then plays a leader arm). Faults are injected through faults.py.
@@ -38,7 +39,9 @@ from so101.feetech.fake_arm.protocol import (
     ACTION, BROADCAST_ID, PARTIAL_PACKET_TIMEOUT_S, PING, READ, REG_WRITE, SYNC_READ, SYNC_WRITE, WRITE,
     Instruction, PacketReader,
 )
-from so101.feetech.fake_arm.servo import DEFAULT_SPEED_STEPS_S, FIRST_READ_ONLY, FIRST_WRITABLE, MEMORY_SIZE, Servo
+from so101.feetech.fake_arm.servo import (
+    DEFAULT_SPEED_STEPS_S, FIRST_READ_ONLY, FIRST_WRITABLE, MEMORY_SIZE, Response, Servo,
+)
 from so101.feetech.hand import eased_in
 from so101.robot import ACTUATED_JOINTS, goal_deg
 
@@ -60,6 +63,7 @@ class FakeArm:
         speed_steps_s: float = DEFAULT_SPEED_STEPS_S,
         start_positions: dict[int, int] | None = None,
         clock: Callable[[], float] = time.monotonic,
+        response: Response = Response(),
     ):
         ids = tuple(ids)
         unknown = [servo_id for servo_id in ids if servo_id not in MECHANICS]
@@ -85,7 +89,7 @@ class FakeArm:
         self._lock = threading.RLock()
         now = self.clock()
         self._servos = {
-            servo_id: Servo(MECHANICS[servo_id], start_positions.get(servo_id, MECHANICS[servo_id].centre), now)
+            servo_id: Servo(MECHANICS[servo_id], start_positions.get(servo_id, MECHANICS[servo_id].centre), now, response)
             for servo_id in ids
         }
         self._faults = Faults(ids)

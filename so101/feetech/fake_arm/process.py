@@ -22,7 +22,7 @@ from typing import Any, Callable, Sequence
 
 from so101.feetech.fake_arm.arm import FakeArm
 from so101.feetech.fake_arm.mechanics import ALL_IDS
-from so101.feetech.fake_arm.servo import DEFAULT_SPEED_STEPS_S
+from so101.feetech.fake_arm.servo import DEFAULT_SPEED_STEPS_S, Response
 
 START_TIMEOUT_S = 30.0  # a fresh interpreter imports the emulator: well under a second on an idle machine
 CLOSE_TIMEOUT_S = 5.0
@@ -97,6 +97,7 @@ class FakeArmProcess:
         speed_steps_s: float = DEFAULT_SPEED_STEPS_S,
         start_positions: dict[int, int] | None = None,
         time_scale: float = 1.0,
+        response: Response = Response(),
     ):
         if not time_scale > 0:
             raise ValueError(f"time_scale must be positive, got {time_scale}")
@@ -110,7 +111,8 @@ class FakeArmProcess:
         self._connection = Connection(os.dup(self._process.stdout.fileno()), writable=False)
         self._process.stdin.close()
         self._process.stdout.close()
-        options = {"ids": tuple(ids), "speed_steps_s": speed_steps_s, "start_positions": start_positions}
+        options = {"ids": tuple(ids), "speed_steps_s": speed_steps_s, "start_positions": start_positions,
+                   "response": response}
         self._requests.send((options, time_scale, sys.path))
         if not self._connection.poll(START_TIMEOUT_S):
             self.close()

@@ -22,7 +22,9 @@ as a real one listening at another speed.
 
 from __future__ import annotations
 
+import math
 from collections import deque
+from dataclasses import dataclass
 
 from so101.feetech import sts3215
 from so101.feetech.fake_arm.hand_paths import HandPath, ScriptedHand
@@ -67,11 +69,43 @@ POWER_UP: dict[str, int] = {
 }
 
 
+@dataclass(frozen=True)
+class Response:
+    """How a servo answers a new goal beyond what its registers say, so that a fit has a known answer
+    (`so101 physics --fit`). A real follower acts on a goal late: its bus, its loop and the host add up
+    to about 130 ms on a public LeRobot recording. Its P loop closes the last of a gap gradually, with
+    a time constant; at 0 (the default) the motor runs at its top speed right onto the goal."""
+
+    delay_s: float = 0.0
+    time_constant_s: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("delay_s", "time_constant_s"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and 0 <= value <= 2):
+                raise ValueError(f"a servo's {name} is a number of seconds from 0 to 2, got {value!r}")
+
+
+def closing(gap: float, speed: float, time_constant_s: float, elapsed: float) -> tuple[float, float]:
+    """How far a motor `gap` steps from its goal travels in `elapsed` seconds, and its speed then: at most
+    `speed` steps/s, and no faster than the gap over `time_constant_s` (a P loop's exponential approach)."""
+    at_top_speed_s = max(0.0, (gap - speed * time_constant_s) / speed)
+    if elapsed <= at_top_speed_s:
+        return speed * elapsed, speed
+    left = min(gap, speed * time_constant_s) * math.exp(-(elapsed - at_top_speed_s) / time_constant_s)
+    return gap - left, left / time_constant_s
+
+
 class Servo:
     """One STS3215: its register memory and the physical position of its joint."""
 
-    def __init__(self, mechanics: Mechanics, physical: float, now: float):
+    def __init__(self, mechanics: Mechanics, physical: float, now: float, response: Response = Response()):
         self.mechanics = mechanics
+        self.response = response
+        # With a delay: the Goal_Position the motor acts on (raw), and the later writes, each with the
+        # time it takes effect. Without one the motor acts on the register as it is.
+        self.acting_goal_raw = 0
+        self.goal_changes: deque[tuple[float, int]] = deque()
         self.memory = bytearray(MEMORY_SIZE)
         self.physical = float(physical)  # encoder steps, inside the stops (or 0..4096 without)
         self.velocity = 0.0  # steps/s at self.time
@@ -108,6 +142,8 @@ class Servo:
         self.pending = None
         self.refresh()
         self.set("Goal_Position", self.get("Present_Position"))
+        self.acting_goal_raw = self.get("Goal_Position")
+        self.goal_changes.clear()
 
     @property
     def bus_id(self) -> int:
@@ -127,7 +163,8 @@ class Servo:
 
     def goal(self) -> int:
         """The position the motor drives to, in the offset frame, after the limits."""
-        goal = sts3215.decode_signed(self.get("Goal_Position"), 15)
+        raw = self.acting_goal_raw if self.response.delay_s else self.get("Goal_Position")
+        goal = sts3215.decode_signed(raw, 15)
         low, high = self.get("Min_Position_Limit"), self.get("Max_Position_Limit")
         if low == 0 and high == 0:
             # No limits: the STS3215's multi-turn use. Approximated: goals past 0..4095 add turns.
@@ -139,8 +176,9 @@ class Servo:
         return min(float(asked), top_speed) if asked else top_speed
 
     def advance(self, now: float, top_speed: float) -> None:
-        """Bring the joint to `now`: the hand's path, or the motor toward its goal."""
-        elapsed = max(0.0, now - self.time)
+        """Bring the joint to `now`: the hand's path, or the motor toward its goal (each delayed goal
+        taken at its own time)."""
+        start = self.time
         self.time = max(self.time, now)
         if self.hand is not None and not self.torque_on:
             position, self.velocity = self.hand.at(now)
@@ -149,19 +187,31 @@ class Servo:
                 self.hand = None
         elif self.torque_on:
             self.hand = None
-            present = (self.physical - self.homing_offset) % sts3215.STEPS_PER_TURN
-            error = self.goal() - present
-            speed = self.speed(top_speed)
-            direction = 1.0 if error > 0 else -1.0
-            travel = min(abs(error), speed * elapsed)
-            arrived = travel >= abs(error)
-            wanted = self.physical + (error if arrived else direction * travel)
-            self.physical = self.mechanics.clamp(wanted)
-            blocked = self.mechanics.has_stops and self.physical != wanted
-            self.velocity = 0.0 if arrived or blocked else direction * speed
+            while self.goal_changes and self.goal_changes[0][0] <= now:
+                at, goal_raw = self.goal_changes.popleft()
+                self._drive(max(0.0, at - start), top_speed)  # toward the goal before, until this one takes effect
+                start, self.acting_goal_raw = max(start, at), goal_raw
+            self._drive(max(0.0, now - start), top_speed)
         else:
             self.velocity = 0.0
         self.refresh()
+
+    def _drive(self, elapsed: float, top_speed: float) -> None:
+        """The motor, `elapsed` seconds toward the goal it acts on."""
+        present = (self.physical - self.homing_offset) % sts3215.STEPS_PER_TURN
+        error = self.goal() - present
+        speed = self.speed(top_speed)
+        direction = 1.0 if error > 0 else -1.0
+        if self.response.time_constant_s:
+            travel, speed = closing(abs(error), speed, self.response.time_constant_s, elapsed)
+            arrived = abs(error) - travel < 0.5  # within half a step: the encoder reads the goal
+        else:
+            travel = min(abs(error), speed * elapsed)
+            arrived = travel >= abs(error)
+        wanted = self.physical + (error if arrived else direction * travel)
+        self.physical = self.mechanics.clamp(wanted)
+        blocked = self.mechanics.has_stops and self.physical != wanted
+        self.velocity = 0.0 if arrived or blocked else direction * speed
 
     def refresh(self) -> None:
         """The registers the servo writes itself, from the physical state."""
@@ -177,6 +227,7 @@ class Servo:
     def write(self, address: int, data: bytes) -> None:
         """A host's write, byte by byte as the servo takes it (call advance() first)."""
         torque_address = _ADDRESS["Torque_Enable"]
+        was_on = self.torque_on
         for index, value in enumerate(data):
             where = address + index
             if where >= MEMORY_SIZE:
@@ -193,7 +244,18 @@ class Servo:
             self.hand = None  # the motor holds: a hand cannot move it
         elif self.hand is None:
             self.velocity = 0.0
+        self._take_goal(late=was_on and self.torque_on)
         self.refresh()
+
+    def _take_goal(self, late: bool) -> None:
+        """The register's goal for the motor: `response.delay_s` from now while the motor runs, at once
+        when it starts or is off (a driver sets the goal to where the joint is before it starts it)."""
+        goal_raw = self.get("Goal_Position")
+        if not late or not self.response.delay_s:
+            self.acting_goal_raw = goal_raw
+            self.goal_changes.clear()
+        elif goal_raw != (self.goal_changes[-1][1] if self.goal_changes else self.acting_goal_raw):
+            self.goal_changes.append((self.time + self.response.delay_s, goal_raw))
 
     def host_write(self, address: int, data: bytes) -> dict[str, int]:
         """A write that came over the bus: logged for values_written, then taken as write() does.
