@@ -24,6 +24,11 @@ MAX_DELAY_FRAMES = 12
 CLOSINGS = np.geomspace(0.03, 1.0, 28)
 # Speed limits tried: multiples of the fastest the joint was seen to turn (1.0: it was at its limit), and none.
 SPEED_FACTORS = (1.0, 1.1, 1.25, 1.5, 2.0, math.inf)
+# Candidates this close to the best fit as well as it (a mean error within 2%).
+NEAR = 1.02
+# A speed limit is claimed only where it fits 10% better than none: a smooth recording's sampling (a 50 Hz
+# arm read at 30 fps) makes a limit at the fastest turn seen fit a few percent better, and it is not one.
+LIMIT_NEAR = 1.10
 # A joint whose commands span less than this tells nothing of its servo.
 MIN_MOTION_DEG = 3.0
 
@@ -80,8 +85,13 @@ def fit_joint(joint: str, episodes: list[tuple[FloatArray, FloatArray]], fps: fl
                        f"(at least {MIN_MOTION_DEG:g}°)")
     fastest = max(float(np.abs(np.diff(states)).max()) * fps for _, states in episodes)
     coarse = _grid(CLOSINGS, [fastest * factor for factor in SPEED_FACTORS])
-    _, delay, closing, speed, _ = min((_best(episodes, delay, *coarse, fps) for delay in range(MAX_DELAY_FRAMES + 1)),
-                                      key=lambda found: found[0])
+    # The speed rule (_best's) across every delay: a limit that fits a little better at another delay is not reached.
+    by_delay = [_errors(episodes, delay, *coarse, fps) for delay in range(MAX_DELAY_FRAMES + 1)]
+    least = min(float(errors.min()) for errors, _ in by_delay)
+    fastest_near = max(float(coarse[1][errors <= least * LIMIT_NEAR + 1e-4].max(initial=0.0)) for errors, _ in by_delay)
+    delay = int(np.argmin([np.where(coarse[1] == fastest_near, errors, np.inf).min() for errors, _ in by_delay]))
+    _, delay, closing, speed, _ = _best(episodes, delay, coarse[0][coarse[1] == fastest_near],
+                                        coarse[1][coarse[1] == fastest_near], fps)
     # Then finer, around the best, at its delay (a noisy state makes the fastest turn seen too fast).
     speeds = [math.inf] if math.isinf(speed) else list(np.linspace(0.8 * speed, 1.2 * speed, 17))
     _, delay, closing, speed, offset = _best(episodes, delay, *_grid(np.geomspace(closing / 1.3, min(1.0, closing * 1.3), 15),
@@ -97,17 +107,23 @@ def _grid(closings: npt.ArrayLike, speeds: npt.ArrayLike) -> tuple[FloatArray, F
     return closing.ravel(), speed.ravel()
 
 
-def _best(episodes: list[tuple[FloatArray, FloatArray]], delay: int, closing: FloatArray, speed: FloatArray,
-          fps: float) -> tuple[float, int, float, float, float]:
-    """The best candidate at `delay`: (its mean error, delay, closing, speed, offset)."""
+def _errors(episodes: list[tuple[FloatArray, FloatArray]], delay: int, closing: FloatArray, speed: FloatArray,
+            fps: float) -> tuple[FloatArray, FloatArray]:
+    """Each candidate's mean error at `delay`, and its offset."""
     residuals = [states[:, None] - simulate(actions, states[0], delay, closing, speed, np.zeros_like(closing), fps)
                  for actions, states in episodes]
     # The offset: the residual's median once the start's transient is past (a quarter of each episode).
     offset = np.median(np.concatenate([residual[len(residual) // 4:] for residual in residuals]), axis=0)
     # The mean, not the median: a speed limit shows on the few frames of a fast move.
-    errors = np.mean(np.abs(np.concatenate(residuals) - offset), axis=0)
+    return np.mean(np.abs(np.concatenate(residuals) - offset), axis=0), offset
+
+
+def _best(episodes: list[tuple[FloatArray, FloatArray]], delay: int, closing: FloatArray, speed: FloatArray,
+          fps: float) -> tuple[float, int, float, float, float]:
+    """The best candidate at `delay`: (its mean error, delay, closing, speed, offset)."""
+    errors, offset = _errors(episodes, delay, closing, speed, fps)
     # A limit the joint never reached cannot be told from none: of the candidates within 2% of the best, the fastest.
-    near = errors <= errors.min() * 1.02 + 1e-4
+    near = errors <= errors.min() * NEAR + 1e-4
     found = int(np.argmin(np.where(near & (speed == speed[near].max()), errors, np.inf)))
     return float(errors[found]), delay, float(closing[found]), float(speed[found]), float(offset[found])
 

@@ -65,6 +65,7 @@ TEXT: dict[str, dict[str, Any]] = {
   quit               停止模拟器(Ctrl-C 和 SIGTERM 也可以)""",
         "about": "模拟的 SO-101 总线:{count} 个 STS3215 舵机,ID {ids},1,000,000 波特;模拟协议和寄存器,"
                  "不模拟物理(无重力、无负载);输入 help 查看命令",
+        "response": "舵机在运行中晚 {delay_ms:g} ms 执行新目标,以 {tau_ms:g} ms 的时间常数缩小最后的差距(0:全速到位)",
         "unknown": "未知命令 {word!r};命令:{accepted}",
         "usage": "用法:{usage};命令:{accepted}",
         "no_servo": "总线上没有舵机 {text!r};ID:{ids}",
@@ -105,6 +106,8 @@ TEXT: dict[str, dict[str, Any]] = {
         "help": COMMANDS_HELP,
         "about": "an emulated SO-101 bus: {count} STS3215 servos, ids {ids}, 1,000,000 baud; it emulates the protocol "
                  "and the registers, not the physics (no gravity, no load); type help for its commands",
+        "response": "its servos act on a new goal {delay_ms:g} ms late while they run, and close the last of a gap "
+                    "with a {tau_ms:g} ms time constant (0: at top speed)",
         "unknown": "unknown command {word!r}; commands: {accepted}",
         "usage": "usage: {usage}; commands: {accepted}",
         "no_servo": "no servo {text!r} on this bus; ids: {ids}",
@@ -482,6 +485,8 @@ def run(args: argparse.Namespace) -> int:
     try:
         out.say(arm.port)
         out.say(text["about"].format(count=len(arm.ids), ids=", ".join(map(str, arm.ids))))
+        if args.delay_ms or args.time_constant_ms:
+            out.say(text["response"].format(delay_ms=args.delay_ms, tau_ms=args.time_constant_ms))
 
         def unplug() -> None:
             arm.close_port()
