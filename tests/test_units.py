@@ -4,6 +4,7 @@ arithmetic as the oracle, and the commands that read a dataset's joints saying o
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -99,3 +100,33 @@ def test_the_dataset_summary_says_how_its_joints_are_read():
         "joints: the dataset does not say its joints' units"), unknown.stdout
     said = run_so101("dataset", str(MADE), "--units", "degrees")
     assert said.stdout.splitlines()[-1] == "joints in degrees (said by --units)", said.stdout
+
+
+@pytest.mark.parametrize("stated, outcome", [
+    ("degrees", ""),
+    ("normalized", "whose joints are in LeRobot's normalized units: it would send them to the arm as degrees"),
+    (None, "which does not say its joints' units, and its values could be degrees or LeRobot's normalized units: if "
+           'degrees, say so in its meta/info.json ("so101_joint_units": "degrees")'),
+])
+def test_a_policy_is_driven_only_in_the_units_it_was_trained_in(tmp_path, stated, outcome):
+    """The policy's train_config.json names its dataset: degrees drive the arm, anything else is one line."""
+    import shutil
+
+    from so101.policy.choice import joint_units_note
+
+    dataset = tmp_path / "trained_on"
+    shutil.copytree(MADE, dataset)
+    if stated is not None:
+        info_file = dataset / "meta" / "info.json"
+        info_file.write_text(json.dumps({**json.loads(info_file.read_text()), UNITS_KEY: stated}))
+    policy = tmp_path / "policy"
+    policy.mkdir()
+    (policy / "train_config.json").write_text(json.dumps({"dataset": {"root": str(dataset)}}))
+    if not outcome:
+        assert joint_units_note(policy) == ""
+    else:
+        with pytest.raises(ValueError, match=re.escape(outcome)) as refused:
+            joint_units_note(policy)
+        assert "\n" not in str(refused.value) and str(refused.value).startswith(f"the policy was trained on {dataset}")
+    shutil.rmtree(dataset)
+    assert joint_units_note(policy).startswith("note: the policy's joints are taken as degrees: its training dataset")

@@ -1,8 +1,9 @@
 """What a policy's frames are made of, without LeRobot or torch: which dataflow inputs give each of
 its input features, a frame made into LeRobot's observation, and its action made into the body's
 joint_cmd. The units are mapped where the recorder maps them (so101.dataset.features): a policy
-trained on this project's datasets, or on LeRobot's so101_follower recordings, sees and gives
-the values they hold (degrees; the gripper 0-100). Light: numpy only, so the policy's own
+trained on this project's datasets, or on LeRobot's so101_follower recordings in degrees, sees and
+gives the values they hold (degrees; the gripper 0-100); so101.policy.choice refuses one trained in
+LeRobot's normalized units. Light: numpy only, so the policy's own
 Python (`so101 policy-env`) imports it from the source tree.
 """
 
