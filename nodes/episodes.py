@@ -54,9 +54,6 @@ from so101.runtime.lockstep import (  # noqa: E402
     AGAIN_WORD, INFERENCE_MS_KEY, NOT_WRITTEN_KEY, FrameParts, FrameTag, frame_tag,
 )
 from so101.runtime.logs import send_diagnostics_to  # noqa: E402
-from so101.bodies.camera_file import cameras_metadata  # noqa: E402
-from so101.bodies.looks import looks_metadata  # noqa: E402
-from so101.bodies.physics import physics_metadata  # noqa: E402
 from so101.tasks import task_named  # noqa: E402
 from so101.tasks.episodes import EpisodeClock, Outcome, seeds_for  # noqa: E402
 from so101.tasks.settings import EpisodeSettings  # noqa: E402
@@ -129,11 +126,9 @@ def main() -> int:
         recorder = writer.start_episode(task.instruction) if writer is not None else None
         if recorder is not None:
             recorder.seed = seeds[index]
-            recorder.physics = physics_metadata(settings.physics, seeds[index])
-            if settings.image_size:  # the pictures' looks, by episode: a dataset says what it showed, and from where
-                recorder.looks = looks_metadata(settings.looks, seeds[index])
-                recorder.cameras = cameras_metadata(settings.camera_poses, settings.looks, seeds[index], recorded,
-                                                    settings.image_size)
+            # its physics, and with pictures their looks and where its cameras stood: what it showed, and from where
+            recorder.scenario = settings.scenario.metadata(seeds[index], recorded if settings.image_size else (),
+                                                           settings.image_size)
         if settings.video_dir is not None and settings.image_size:
             width, height = settings.image_size
             video = StreamingEncoder(settings.video_dir / f"seed_{seeds[index]}.mp4",

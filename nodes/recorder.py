@@ -92,11 +92,11 @@ def main() -> int:
                                        "(empty it to record without video)"), NODE_ID)
     reports: queue.Queue[str] = queue.Queue()  # lines from the save thread, sent from this one
     recording = Recording(writer, str(settings.root), settings.fps, settings.lang,
-                          needs_image=settings.image_size is not None, say=reports.put, task=task, looks=settings.looks,
-                          camera_poses=settings.camera_poses, image_size=settings.image_size,
+                          needs_image=settings.image_size is not None, say=reports.put, task=task,
+                          scenario=settings.scenario, image_size=settings.image_size,
                           observed=settings.observed, wrist=wrist,
                           camera_lost=settings.camera_lost if settings.real_cameras else "",
-                          log=lambda line: logger.info("[recorder] %s", line), physics=settings.physics)
+                          log=lambda line: logger.info("[recorder] %s", line))
 
     def send_status(lines: list[str], reply_to: str | None = None) -> None:
         for line in lines:

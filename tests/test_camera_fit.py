@@ -150,7 +150,7 @@ def test_a_fit_that_fails_leaves_the_file_there_and_says_why_in_one_line(tmp_pat
 def test_the_fit_recovers_the_camera_an_episode_was_drawn_from_and_redraws_its_first_frame(tmp_path):
     """An episode drawn from the front camera moved 4.2 cm, turned 8° and 4° wider, with varied looks on top:
     the fit from the default camera lands within 5 mm, 1° and 1° of field of view of where the episode's
-    camera stood (its so101_episode_cameras entry), and that file draws the first frame again within 3 of
+    camera stood (its scenario's cameras entry), and that file draws the first frame again within 3 of
     255 of the frame as drawn. tools/camera_fit_offsets.py runs more offsets."""
     from so101.bodies.task_cameras import TaskCameras
     from so101.dataset.features import ENVIRONMENT_KEY, STATE_KEY, from_lerobot
@@ -170,7 +170,7 @@ def test_the_fit_recovers_the_camera_an_episode_was_drawn_from_and_redraws_its_f
     assert fit.returncode == 0, fit.stdout + fit.stderr
     assert fit.stdout == "" and fit.stderr.splitlines()[-1] == f"wrote {fitted}"
     info = json.loads((root / "meta" / "info.json").read_text(encoding="utf-8"))
-    truth = camera_file_from(info["so101_episode_cameras"][0]["front"], "front")
+    truth = camera_file_from(info["so101_episode_scenarios"]["0"]["cameras"]["front"], "front")
     refit = read_camera_file(fitted, "front")
     assert pose_error(default_camera_file("front"), truth)[0] > 0.04  # the start is far off
     error_m, error_deg, error_fov = pose_error(refit, truth)

@@ -67,7 +67,8 @@ def test_the_same_seeds_make_the_same_demonstrations_bit_for_bit(tmp_path, body)
     assert dataset.fps == 25 and [episode.tasks for episode in dataset.episodes] == [("put the cube in the box",)] * 2
     assert all(bool(dataset.episode_frames(index)[SUCCESS_KEY][-1]) for index in range(2))
     assert dataset.info[SEEDS_KEY] == {"0": 5, "1": 6}
-    assert dataset.info["so101_episode_physics"] == {"0": {"physics": "fixed"}, "1": {"physics": "fixed"}}
+    assert dataset.info["so101_episode_scenarios"] == {"0": {"physics": {"physics": "fixed"}},
+                                                       "1": {"physics": {"physics": "fixed"}}}
 
 
 def test_with_misses_an_episode_is_written_from_the_recovery_on(tmp_path):
@@ -109,9 +110,9 @@ def test_eval_scores_the_expert_and_an_idle_arm_scores_nothing(tmp_path):
 def test_demos_with_video_append_to_the_folder_and_every_episode_reads(tmp_path):
     from dataclasses import replace
 
-    from so101.bodies.camera_file import cameras_metadata, default_camera_file, read_camera_file
-    from so101.bodies.looks import looks_metadata
-    from so101.dataset.layout import CAMERAS_KEY, LOOKS_KEY
+    from so101.bodies.camera_file import default_camera_file, read_camera_file
+    from so101.bodies.scenario import Scenario
+    from so101.dataset.layout import SCENARIOS_KEY
 
     root = tmp_path / "demos"
     moved = tmp_path / "front.json"  # the front camera 3 cm to the left of the simulator's, 4° wider
@@ -125,12 +126,12 @@ def test_demos_with_video_append_to_the_folder_and_every_episode_reads(tmp_path)
         assert result.returncode == 0, result.stdout + result.stderr
     dataset = Dataset.open(root)
     assert len(dataset.episodes) == 2
-    # A dataset says what its pictures showed, by episode, and where its cameras stood.
-    assert dataset.info[LOOKS_KEY] == {"0": {"looks": "fixed"}, "1": looks_metadata("varied", 1)}
-    assert dataset.info[CAMERAS_KEY] == [
-        cameras_metadata({}, "fixed", 0, ("front", "wrist"), (160, 120)),
-        cameras_metadata({"front": read_camera_file(moved)}, "varied", 1, ("front", "wrist"), (160, 120))]
-    assert dataset.info[CAMERAS_KEY][0]["front"]["position_m"] == [round(v, 6) for v in default.position_m]
+    # A dataset says what its pictures showed, by episode, and where its cameras stood: its scenario, as drawn.
+    assert dataset.info[SCENARIOS_KEY] == {
+        "0": Scenario().metadata(0, ("front", "wrist"), (160, 120)),
+        "1": Scenario("varied", {"front": read_camera_file(moved)}).metadata(1, ("front", "wrist"), (160, 120))}
+    assert dataset.info[SCENARIOS_KEY]["1"]["looks"]["looks"] == "varied"
+    assert dataset.info[SCENARIOS_KEY]["0"]["cameras"]["front"]["position_m"] == [round(v, 6) for v in default.position_m]
     for index in range(2):
         frames = dataset.episode_frames(index)
         front = list(dataset.episode_images(index, "observation.images.front"))
@@ -168,11 +169,11 @@ def test_two_workers_write_the_dataset_one_worker_writes_byte_for_byte(tmp_path)
     assert len(merged.episodes) == 3
     # Each worker's episodes keep their looks and physics through the merge: seeds 30, 31, 32 in episode order.
     from so101.bodies.physics import physics_metadata
-    from so101.dataset.layout import LOOKS_KEY, PHYSICS_KEY
+    from so101.dataset.layout import SCENARIOS_KEY
 
-    assert [merged.info[LOOKS_KEY][str(index)]["seed"] for index in range(3)] == [30, 31, 32]
-    assert merged.info[PHYSICS_KEY] == {str(index): physics_metadata("varied", seed)
-                                        for index, seed in enumerate((30, 31, 32))}
+    kept = merged.info[SCENARIOS_KEY]
+    assert [kept[str(index)]["looks"]["seed"] for index in range(3)] == [30, 31, 32]
+    assert [kept[str(index)]["physics"] for index in range(3)] == [physics_metadata("varied", seed) for seed in (30, 31, 32)]
 
 
 def test_on_a_cluster_the_workers_spread_over_its_machines_and_the_dataset_is_the_same(tmp_path):

@@ -453,12 +453,13 @@ def test_a_policy_that_sees_and_the_recorder_share_one_camera_at_the_higher_rate
     descriptor = with_task(dataflow_copy({}), "simulation", "cube_to_box", 3)
     with_camera(descriptor, "simulation", {"SO101_RECORD_IMAGE_SIZE": "96x72"}, 25)
     with_policy(descriptor, "simulation", ("joint_state", "gripper_state", "image", "wrist_image"), {}, "/py")
-    with_recorder(descriptor, "simulation", {}, {"SO101_RECORD_IMAGE_SIZE": "96x72", "SO101_LOOKS": "varied"}, 30)
+    with_recorder(descriptor, "simulation", {}, {"SO101_RECORD_IMAGE_SIZE": "96x72", "SO101_SCENARIO": '{"looks":"varied"}'}, 30)
     nodes = {node["id"]: node for node in descriptor["nodes"]}
     assert [node["id"] for node in descriptor["nodes"]].count("camera") == 1
     camera = nodes["camera"]
     assert camera["outputs"] == ["image", "wrist_image"] and camera["inputs"]["tick"]["source"] == "dora/timer/millis/33"
-    assert camera["env"] == {"SO101_RECORD_IMAGE_SIZE": "96x72", "SO101_TASK": "cube_to_box", "SO101_LOOKS": "varied"}
+    assert camera["env"] == {"SO101_RECORD_IMAGE_SIZE": "96x72", "SO101_TASK": "cube_to_box",
+                             "SO101_SCENARIO": '{"looks":"varied"}'}
     # The policy takes the newest picture only; the recorder, every one.
     assert nodes["policy"]["inputs"]["image"] == {"source": "camera/image", "queue_size": 1}
     assert nodes["policy"]["inputs"]["wrist_image"] == {"source": "camera/wrist_image", "queue_size": 1}

@@ -12,6 +12,7 @@ import pytest
 import yaml
 
 from so101.bodies.registry import BODIES
+from so101.bodies.scenario import Scenario
 from so101.bodies.settings import (
     ArmSettings,
     MuJoCoSettings,
@@ -53,7 +54,7 @@ def test_the_dataflow_file_sets_only_declared_settings(body):
 def test_an_empty_environment_gives_the_declared_defaults():
     assert NodeSettings.from_environ({}) == NodeSettings(
         display_mode="auto", image_hz=0.0, fast_steps=0, tick_log_path="", lang="zh", task="", seed=0,
-        lockstep_fps=0, lockstep_pictures=None, looks="fixed", camera_poses={}, physics="fixed",
+        lockstep_fps=0, lockstep_pictures=None, scenario=Scenario(),
         lockstep_episode_frames=0)
     assert PyBulletSettings.from_environ({}) == PyBulletSettings(
         assets_dir=None, control_mode="position", servo_damping_ratio=0.7)
@@ -77,7 +78,9 @@ def test_the_arm_settings_read_every_variable():
 @pytest.mark.parametrize("settings_class, environ, message", [
     (NodeSettings, {"SO101_IMAGE_HZ": "-1"}, "SO101_IMAGE_HZ='-1' is not a number >= 0"),
     (NodeSettings, {"SO101_FAST_STEPS": "2.5"}, "SO101_FAST_STEPS='2.5' is not a whole number >= 0"),
-    (NodeSettings, {"SO101_LOOKS": "random"}, "SO101_LOOKS='random' is not one of: fixed, varied"),
+    (NodeSettings, {"SO101_SCENARIO": '{"looks": "random"}'},
+     "SO101_SCENARIO: a scenario's looks are one of fixed, varied, unseen, not 'random'"),
+    (NodeSettings, {"SO101_SCENARIO": '{"physics": "wild"}'}, "unknown physics 'wild'; use fixed, varied, or a JSON file"),
     (NodeSettings, {"SO101_LANG": "fr"}, "unknown language 'fr' (from --lang or $SO101_LANG); use zh or en"),
     (PyBulletSettings, {"SO101_CONTROL": "torque"}, "unknown control mode 'torque'; use one of: position, servo"),
     (PyBulletSettings, {"SO101_SERVO_ZETA": "nan"}, "SO101_SERVO_ZETA='nan' is not a number >= 0"),

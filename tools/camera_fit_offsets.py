@@ -6,7 +6,7 @@ docs/experiments/fitting-cameras.md.
 For each offset, drawn from --seed: the default front camera's lens moved up to 5 cm, turned up to 10°
 (about the vertical, then its own right axis and line of sight) and its field of view changed up to 5°;
 one episode of `so101 demos --camera-pose front=FILE --looks varied` (the looks jitter it further);
-then the fit from the default camera, against the episode's `so101_episode_cameras` entry. One line an
+then the fit from the default camera, against the episode's scenario's `cameras` entry (`so101_episode_scenarios`). One line an
 offset (the offset, the fit's error, its residual, its time, and how far the refit draws the episode's
 first frame from the frame as drawn and from the video's, mean of 255), then the worst of each.
 """
@@ -28,6 +28,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from so101.bodies.camera_file import camera_file_from, default_camera_file, orbit_of  # noqa: E402
+from so101.dataset.layout import episode_scenario  # noqa: E402
 from so101.perception.camera_fit import Pose, _rotation, fit_from_dataset, pose_error  # noqa: E402
 
 # The issue's offsets: the lens up to this far, turned up to this much, the field of view up to this much.
@@ -86,7 +87,7 @@ def main() -> int:
             subprocess.run([sys.executable, "-m", "so101.cli.main", "demos", str(root), "--task", "cube_to_box",
                             "--episodes", "1", "--seed", str(1000 + index), "--looks", "varied",
                             "--camera-pose", f"front={pose_file}"], check=True, capture_output=True, cwd=ROOT)
-        truth = camera_file_from(json.loads((root / "meta" / "info.json").read_text())["so101_episode_cameras"][0]["front"])
+        truth = camera_file_from(episode_scenario(json.loads((root / "meta" / "info.json").read_text()), 0)["cameras"]["front"])
         started = time.monotonic()
         try:
             fit = fit_from_dataset(root, default_camera_file("front"))

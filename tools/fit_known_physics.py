@@ -22,7 +22,7 @@ sys.path.insert(0, str(ROOT))
 from so101.bodies.physics import physics_from_metadata  # noqa: E402
 from so101.bodies.servo_fit import fit_joint  # noqa: E402
 from so101.dataset.features import ACTION_KEY, STATE_KEY  # noqa: E402
-from so101.dataset.layout import PHYSICS_KEY  # noqa: E402
+from so101.dataset.layout import episode_scenario  # noqa: E402
 from so101.dataset.reader import Dataset  # noqa: E402
 from so101.robot import ARM_JOINTS  # noqa: E402
 
@@ -38,7 +38,7 @@ def main() -> int:
     print("| episode | drawn delay (frames) | fitted (median of the 5 arm joints) | p50 before → after (deg) |")
     print("|---|---|---|---|")
     for episode in dataset.episodes[:args.episodes]:
-        physics = physics_from_metadata(dataset.info[PHYSICS_KEY][str(episode.index)])
+        physics = physics_from_metadata(episode_scenario(dataset.info, episode.index)["physics"])
         assert physics is not None, "a dataset of --physics varied"
         joints = dataset.episode_joints_deg(episode.index, units)
         fits = [fit_joint(joint.name, [(joints[ACTION_KEY][:, number], joints[STATE_KEY][:, number])], dataset.fps)

@@ -185,7 +185,7 @@ def default_camera_file(name: str, width: int = DEFAULT_SIZE[0], height: int = D
 
 
 def parse_camera_poses(text: str) -> dict[str, CameraFile]:
-    """SO101_CAMERA_POSES as the nodes read it: JSON mapping a camera's name to its file's fields ("" none)."""
+    """A scenario's camera poses (so101.bodies.scenario): JSON mapping a camera's name to its file's fields ("" none)."""
     if not text.strip():
         return {}
     try:
@@ -195,16 +195,6 @@ def parse_camera_poses(text: str) -> dict[str, CameraFile]:
     if not isinstance(fields, dict):
         raise CameraFileError("a JSON object mapping a camera's name to its camera file's fields")
     return {name: camera_file_from(value, str(name)) for name, value in fields.items()}
-
-
-CAMERA_POSES_ENV_VAR = "SO101_CAMERA_POSES"
-CAMERA_POSES_HELP = ("where a task's simulated cameras stand: JSON mapping `front`/`wrist` to a camera file's fields "
-                     "(so101/bodies/camera_file.py; `--camera-pose NAME=FILE`); empty = the simulator's own")
-
-
-def camera_poses_text(poses: dict[str, CameraFile]) -> str:
-    """The other way: what a command puts in SO101_CAMERA_POSES."""
-    return json.dumps({name: pose.as_dict() for name, pose in poses.items()}, separators=(",", ":"))
 
 
 def wrist_placement(camera: WristCamera) -> tuple[Vector, tuple[float, float, float, float]]:

@@ -28,9 +28,6 @@ from typing import Iterable
 
 PHYSICS_MODES = ("fixed", "varied")
 DEFAULT_PHYSICS = "fixed"
-PHYSICS_ENV_VAR = "SO101_PHYSICS"
-PHYSICS_HELP = ("`fixed` (each simulator's own, as always), `varied` (drawn from each layout's seed within the documented "
-                "ranges: so101/bodies/physics.py) or a JSON file of ranges (varied within them)")
 JOINTS = 6
 # The jaws open 40 mm between their pads (so101.bodies.jaw_pads): a larger cube cannot be held.
 JAWS_OPEN_M = 0.040

@@ -15,10 +15,9 @@ from pathlib import Path
 from typing import Mapping, Self
 
 from so101.assets import ASSETS_ENV_VAR
-from so101.bodies.camera_file import CAMERA_POSES_ENV_VAR, CAMERA_POSES_HELP, CameraFile, parse_camera_poses
-from so101.bodies.looks import DEFAULT_LOOKS, LOOKS_CHOICES
-from so101.bodies.physics import DEFAULT_PHYSICS, PHYSICS_ENV_VAR, PHYSICS_HELP, physics_mode
+from so101.bodies.camera_file import CameraFile
 from so101.bodies.pd_servo import DEFAULT_DAMPING_RATIO
+from so101.bodies.scenario import SCENARIO_ENV_VAR, SCENARIO_HELP, Scenario, parse_scenario
 from so101.feetech.calibration import parse_joint_signs
 from so101.runtime.display import MODE_ENV_VAR
 from so101.lang import DEFAULT_LANGUAGE, ENV_VAR as LANG_ENV_VAR, language_from_environ
@@ -106,13 +105,7 @@ class NodeSettings(EnvironSettings):
         "SO101_LOCKSTEP_PICTURES", "",
         "WIDTHxHEIGHT: in lockstep, each frame carries the task's front and wrist pictures on `image` and "
         "`wrist_image`, drawn for that frame; empty = none", read_image_size)
-    looks: str = setting(
-        "SO101_LOOKS", DEFAULT_LOOKS, "in lockstep with pictures: `fixed` (the pictures as always) or `varied` (each "
-        "episode's seed draws its light, colours and camera placement: so101/bodies/looks.py)", read_choice(LOOKS_CHOICES))
-    camera_poses: dict[str, CameraFile] = setting(
-        CAMERA_POSES_ENV_VAR, "", CAMERA_POSES_HELP, read_parsed(parse_camera_poses))
-    physics: str = setting(
-        PHYSICS_ENV_VAR, DEFAULT_PHYSICS, f"a task's physics: {PHYSICS_HELP}", read_parsed(physics_mode))
+    scenario: Scenario = setting(SCENARIO_ENV_VAR, "", SCENARIO_HELP, read_parsed(parse_scenario))
     lockstep_episode_frames: int = setting(
         "SO101_EPISODE_FRAMES", "0",
         "N > 0: in lockstep, an episode's last frame is at most N; after it, or after a frame whose `task_status` "
@@ -127,6 +120,18 @@ class NodeSettings(EnvironSettings):
         if problem:
             raise ValueError(problem)
         return super().from_environ(environ)
+
+    @property
+    def looks(self) -> str:
+        return self.scenario.looks
+
+    @property
+    def camera_poses(self) -> dict[str, CameraFile]:
+        return self.scenario.camera_poses
+
+    @property
+    def physics(self) -> str:
+        return self.scenario.physics
 
 
 @dataclass(frozen=True)

@@ -16,8 +16,9 @@ import sys
 from dataclasses import asdict, replace
 from pathlib import Path
 
-from so101.bodies.physics import PHYSICS_ENV_VAR, centred, physics_mode, physics_ranges
+from so101.bodies.physics import centred, physics_mode, physics_ranges
 from so101.bodies.registry import BODIES
+from so101.bodies.scenario import Scenario
 from so101.dataset.units import UNITS, UNITS_HELP
 from so101.runtime.argtypes import add_language_option, parsed_by, whole_number
 from so101.launch.beside_prompt import (
@@ -74,7 +75,7 @@ def run(args: argparse.Namespace) -> int:
     text = TEXT[args.lang]
     descriptor = with_replay(dataflow_copy(launch.node_env, launch.body.dataflow_file), launch.body.node_id)
     if physics != "fixed":
-        tell_nodes(descriptor, (launch.body.node_id,), {PHYSICS_ENV_VAR: physics})
+        tell_nodes(descriptor, (launch.body.node_id,), Scenario(physics=physics).env())
     web_line = add_web_view(args, descriptor, launch.body, "replay")
     ready_marks = (LOADED_MARKS, WEB_VIEW_MARKS) if web_line else (LOADED_MARKS,)
     env = dict(launch.env, SO101_REPLAY_DIR=str(dataset_dir), SO101_REPLAY_EPISODE=str(args.episode),

@@ -38,11 +38,12 @@ import sys
 from pathlib import Path, PurePath
 
 from so101.bodies.looks import DEFAULT_LOOKS, LOOKS_CHOICES
-from so101.bodies.physics import DEFAULT_PHYSICS, PHYSICS_ENV_VAR
+from so101.bodies.physics import DEFAULT_PHYSICS
+from so101.bodies.scenario import Scenario
 from so101.bodies.registry import BODIES, BodyKind
 from so101.dataset.features import DEFAULT_FPS, video_keys_and_sizes
 from so101.dataset.settings import DEFAULT_IMAGE_SIZE
-from so101.launch.camera_poses import add_camera_pose_option, draw_from_poses
+from so101.launch.camera_poses import add_camera_pose_option
 from so101.launch.lockstep import add_physics_option
 from so101.launch.beside_prompt import (
     TEXT, add_body_arguments, add_log_option, add_task_arguments, add_web_arguments, add_web_view, prepare, run_beside,
@@ -199,15 +200,17 @@ def run(args: argparse.Namespace) -> int:
             print(f"so101 teleop: {problem}", file=sys.stderr)
             return 2
     add_real_cameras(descriptor, cameras, args.image_size, args.image_size, args.camera_fps)  # seen in the web view
-    if args.camera_poses and not (launch.body.simulated and args.task is not None and draw_from_poses(
-            descriptor, args.camera_poses, (CAMERA_NODE_ID, "recorder", PERCEPTION_NODE_ID))):
-        print("so101 teleop: --camera-pose draws a task's simulated cameras: it goes with --task NAME on a simulated "
-              "body, and --record DIR or a --policy that sees", file=sys.stderr)
+    drawing = (CAMERA_NODE_ID, "recorder", PERCEPTION_NODE_ID)  # the nodes that draw, keep or read task pictures
+    present = {node["id"] for node in descriptor["nodes"]}
+    # A seeing policy's eyes take the camera's geometry on any body: on the real arm, where the real camera stands.
+    if args.camera_poses and PERCEPTION_NODE_ID not in present and not (
+            launch.body.simulated and args.task is not None and present & set(drawing)):
+        print("so101 teleop: --camera-pose draws a task's simulated cameras, or tells a seeing policy's eyes where the "
+              "camera stands: it goes with --task NAME on a simulated body and --record DIR, or a --policy that sees",
+              file=sys.stderr)
         return 2
-    if args.looks != DEFAULT_LOOKS:  # the camera draws them (for the recording, or the policy's eyes), the recorder keeps them
-        tell_nodes(descriptor, (CAMERA_NODE_ID, "recorder"), {"SO101_LOOKS": args.looks})
-    if args.physics != DEFAULT_PHYSICS:  # the body has it, the camera draws its cube and calibration, the recorder keeps it
-        tell_nodes(descriptor, (launch.body.node_id, CAMERA_NODE_ID, "recorder"), {PHYSICS_ENV_VAR: args.physics})
+    # The body has its physics, the camera draws the pictures, the recorder keeps them, the eyes see from where they stand.
+    tell_nodes(descriptor, (launch.body.node_id, *drawing), Scenario(args.looks, dict(args.camera_poses), args.physics).env())
     web_line = add_web_view(args, descriptor, launch.body, "teleop")
     if web_line:
         ready_marks += (WEB_VIEW_MARKS,)

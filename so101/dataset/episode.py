@@ -18,9 +18,7 @@ class EpisodeSink(Protocol):
     """Where a recorded episode goes (so101.dataset.writer.DatasetWriter): the recorder knows it by this only."""
 
     def commit_episode(self, task: str, columns: dict[str, np.ndarray], encoded: dict[str, videos.EncodedVideo],
-                       seed: int | None = None, looks: dict[str, object] | None = None,
-                       cameras: dict[str, object] | None = None,
-                       physics: dict[str, object] | None = None) -> EpisodeSummary:
+                       seed: int | None = None, scenario: dict[str, object] | None = None) -> EpisodeSummary:
         """The episode added to the dataset, its summary returned."""
 
     def episode_ended(self) -> None:
@@ -77,9 +75,8 @@ class EpisodeRecorder:
         self._lock = threading.Lock()
         self.frames = 0  # frames added so far
         self.seed: int | None = None  # a task's episode: the seed of its layout, kept in info.json (layout.SEEDS_KEY)
-        self.looks: dict[str, object] | None = None  # its pictures' looks (so101.bodies.looks), kept beside (LOOKS_KEY)
-        self.cameras: dict[str, object] | None = None  # where its simulated cameras stood (CAMERAS_KEY)
-        self.physics: dict[str, object] | None = None  # its physics (so101.bodies.physics), kept beside (PHYSICS_KEY)
+        # its scenario as drawn (so101.bodies.scenario.Scenario.metadata), kept beside (layout.SCENARIOS_KEY)
+        self.scenario: dict[str, object] | None = None
 
     def add_frame(self, frame: Mapping[str, Any]) -> None:
         """One frame: a value for each of the dataset's features (self.features), e.g.
@@ -121,7 +118,7 @@ class EpisodeRecorder:
             columns = {key: np.stack(rows) for key, rows in self._columns.items()}
             try:
                 self._saved = self._writer.commit_episode(self.task, columns, dict(self._encoded), self.seed,
-                                                           self.looks, self.cameras, self.physics)
+                                                           self.scenario)
             except CommitIncomplete:
                 # Its videos may still be in the work folder, named by the journal: kept for the next open.
                 self._discarded = True

@@ -73,12 +73,27 @@ class EpisodeSummary:
 # In info.json, beside LeRobot's keys: {episode index: the seed its task's layout was made from}, for
 # the episodes made from a seed (`so101 demos`, `so101 eval`'s runner); LeRobot ignores it.
 SEEDS_KEY = "so101_episode_seeds"
-# Each episode's pictures' looks (so101.bodies.looks: "fixed", or the varied ones drawn), by episode index.
-LOOKS_KEY = "so101_episode_looks"
-# Where each episode's simulated cameras stood (so101.bodies.camera_file: each camera's file, as drawn), a list by episode index.
-CAMERAS_KEY = "so101_episode_cameras"
-# Each episode's physics (so101.bodies.physics: "fixed", or the varied physics drawn), by episode index.
-PHYSICS_KEY = "so101_episode_physics"
+# Each episode's scenario (so101.bodies.scenario: its physics, and with pictures their looks and where its
+# cameras stood, as drawn), by episode index.
+SCENARIOS_KEY = "so101_episode_scenarios"
+# Where datasets written before SCENARIOS_KEY kept them: looks and physics by episode index, cameras a list.
+OLD_LOOKS_KEY, OLD_CAMERAS_KEY, OLD_PHYSICS_KEY = "so101_episode_looks", "so101_episode_cameras", "so101_episode_physics"
+
+
+def episode_scenario(info: Mapping[str, Any], episode: int) -> dict[str, Any]:
+    """What info.json keeps of episode `episode`'s scenario ({} for none): "physics", "looks", "cameras", those
+    it has; read from the keys of datasets written before SCENARIOS_KEY too."""
+    kept = info.get(SCENARIOS_KEY, {}).get(str(episode))
+    if kept is not None:
+        return dict(kept)
+    older: dict[str, Any] = {}
+    for name, key in (("looks", OLD_LOOKS_KEY), ("physics", OLD_PHYSICS_KEY)):
+        if str(episode) in info.get(key, {}):
+            older[name] = info[key][str(episode)]
+    cameras = info.get(OLD_CAMERAS_KEY, [])
+    if episode < len(cameras) and cameras[episode] is not None:
+        older["cameras"] = cameras[episode]
+    return older
 
 
 def recorder_features(video_sizes: Mapping[str, tuple[int, int]],

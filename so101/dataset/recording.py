@@ -29,9 +29,8 @@ from typing import Any, Callable, Mapping, Protocol, Sequence
 import numpy as np
 import numpy.typing as npt
 
-from so101.bodies.camera_file import DEFAULT_SIZE, CameraFile, cameras_metadata
-from so101.bodies.looks import DEFAULT_LOOKS, looks_metadata
-from so101.bodies.physics import DEFAULT_PHYSICS, physics_metadata
+from so101.bodies.camera_file import DEFAULT_SIZE
+from so101.bodies.scenario import Scenario
 from so101.cameras.sources import silent_camera
 from so101.dataset.features import (
     ACTION_KEY, ENVIRONMENT_KEY, IMAGE_KEY, REWARD_KEY, STATE_KEY, SUCCESS_KEY, WRIST_IMAGE_KEY, to_lerobot,
@@ -100,10 +99,8 @@ class Episode(Protocol):
     """An episode being written (so101.dataset.episode.EpisodeRecorder)."""
 
     frames: int
-    seed: int | None  # the task's layout, and its pictures' looks, kept by episode in info.json
-    looks: dict[str, object] | None
-    cameras: dict[str, object] | None
-    physics: dict[str, object] | None
+    seed: int | None  # the task's layout, and its scenario as drawn, kept by episode in info.json
+    scenario: dict[str, object] | None
 
     def add_frame(self, frame: Mapping[str, Any]) -> None: ...  # feature key -> value
 
@@ -165,10 +162,9 @@ class Recording:
 
     def __init__(self, writer: Writer, root: str, fps: int, lang: str, needs_image: bool,
                  say: Callable[[str], None], clock: Callable[[], float] = time.monotonic, task: CubeToBox | None = None,
-                 looks: str = DEFAULT_LOOKS, observed: Observed = ALL_OBSERVED, wrist: bool = False,
-                 camera_poses: dict[str, CameraFile] | None = None, image_size: tuple[int, int] | None = None,
-                 camera_lost: str = "", log: Callable[[str], None] = lambda line: None,
-                 physics: str = DEFAULT_PHYSICS):
+                 scenario: Scenario = Scenario(), observed: Observed = ALL_OBSERVED, wrist: bool = False,
+                 image_size: tuple[int, int] | None = None, camera_lost: str = "",
+                 log: Callable[[str], None] = lambda line: None):
         self.writer, self.root, self.fps = writer, root, fps
         self.text = TEXT[lang]
         self.needs_image = needs_image and observed.front
@@ -190,10 +186,8 @@ class Recording:
         self._pairing_s = 0.0  # the episode's widest gap between a picture and its state
         self.shows_environment = observed.environment
         self.success = False
-        self.looks = looks  # the pictures' looks (so101.bodies.looks), drawn from the layout's seed
-        self.camera_poses = dict(camera_poses or {})  # where the simulated cameras stand (so101.bodies.camera_file)
+        self.scenario = scenario  # the pictures' looks, cameras and the physics, drawn from the layout's seed
         self.image_size = image_size  # the pictures' size
-        self.physics = physics  # the body's physics (so101.bodies.physics), drawn from the layout's seed
         self.seed: int | None = None  # the layout's, from task_status
         self.episode: Episode | None = None
         self.episode_index = 0  # the index of the episode recording (or of the next one)
@@ -346,14 +340,11 @@ class Recording:
         self.episode = self.writer.start_episode(task)
         if self.task is not None and self.seed is not None:  # the layout it starts from, its physics, how it looks
             self.episode.seed = self.seed
-            self.episode.physics = physics_metadata(self.physics, self.seed)
-            if self.needs_image or self.needs_wrist_image:
-                self.episode.looks = looks_metadata(self.looks, self.seed)
-                if not self.camera_lost:  # a simulation's cameras: where they stood, as drawn
-                    names = tuple(name for name, shown in (("front", self.needs_image), ("wrist", self.needs_wrist_image))
-                                  if shown)
-                    self.episode.cameras = cameras_metadata(self.camera_poses, self.looks, self.seed, names,
-                                                            self.image_size or DEFAULT_SIZE)
+            names = tuple(name for name, shown in (("front", self.needs_image), ("wrist", self.needs_wrist_image))
+                          if shown)
+            self.episode.scenario = self.scenario.metadata(self.seed, names, self.image_size or DEFAULT_SIZE)
+            if self.camera_lost:  # real cameras: where they stood is not the simulation's to say
+                self.episode.scenario.pop("cameras", None)
         self._frame_clock, self._pairing_s = None, 0.0
         self.last_task = task
         line = self.text["started"].format(episode=self.episode_index, task=task)

@@ -7,9 +7,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from so101.assets import ASSETS_ENV_VAR
-from so101.bodies.camera_file import CAMERA_POSES_ENV_VAR, CAMERA_POSES_HELP, CameraFile, parse_camera_poses
-from so101.bodies.looks import DEFAULT_LOOKS, LOOKS_CHOICES
-from so101.bodies.physics import DEFAULT_PHYSICS, PHYSICS_ENV_VAR, physics_mode
+from so101.bodies.camera_file import CameraFile
+from so101.bodies.scenario import SCENARIO_ENV_VAR, SCENARIO_HELP, Scenario, parse_scenario
 from so101.bodies.settings import read_language
 from so101.tasks.settings import read_task
 from so101.dataset.features import DEFAULT_FPS
@@ -42,14 +41,7 @@ class RecorderSettings(EnvironSettings):
     task: str = setting(
         "SO101_TASK", "", "the body's task: frames also hold its `object_state`, reward and success; empty = none",
         read_task)
-    looks: str = setting(
-        "SO101_LOOKS", DEFAULT_LOOKS, "the pictures' looks, as the camera draws them (`fixed` or `varied`): each "
-        "episode's, from the seed its layout starts from, is kept in info.json", read_choice(LOOKS_CHOICES))
-    physics: str = setting(
-        PHYSICS_ENV_VAR, DEFAULT_PHYSICS, "the physics, as the body has it (`fixed`, `varied` or a ranges file): each "
-        "episode's, from the seed its layout starts from, is kept in info.json", read_parsed(physics_mode))
-    camera_poses: dict[str, CameraFile] = setting(
-        CAMERA_POSES_ENV_VAR, "", CAMERA_POSES_HELP, read_parsed(parse_camera_poses))
+    scenario: Scenario = setting(SCENARIO_ENV_VAR, "", SCENARIO_HELP, read_parsed(parse_scenario))
     observed: Observed = setting(
         OBSERVE_ENV_VAR, str(ALL_OBSERVED), "what the frames show, from state,environment,front,wrist (so101.observe), "
         "as far as the body has it: without a task no environment or wrist, without video no camera",
@@ -61,6 +53,18 @@ class RecorderSettings(EnvironSettings):
     camera_lost: str = setting(
         "SO101_RECORD_CAMERA_LOST", "save", "with real cameras, what becomes of the episode when one stops sending "
         "pictures: `save` it up to then, or `discard` it", read_choice(CAMERA_LOST_CHOICES))
+
+    @property
+    def looks(self) -> str:
+        return self.scenario.looks
+
+    @property
+    def camera_poses(self) -> dict[str, CameraFile]:
+        return self.scenario.camera_poses
+
+    @property
+    def physics(self) -> str:
+        return self.scenario.physics
 
 
 @dataclass(frozen=True)
@@ -74,14 +78,19 @@ class CameraSettings(EnvironSettings):
         ASSETS_ENV_VAR, "", "where the model is; empty = where `so101 assets` puts it", read_optional_path)
     task: str = setting("SO101_TASK", "", "the task whose objects the pictures show, posed by `object_state`; empty = none",
                         read_task)
-    looks: str = setting(
-        "SO101_LOOKS", DEFAULT_LOOKS, "`fixed`, or `varied`: each layout's seed (from `task_status`) draws the pictures' "
-        "light, colours and camera placement (so101/bodies/looks.py)", read_choice(LOOKS_CHOICES))
-    physics: str = setting(
-        PHYSICS_ENV_VAR, DEFAULT_PHYSICS, "the physics, as the body has it: varied, each layout's seed draws the cube's "
-        "size and the calibration, and the pictures show them (so101/bodies/physics.py)", read_parsed(physics_mode))
-    camera_poses: dict[str, CameraFile] = setting(
-        CAMERA_POSES_ENV_VAR, "", CAMERA_POSES_HELP, read_parsed(parse_camera_poses))
+    scenario: Scenario = setting(SCENARIO_ENV_VAR, "", SCENARIO_HELP, read_parsed(parse_scenario))
+
+    @property
+    def looks(self) -> str:
+        return self.scenario.looks
+
+    @property
+    def camera_poses(self) -> dict[str, CameraFile]:
+        return self.scenario.camera_poses
+
+    @property
+    def physics(self) -> str:
+        return self.scenario.physics
 
 
 @dataclass(frozen=True)

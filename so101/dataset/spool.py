@@ -63,15 +63,13 @@ class EpisodeSpool:
 
     def commit_episode(self, task: str, columns: dict[str, np.ndarray],
                        encoded: dict[str, videos.EncodedVideo], seed: int | None = None,
-                       looks: dict[str, object] | None = None, cameras: dict[str, object] | None = None,
-                       physics: dict[str, object] | None = None) -> EpisodeSummary:
+                       scenario: dict[str, object] | None = None) -> EpisodeSummary:
         number = self._count
         staging = self.folder / f".{PREFIX}{number:06d}"
         shutil.rmtree(staging, ignore_errors=True)
         staging.mkdir()
         np.savez(staging / COLUMNS_FILE, **columns)  # type: ignore[arg-type]
-        meta: dict[str, Any] = {"task": task, "seed": seed, "looks": looks, "cameras": cameras, "physics": physics,
-                                "videos": {}}
+        meta: dict[str, Any] = {"task": task, "seed": seed, "scenario": scenario, "videos": {}}
         for key, video in encoded.items():
             os.replace(video.path, staging / f"{key}.mp4")
             np.save(staging / _histograms_file(key), np.stack(video.inspected))
@@ -109,8 +107,7 @@ def pop(episode: Path, writer: DatasetWriter) -> EpisodeSummary:
         encoded[key] = videos.EncodedVideo(moved, int(info["frames"]), float(info["duration_s"]),
                                            list(np.load(episode / _histograms_file(key))))
     try:
-        summary = writer.commit_episode(meta["task"], columns, encoded, meta.get("seed"), meta.get("looks"),
-                                         meta.get("cameras"), meta.get("physics"))
+        summary = writer.commit_episode(meta["task"], columns, encoded, meta.get("seed"), meta.get("scenario"))
     except CommitIncomplete:
         raise  # its videos stay where its journal names them, for the next open
     except BaseException:

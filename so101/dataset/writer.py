@@ -24,7 +24,7 @@ from so101.dataset.commit import (WORK_DIR, CommitIncomplete, Plan, commit, fsyn
 from so101.dataset.episode import EpisodeRecorder
 from so101.dataset.features import ENVIRONMENT_KEY, REWARD_KEY, ROBOT_TYPE
 from so101.dataset.layout import (CODEBASE_VERSION, DATA_PATH, DEFAULT_CHUNK_SIZE, DEFAULT_DATA_FILE_SIZE_IN_MB,
-                                  DEFAULT_VIDEO_FILE_SIZE_IN_MB, EPISODES_DIR, EPISODES_PATH, INFO_PATH, LOOKS_KEY, SEEDS_KEY, CAMERAS_KEY, PHYSICS_KEY,
+                                  DEFAULT_VIDEO_FILE_SIZE_IN_MB, EPISODES_DIR, EPISODES_PATH, INFO_PATH, SEEDS_KEY, SCENARIOS_KEY,
                                   STATS_PATH, TASKS_PATH, VIDEO_PATH, DatasetError, EpisodeSummary,
                                   data_schema, episode_row_schema, frame_features, load_info, next_file,
                                   read_episode_rows, read_tasks, recorder_features, summary, tasks_table,
@@ -277,12 +277,10 @@ class DatasetWriter:
 
     # -- a save ------------------------------------------------------------------------------
     def commit_episode(self, task: str, columns: dict[str, np.ndarray], encoded: dict[str, videos.EncodedVideo],
-                       seed: int | None = None, looks: dict[str, object] | None = None,
-                       cameras: dict[str, object] | None = None,
-                       physics: dict[str, object] | None = None) -> EpisodeSummary:
+                       seed: int | None = None, scenario: dict[str, object] | None = None) -> EpisodeSummary:
         """Add an episode (EpisodeRecorder.save): its frame features' (frames, ...) columns, its
-        finished videos, and a task's layout seed, its pictures' looks, where its cameras stood and its physics
-        (kept in info.json under SEEDS_KEY, LOOKS_KEY and PHYSICS_KEY by episode index, and CAMERAS_KEY's list). All of it or nothing is in the dataset when this returns or raises."""
+        finished videos, and a task's layout seed and its scenario as drawn (kept in info.json under SEEDS_KEY and
+        SCENARIOS_KEY by episode index). All of it or nothing is in the dataset when this returns or raises."""
         with self._commit_lock:
             if self._lock_fd is None:
                 raise DatasetError(f"the writer of {self.root} is closed: the episode is not saved")
@@ -335,13 +333,8 @@ class DatasetWriter:
             new_stats = aggregate_stats([self._stats, episode_stats]) if self._stats is not None else episode_stats
             if seed is not None:
                 info[SEEDS_KEY] = {**info.get(SEEDS_KEY, {}), str(episode_index): int(seed)}
-            if looks is not None:
-                info[LOOKS_KEY] = {**info.get(LOOKS_KEY, {}), str(episode_index): looks}
-            if physics is not None:
-                info[PHYSICS_KEY] = {**info.get(PHYSICS_KEY, {}), str(episode_index): physics}
-            if cameras is not None:  # a list by episode index; none for episodes recorded before it was kept
-                kept = list(info.get(CAMERAS_KEY, []))
-                info[CAMERAS_KEY] = [*kept, *[None] * (episode_index - len(kept)), cameras]
+            if scenario is not None:
+                info[SCENARIOS_KEY] = {**info.get(SCENARIOS_KEY, {}), str(episode_index): scenario}
             info.update({"total_episodes": episode_index + 1, "total_frames": first_frame + length,
                          "total_tasks": len(tasks), "splits": {"train": f"0:{episode_index + 1}"}})
             plan.writes.append((INFO_PATH, lambda path: write_json(path, info)))

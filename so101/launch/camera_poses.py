@@ -7,8 +7,7 @@ from __future__ import annotations
 import argparse
 from typing import cast
 
-from so101.bodies.camera_file import CAMERA_POSES_ENV_VAR, CameraFile, CameraFileError, camera_pose_given, camera_poses_text
-from so101.runtime.dataflow import tell_nodes
+from so101.bodies.camera_file import CameraFile, CameraFileError, camera_pose_given
 
 CAMERA_POSE_HELP = ("draw the simulated camera NAME (front or wrist) from where FILE puts it: a camera file from "
                     "`so101 cameras --fit` or `--default` (repeat for both cameras; default: the simulator's own)")
@@ -39,13 +38,3 @@ def add_camera_pose_option(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--camera-pose", dest="camera_poses", type=camera_pose, action=_CameraPoses, default={},
                         metavar="NAME=FILE", help=CAMERA_POSE_HELP)
 
-
-def camera_poses_env(poses: dict[str, CameraFile]) -> dict[str, str]:
-    """What the nodes that draw and keep the pictures are told (none: nothing, the simulator's own)."""
-    return {CAMERA_POSES_ENV_VAR: camera_poses_text(poses)} if poses else {}
-
-
-def draw_from_poses(descriptor: dict, poses: dict[str, CameraFile], drawing: tuple[str, ...]) -> bool:
-    """`poses` told to the nodes of `descriptor` named in `drawing` (those that draw, keep or read a task's
-    simulated pictures); False when it has none of them (nothing would be drawn from there)."""
-    return tell_nodes(descriptor, drawing, camera_poses_env(poses))

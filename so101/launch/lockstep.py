@@ -25,11 +25,11 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path, PurePath
 from typing import TYPE_CHECKING, Callable
 
-from so101.bodies.camera_file import CAMERA_POSES_ENV_VAR
 from so101.bodies.looks import DEFAULT_LOOKS, LOOKS_CHOICES
-from so101.bodies.physics import DEFAULT_PHYSICS, PHYSICS_ENV_VAR, physics_mode
+from so101.bodies.physics import DEFAULT_PHYSICS, physics_mode
 from so101.bodies.registry import BODIES, SIMULATED_BODIES, BodyKind
-from so101.launch.camera_poses import add_camera_pose_option, camera_poses_env
+from so101.bodies.scenario import SCENARIO_ENV_VAR, Scenario
+from so101.launch.camera_poses import add_camera_pose_option
 from so101.launch.on_cluster import ClusterPlace, joined_cluster
 from so101.runtime.argtypes import add_language_option, number, parsed_by, whole_number
 from so101.runtime.dataflow import (
@@ -170,15 +170,17 @@ def flows_for(args: argparse.Namespace, work: Path, driver: Driver | None, pictu
         env = {"SO101_TASK": args.task, "SO101_SEED": str(seeds[0]), "SO101_EPISODES": str(len(seeds)),
                "SO101_TIME_LIMIT_S": repr(args.time_limit), "SO101_EPISODES_OUT": str(folder / "episodes.jsonl"),
                "SO101_LOCKSTEP_PICTURES": size, **runner_env(folder)}
-        if size and args.looks != DEFAULT_LOOKS:  # the body draws them, the runner keeps them in the dataset
-            env["SO101_LOOKS"] = args.looks
-        if size:  # where the cameras stand: the body draws from there, the runner keeps it
-            env.update(camera_poses_env(args.camera_poses))
-        if args.physics != DEFAULT_PHYSICS:  # the body has it, the runner keeps it in the dataset
-            env[PHYSICS_ENV_VAR] = args.physics
+        env.update(scenario_of(args, pictured=bool(size)).env())  # the body has it, the runner keeps it
         flows.append(Flow(BODIES[args.body], driver=driver, runner_env=env, lang=args.lang,
                           pictures=pictures if size else (), picture_size=size))
     return flows
+
+
+def scenario_of(args: argparse.Namespace, pictured: bool = True) -> Scenario:
+    """The scenario --looks, --camera-pose and --physics ask for; the looks and the cameras only where
+    there are pictures (`pictured`) to draw them in."""
+    return Scenario(looks=args.looks if pictured else DEFAULT_LOOKS,
+                    camera_poses=dict(args.camera_poses) if pictured else {}, physics=args.physics)
 
 
 def lockstep_dataflow(flow: Flow, placement: Placement | None = None, root: PurePath = ROOT) -> dict:
@@ -206,8 +208,7 @@ def lockstep_dataflow(flow: Flow, placement: Placement | None = None, root: Pure
         "env": {"SO101_MODE": "direct", "SO101_LANG": flow.lang, "SO101_TASK": flow.runner_env["SO101_TASK"],
                 "SO101_SEED": flow.runner_env["SO101_SEED"], "SO101_LOCKSTEP_FPS": str(fps),
                 "SO101_EPISODE_FRAMES": str(last_frame), "SO101_LOCKSTEP_PICTURES": flow.picture_size,
-                **{key: value for key, value in flow.runner_env.items()
-                   if key in ("SO101_LOOKS", CAMERA_POSES_ENV_VAR, PHYSICS_ENV_VAR)},
+                **{key: value for key, value in flow.runner_env.items() if key == SCENARIO_ENV_VAR},
                 **flow.body_env},
     }]
     if driver is not None:
@@ -219,7 +220,10 @@ def lockstep_dataflow(flow: Flow, placement: Placement | None = None, root: Pure
                 "id": PERCEPTION_NODE_ID, "restart_policy": "never",
                 **node_launch(PERCEPTION_NODE_FILE, under(driver.node_id), driver.python),
                 "inputs": {name: queued(f"{body_id}/{name}") for name in ("image", "joint_state")},
-                "outputs": ["object_state"], "env": {"SO101_LANG": flow.lang, **driver.perception_env},
+                "outputs": ["object_state"],
+                # the scenario's camera poses: the eyes see from where the pictures were drawn
+                "env": {"SO101_LANG": flow.lang, **driver.perception_env,
+                        **{key: value for key, value in flow.runner_env.items() if key == SCENARIO_ENV_VAR}},
             })
         nodes.append({
             "id": driver.node_id, "restart_policy": "never",

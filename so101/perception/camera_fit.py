@@ -363,7 +363,7 @@ def fit_from_dataset(root: Path, start: CameraFile, episode: int = 0,
     observation.images.NAME and its observation.state, read in its units: so101.dataset.units, with
     `units` and the recording follower's `calibration` where its meta does not say), from `start`."""
     from so101.dataset.features import ENVIRONMENT_KEY, STATE_KEY
-    from so101.dataset.layout import PHYSICS_KEY, DatasetError
+    from so101.dataset.layout import DatasetError, episode_scenario
     from so101.dataset.reader import Dataset
 
     name = start.camera
@@ -378,7 +378,7 @@ def fit_from_dataset(root: Path, start: CameraFile, episode: int = 0,
         chosen = chosen_frames(len(states))
         wanted = set(chosen)
         pictures = [picture for index, picture in enumerate(dataset.episode_images(episode, key)) if index in wanted]
-        physics = physics_from_metadata(dataset.info.get(PHYSICS_KEY, {}).get(str(episode), {"physics": "fixed"}))
+        physics = physics_from_metadata(episode_scenario(dataset.info, episode).get("physics", {"physics": "fixed"}))
     except DatasetError as error:  # it names the dataset
         raise CameraFitError(str(error)) from None
     except (ValueError, OSError) as error:

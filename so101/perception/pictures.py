@@ -9,7 +9,7 @@ and a cube still lying where its episode put it moves to another layout's place 
 thousands of layouts for the price of a few hundred demonstrations. Held-out pictures draw their looks
 and layouts from seeds the training pictures never draw.
 
-Each picture is drawn with its episode's physics, as the dataset keeps it (`so101_episode_physics`):
+Each picture is drawn with its episode's physics, as the dataset keeps it (its scenario's, `so101_episode_scenarios`):
 its cube at its size, and the arm where it truly was while its calibration reported the recorded
 angles. Its answers are what the picture shows (the tip where the arm truly was, the cube's height
 above lying on the floor at its own size), but for `tip_xyz`, where the recorded angles put the tip:
@@ -30,7 +30,7 @@ import pyarrow.parquet as pq
 
 from so101.bodies.physics import Physics, physics_from_metadata
 from so101.dataset.features import ENVIRONMENT_KEY, STATE_KEY, from_lerobot
-from so101.dataset.layout import INFO_PATH, PHYSICS_KEY
+from so101.dataset.layout import INFO_PATH, SCENARIOS_KEY, episode_scenario
 from so101.perception.estimate import BOX_POINT_HEIGHT_M
 from so101.perception.geometry import view_of
 from so101.tasks.cube_to_box import CUBE_TO_BOX
@@ -92,10 +92,11 @@ def read_frames(dataset: Path) -> Frames:
 def episode_physics(dataset: Path) -> dict[int, Physics | None]:
     """Each episode's physics as the dataset keeps it (a dataset from before varied physics: fixed)."""
     info = json.loads((dataset / INFO_PATH).read_text(encoding="utf-8"))
+    kept = {index: episode_scenario(info, index).get("physics") for index in range(int(info.get("total_episodes", 0)))}
     try:
-        return {int(index): physics_from_metadata(entry) for index, entry in info.get(PHYSICS_KEY, {}).items()}
+        return {index: physics_from_metadata(entry) for index, entry in kept.items() if entry is not None}
     except ValueError as error:
-        raise ValueError(f"{dataset / INFO_PATH}: {PHYSICS_KEY}: {error}") from None
+        raise ValueError(f"{dataset / INFO_PATH}: {SCENARIOS_KEY}: {error}") from None
 
 
 def picture_seeds(held_out: bool) -> tuple[tuple[int, int], tuple[int, int]]:

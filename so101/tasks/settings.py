@@ -7,9 +7,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Mapping
 
-from so101.bodies.camera_file import CAMERA_POSES_ENV_VAR, CAMERA_POSES_HELP, CameraFile, parse_camera_poses
-from so101.bodies.looks import DEFAULT_LOOKS, LOOKS_CHOICES
-from so101.bodies.physics import DEFAULT_PHYSICS, PHYSICS_ENV_VAR, physics_mode
+from so101.bodies.camera_file import CameraFile
+from so101.bodies.scenario import SCENARIO_ENV_VAR, SCENARIO_HELP, Scenario, parse_scenario
 from so101.bodies.settings import read_language, read_lockstep_fps
 from so101.lang import DEFAULT_LANGUAGE, ENV_VAR as LANG_ENV_VAR
 from so101.observe import ALL_OBSERVED, OBSERVE_ENV_VAR, Observed, parse_observed
@@ -103,15 +102,20 @@ class EpisodeSettings(EnvironSettings):
         read_image_size)
     video_dir: Path | None = setting(
         "SO101_VIDEO_DIR", "", "a folder for each episode's front picture as an mp4; empty = none", read_optional_path)
-    looks: str = setting(
-        "SO101_LOOKS", DEFAULT_LOOKS, "the pictures' looks, as the body draws them (`fixed` or `varied`): a dataset "
-        "keeps each episode's in info.json", read_choice(LOOKS_CHOICES))
-    physics: str = setting(
-        PHYSICS_ENV_VAR, DEFAULT_PHYSICS, "the physics, as the body has it (`fixed`, `varied` or a ranges file): a dataset "
-        "keeps each episode's in info.json", read_parsed(physics_mode))
-    camera_poses: dict[str, CameraFile] = setting(
-        CAMERA_POSES_ENV_VAR, "", CAMERA_POSES_HELP, read_parsed(parse_camera_poses))
+    scenario: Scenario = setting(SCENARIO_ENV_VAR, "", SCENARIO_HELP, read_parsed(parse_scenario))
     observed: Observed = setting(
         OBSERVE_ENV_VAR, str(ALL_OBSERVED), "what the written frames show, from state,environment,front,wrist "
         "(so101.observe): state,front,wrist leaves the objects' exact poses out", read_parsed(parse_observed))
     lang: str = setting(LANG_ENV_VAR, DEFAULT_LANGUAGE, "log language, `zh` or `en`", read_language)
+
+    @property
+    def looks(self) -> str:
+        return self.scenario.looks
+
+    @property
+    def camera_poses(self) -> dict[str, CameraFile]:
+        return self.scenario.camera_poses
+
+    @property
+    def physics(self) -> str:
+        return self.scenario.physics

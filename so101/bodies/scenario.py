@@ -1,0 +1,86 @@
+"""What an episode looks like and how it behaves: one value, from the command line to every node.
+
+A task's episode is laid out from its seed. Three things vary with it beyond the layout:
+- its pictures' looks (so101.bodies.looks: `fixed`, `varied`, `unseen`);
+- where its simulated cameras stand (so101.bodies.camera_file: `--camera-pose NAME=FILE`);
+- its physics (so101.bodies.physics: `fixed`, `varied`, or a ranges file's ranges).
+
+A `Scenario` holds the three as a run asks for them. It travels whole: one environment variable
+(`SCENARIO_ENV_VAR`, JSON, so that a node on another machine needs no file) to the body, the camera,
+the recorder, the episodes' runner and the perception node. Each episode's are drawn from its seed
+(`metadata`), and a dataset keeps them under one key by episode (so101.dataset.layout.SCENARIOS_KEY).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from typing import Any
+
+from so101.bodies.camera_file import CameraFile, CameraFileError, cameras_metadata, parse_camera_poses
+from so101.bodies.looks import DEFAULT_LOOKS, LOOKS_CHOICES, looks_metadata
+from so101.bodies.physics import DEFAULT_PHYSICS, PhysicsError, physics_metadata, physics_mode
+
+SCENARIO_ENV_VAR = "SO101_SCENARIO"
+SCENARIO_HELP = ("what a task's episodes look like and how they behave, JSON: `looks` (fixed, varied or unseen), "
+                 "`camera_poses` (a camera's name to its camera file's fields) and `physics` (fixed, varied or a "
+                 "ranges object); each left out is the default (so101/bodies/scenario.py); empty = all defaults")
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A run's looks, camera poses and physics, as asked for; each episode's are drawn from its seed."""
+
+    looks: str = DEFAULT_LOOKS
+    camera_poses: dict[str, CameraFile] = field(default_factory=dict)
+    physics: str = DEFAULT_PHYSICS  # as physics_mode gives it: fixed, varied, or the ranges as JSON text
+
+    def text(self) -> str:
+        """This scenario as nodes are told it: JSON of what differs from the defaults ("" for none)."""
+        given: dict[str, Any] = {}
+        if self.looks != DEFAULT_LOOKS:
+            given["looks"] = self.looks
+        if self.camera_poses:
+            given["camera_poses"] = {name: pose.as_dict() for name, pose in self.camera_poses.items()}
+        if self.physics != DEFAULT_PHYSICS:
+            given["physics"] = json.loads(self.physics) if self.physics.startswith("{") else self.physics
+        return json.dumps(given, separators=(",", ":"), sort_keys=True) if given else ""
+
+    def env(self) -> dict[str, str]:
+        """What a node is told: nothing for the defaults."""
+        text = self.text()
+        return {SCENARIO_ENV_VAR: text} if text else {}
+
+    def metadata(self, seed: int, cameras: tuple[str, ...] = (), size: tuple[int, int] | None = None) -> dict[str, object]:
+        """What a dataset keeps of episode seed `seed`: its physics, and where it has pictures from `cameras`
+        (at `size`), their looks and where those cameras stood, as drawn."""
+        kept: dict[str, object] = {"physics": physics_metadata(self.physics, seed)}
+        if cameras and size is not None:
+            kept["looks"] = looks_metadata(self.looks, seed)
+            kept["cameras"] = cameras_metadata(self.camera_poses, self.looks, seed, cameras, size)
+        return kept
+
+
+def parse_scenario(text: str) -> Scenario:
+    """SCENARIO_ENV_VAR as a node reads it; ValueError in one line for anything else."""
+    if not text.strip():
+        return Scenario()
+    try:
+        given = json.loads(text)
+    except json.JSONDecodeError as error:
+        raise ValueError(f"a scenario is JSON ({error.msg})") from None
+    if not isinstance(given, dict):
+        raise ValueError("a scenario is a JSON object of looks, camera_poses and physics")
+    unknown = sorted(set(given) - {"looks", "camera_poses", "physics"})
+    if unknown:
+        raise ValueError(f"a scenario has no {unknown[0]!r}: it holds looks, camera_poses and physics")
+    looks = given.get("looks", DEFAULT_LOOKS)
+    if looks not in LOOKS_CHOICES:
+        raise ValueError(f"a scenario's looks are one of {', '.join(LOOKS_CHOICES)}, not {looks!r}")
+    physics = given.get("physics", DEFAULT_PHYSICS)
+    try:
+        poses = parse_camera_poses(json.dumps(given.get("camera_poses", {})))
+        mode = physics_mode(json.dumps(physics) if isinstance(physics, dict) else str(physics))
+    except (CameraFileError, PhysicsError) as error:
+        raise ValueError(f"the scenario: {error}") from None
+    return Scenario(looks, poses, mode)
