@@ -68,7 +68,7 @@ def main() -> int:
         settings = CameraSettings.from_environ(os.environ)
         cameras = TaskCameras(task_named(settings.task) if settings.task else None, settings.assets_dir,
                               log=lambda line: None, looks=settings.looks, poses=settings.camera_poses,
-                              physics=settings.physics)
+                              physics=settings.physics, backdrops=settings.scenario.backdrops)
         width, height = settings.image_size or (0, 0)
         cameras.draw(HOME_POSE_DEG, [], width, height)  # a renderer that cannot work says so now, in one line
     except (ValueError, ModelFilesError, DisplayError, RuntimeError) as error:
@@ -96,9 +96,9 @@ def main() -> int:
             elif event["id"] == "task_status":  # the layout's seed: the pictures' looks and physics, where they vary
                 seed = (event["metadata"] or {}).get("seed")
                 if isinstance(seed, int) and seed >= 0:
-                    before = (cameras.looks, cameras.physics)
+                    before = (cameras.looks, cameras.physics, cameras.placements)
                     cameras.show_seed(seed)
-                    if (cameras.looks, cameras.physics) != before:
+                    if (cameras.looks, cameras.physics, cameras.placements) != before:
                         drawn_deg = None  # drawn again at the next tick, in the new looks
             elif event["id"] == "tick" and arm_deg is not None:
                 if stale(event["metadata"].get("timestamp"), period_s):  # waited while drawing: newer states came

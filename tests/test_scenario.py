@@ -28,8 +28,9 @@ def test_a_scenario_reaches_a_node_whole_and_the_defaults_say_nothing(tmp_path):
 
 
 @pytest.mark.parametrize("text, message", [
-    ("[1]", "a scenario is a JSON object of looks, camera_poses and physics"),
-    ('{"look": "varied"}', "a scenario has no 'look': it holds looks, camera_poses and physics"),
+    ("[1]", "a scenario is a JSON object of looks, camera_poses, physics, backdrops"),
+    ('{"look": "varied"}', "a scenario has no 'look': it holds looks, camera_poses, physics, backdrops"),
+    ('{"backdrops": {"front": "/no/such/table.png"}}', "the scenario: /no/such/table.png does not exist"),
     ('{"physics": {"cube_mass_kg": [0.05, 0.01]}}', "the scenario: the physics ranges: cube_mass_kg is [low, high]"),
     ('{"camera_poses": {"front": {}}}', "the scenario: "),
 ])

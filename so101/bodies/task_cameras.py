@@ -20,7 +20,8 @@ from typing import Callable, Sequence
 import numpy as np
 import numpy.typing as npt
 
-from so101.bodies.camera import DEFAULT_CAMERA, WRIST_CAMERA, WRIST_CAMERA_NAME, Camera
+from so101.bodies.backdrop import backdrop_picture, placement_for
+from so101.bodies.camera import DEFAULT_CAMERA, WRIST_CAMERA, WRIST_CAMERA_NAME, Camera, WristCamera
 from so101.bodies.camera_file import CameraFile, drawn_front, fixed_cameras, wrist_placement
 from so101.bodies.looks import DEFAULT_LOOKS, Looks, looks_for
 from so101.bodies.physics import DEFAULT_PHYSICS, Physics, physics_for
@@ -58,11 +59,14 @@ class TaskCameras:
     `looks` "varied": `show_seed(seed)` gives the pictures that episode's looks (so101.bodies.looks);
     "fixed": the pictures as they always were, whatever the seed. `physics` "varied" (or a ranges file):
     `show_seed(seed)` draws that episode's cube, and the arm where it truly is when its calibration
-    reports `angles_deg` (so101.bodies.physics), as the body it draws has them."""
+    reports `angles_deg` (so101.bodies.physics), as the body it draws has them. `backdrops` (a camera's
+    name to a photo, or a folder of them: so101.bodies.backdrop): that episode's photo where the floor
+    and the sky would be."""
 
     def __init__(self, task: SceneTask | None, assets_dir: Path | str | None = None,
                  log: Callable[[str], None] = print, looks: str = DEFAULT_LOOKS,
-                 poses: dict[str, CameraFile] | None = None, physics: str = DEFAULT_PHYSICS):
+                 poses: dict[str, CameraFile] | None = None, physics: str = DEFAULT_PHYSICS,
+                 backdrops: dict[str, str] | None = None):
         # MuJoCo's body as a model to draw: posed by hand, never stepped.
         from so101.bodies.mujoco_sim import SO101MuJoCo
 
@@ -73,6 +77,8 @@ class TaskCameras:
         self.physics: Physics | None = None
         self.looks_mode = looks
         self.looks: Looks | None = None
+        self.backdrops = dict(backdrops or {})
+        self.placements = {name: placement_for(path, 0, looks != DEFAULT_LOOKS) for name, path in self.backdrops.items()}
         # Light pictures whatever the task: one look, defined once, and a picture in milliseconds.
         self._model = SO101MuJoCo(mode="direct", assets_dir=assets_dir, log=log, renders=True, task=task,
                                   light_pictures=True)
@@ -106,6 +112,8 @@ class TaskCameras:
         """The looks and physics of episode seed `seed` from now on (varied ones; fixed ones stay as they are)."""
         if self.physics_mode != DEFAULT_PHYSICS:
             self.show_physics(physics_for(self.physics_mode, seed))
+        self.placements = {name: placement_for(path, seed, self.looks_mode != DEFAULT_LOOKS)
+                            for name, path in self.backdrops.items()}
         looks = looks_for(self.looks_mode, seed, len(self._object_geoms))
         if looks == self.looks:
             return
@@ -152,8 +160,20 @@ class TaskCameras:
         front_camera = front or self.front_camera()
         if scene is not None:  # MuJoCo's free camera takes its field of view from the model
             self._model.model.vis.global_.fovy = front_camera.fov_deg
-        picture = self._model.render_rgb(width, height, front_camera)
-        return picture, self._model.render_rgb(width, height, WRIST_CAMERA) if wrist and scene is not None else None
+        picture = self._behind("front", self._model.render_rgb(width, height, front_camera), front_camera)
+        if not (wrist and scene is not None):
+            return picture, None
+        return picture, self._behind("wrist", self._model.render_rgb(width, height, WRIST_CAMERA), WRIST_CAMERA)
+
+    def _behind(self, name: str, picture: RgbImage, camera: Camera | WristCamera) -> RgbImage:
+        """`picture` with camera `name`'s backdrop where it shows the floor or nothing (none: as it is)."""
+        placement = self.placements.get(name)
+        if placement is None:
+            return picture
+        height, width = picture.shape[:2]
+        geoms = self._model.render_geoms(width, height, camera)
+        behind = (geoms < 0) | (geoms == self._floor_geom)
+        return np.where(behind[:, :, None], backdrop_picture(placement, width, height), picture).astype(np.uint8)
 
     def arm_mask(self, angles_deg: AnglesDeg | Sequence[float], camera: Camera, width: int, height: int,
                  object_state: ObjectState | Sequence[float] = ()) -> npt.NDArray[np.bool_]:
@@ -196,7 +216,8 @@ def node_cameras(task: SceneTask | None, settings: NodeSettings, assets_dir: Pat
     cannot work stops the node in one line before it joins."""
     if settings.lockstep_pictures is None and not settings.image_hz > 0:
         return None
-    cameras = TaskCameras(task, assets_dir, log, settings.looks, settings.camera_poses, settings.physics)
+    scenario = settings.scenario
+    cameras = TaskCameras(task, assets_dir, log, scenario.looks, scenario.camera_poses, scenario.physics, scenario.backdrops)
     cameras.show_seed(settings.seed)
     from so101.robot import HOME_POSE_DEG
 

@@ -43,7 +43,7 @@ from so101.bodies.scenario import Scenario
 from so101.bodies.registry import BODIES, BodyKind
 from so101.dataset.features import DEFAULT_FPS, video_keys_and_sizes
 from so101.dataset.settings import DEFAULT_IMAGE_SIZE
-from so101.launch.camera_poses import add_camera_pose_option
+from so101.launch.camera_poses import add_backdrop_option, add_camera_pose_option
 from so101.launch.lockstep import add_physics_option
 from so101.launch.beside_prompt import (
     TEXT, add_body_arguments, add_log_option, add_task_arguments, add_web_arguments, add_web_view, prepare, run_beside,
@@ -88,6 +88,7 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
     add_physics_option(parser)
     parser.add_argument("--observe", type=observed_list, default=None, metavar="LIST", help=f"--record: {OBSERVE_HELP}")
     add_camera_pose_option(parser)
+    add_backdrop_option(parser)
     add_camera_size_option(parser, None, "--record: each camera's pictures, stored as video; real cameras are asked "
                                          "for it; `so101 bench --cameras --camera-size WxH` says what a size costs",
                            default_text=f"{DEFAULT_IMAGE_SIZE} on a simulation, {DEFAULT_CAMERA_SIZE} for real cameras")
@@ -209,8 +210,13 @@ def run(args: argparse.Namespace) -> int:
               "camera stands: it goes with --task NAME on a simulated body and --record DIR, or a --policy that sees",
               file=sys.stderr)
         return 2
+    if args.backdrops and not (launch.body.simulated and args.task is not None and CAMERA_NODE_ID in present):
+        print("so101 teleop: --backdrop is drawn behind a task's simulated cameras: it goes with --task NAME on a "
+              "simulated body, and --record DIR or a --policy that sees", file=sys.stderr)
+        return 2
     # The body has its physics, the camera draws the pictures, the recorder keeps them, the eyes see from where they stand.
-    tell_nodes(descriptor, (launch.body.node_id, *drawing), Scenario(args.looks, dict(args.camera_poses), args.physics).env())
+    scenario = Scenario(args.looks, dict(args.camera_poses), args.physics, dict(args.backdrops))
+    tell_nodes(descriptor, (launch.body.node_id, *drawing), scenario.env())
     web_line = add_web_view(args, descriptor, launch.body, "teleop")
     if web_line:
         ready_marks += (WEB_VIEW_MARKS,)

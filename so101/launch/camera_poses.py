@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 from typing import cast
 
+from so101.bodies.backdrop import BackdropError, checked_backdrop
 from so101.bodies.camera_file import CameraFile, CameraFileError, camera_pose_given
 
 CAMERA_POSE_HELP = ("draw the simulated camera NAME (front or wrist) from where FILE puts it: a camera file from "
@@ -38,3 +39,33 @@ def add_camera_pose_option(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--camera-pose", dest="camera_poses", type=camera_pose, action=_CameraPoses, default={},
                         metavar="NAME=FILE", help=CAMERA_POSE_HELP)
 
+
+BACKDROP_HELP = ("draw the photo IMAGE (or one from a folder of them, drawn per episode) behind camera NAME's scene "
+                 "(front or wrist), where the floor was: your workspace as that camera sees it, the arm out of view; "
+                 "any size, scaled and cropped to the pictures (docs/bodies/backdrop.md)")
+
+
+def backdrop(text: str) -> tuple[str, str]:
+    """argparse's type for NAME=IMAGE: the camera's name and the photos' path, each read once now."""
+    try:
+        return checked_backdrop(text)
+    except BackdropError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
+
+
+class _Backdrops(argparse.Action):
+    """Gathers the --backdrop options into one map (args.backdrops); a camera given twice is refused."""
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: object,
+                 option_string: str | None = None) -> None:
+        name, path = cast(tuple[str, str], values)
+        given = dict(getattr(namespace, self.dest) or {})
+        if name in given:
+            parser.error(f"--backdrop {name}=... is given twice: one photo, or one folder, a camera")
+        given[name] = path
+        setattr(namespace, self.dest, given)
+
+
+def add_backdrop_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--backdrop", dest="backdrops", type=backdrop, action=_Backdrops, default={},
+                        metavar="NAME=IMAGE", help=BACKDROP_HELP)

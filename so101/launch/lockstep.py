@@ -29,7 +29,7 @@ from so101.bodies.looks import DEFAULT_LOOKS, LOOKS_CHOICES
 from so101.bodies.physics import DEFAULT_PHYSICS, physics_mode
 from so101.bodies.registry import BODIES, SIMULATED_BODIES, BodyKind
 from so101.bodies.scenario import SCENARIO_ENV_VAR, Scenario
-from so101.launch.camera_poses import add_camera_pose_option
+from so101.launch.camera_poses import add_backdrop_option, add_camera_pose_option
 from so101.launch.on_cluster import ClusterPlace, joined_cluster
 from so101.runtime.argtypes import add_language_option, number, parsed_by, whole_number
 from so101.runtime.dataflow import (
@@ -82,6 +82,7 @@ def add_common_arguments(parser: argparse.ArgumentParser) -> None:
                              "or unseen (looks held out of varied's palettes and spreads, to score eyes on looks they "
                              "never saw)")
     add_camera_pose_option(parser)
+    add_backdrop_option(parser)
     add_physics_option(parser)
     parser.add_argument("--workers", type=whole_number(1, MAX_WORKERS), default=1, metavar="K",
                         help="dataflows run at once, each on its share of the seeds; the results are merged in seed "
@@ -177,10 +178,11 @@ def flows_for(args: argparse.Namespace, work: Path, driver: Driver | None, pictu
 
 
 def scenario_of(args: argparse.Namespace, pictured: bool = True) -> Scenario:
-    """The scenario --looks, --camera-pose and --physics ask for; the looks and the cameras only where
-    there are pictures (`pictured`) to draw them in."""
+    """The scenario --looks, --camera-pose, --physics and --backdrop ask for; the looks, the cameras and the
+    backdrops only where there are pictures (`pictured`) to draw them in."""
     return Scenario(looks=args.looks if pictured else DEFAULT_LOOKS,
-                    camera_poses=dict(args.camera_poses) if pictured else {}, physics=args.physics)
+                    camera_poses=dict(args.camera_poses) if pictured else {}, physics=args.physics,
+                    backdrops=dict(getattr(args, "backdrops", {})) if pictured else {})
 
 
 def lockstep_dataflow(flow: Flow, placement: Placement | None = None, root: PurePath = ROOT) -> dict:

@@ -1,0 +1,98 @@
+"""A photo of the workspace behind the simulated scene (so101.bodies.backdrop, `--backdrop NAME=IMAGE`): fitted
+to any picture size, drawn where the floor and the sky were and nowhere else, the same from either body,
+kept in the dataset's scenario, and refused in one line when it is not a photo."""
+
+from __future__ import annotations
+
+import re
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from so101.bodies.backdrop import (
+    SHIFT, ZOOM, BackdropError, Placement, backdrop_picture, checked_backdrop, fitted, placement_for,
+)
+from so101.bodies.registry import SIMULATED_BODIES
+from tests.helpers.dataflow import error_lines, run_so101
+
+MAGENTA = (255, 0, 255)  # no floor, arm, cube or box is this colour
+
+
+def photo(path: Path, width: int = 400, height: int = 200, colour=MAGENTA) -> Path:
+    cv2.imwrite(str(path), np.full((height, width, 3), colour[::-1], dtype=np.uint8))
+    return path
+
+
+def test_a_photo_of_any_aspect_covers_the_picture_about_its_centre():
+    wide = np.zeros((100, 400, 3), dtype=np.uint8)
+    wide[:, 190:210] = 255  # a white stripe at the middle
+    picture = fitted(wide, 64, 48)  # scaled to 48 rows (192 columns wide), its middle 64 columns kept
+    assert picture.shape == (48, 64, 3)
+    assert picture[:, 30:34].min() > 200 and picture[:, :20].max() == 0
+    moved = fitted(wide, 64, 48, shift=(0.25, 0.0))  # the crop 16 columns to the right: the stripe 16 to the left
+    assert moved[:, 14:18].min() > 200 and moved[:, 30:34].max() < 50
+
+
+def test_each_seed_draws_its_photo_and_under_varied_looks_a_small_shift_zoom_and_tint(tmp_path):
+    for index in range(3):
+        photo(tmp_path / f"{index}.png", colour=(50 * index, 0, 0))
+    drawn = {placement_for(str(tmp_path), seed, varied=False).photo.name for seed in range(30)}
+    assert drawn == {"0.png", "1.png", "2.png"}
+    assert placement_for(str(tmp_path), 4, varied=False) == Placement(placement_for(str(tmp_path), 4, False).photo)
+    varied = [placement_for(str(tmp_path), seed, varied=True) for seed in range(30)]
+    assert all(abs(shift) <= SHIFT for each in varied for shift in each.shift)
+    assert all(1 <= each.zoom <= 1 + ZOOM for each in varied) and len({each.gains for each in varied}) == 30
+    assert placement_for(str(tmp_path), 7, True) == placement_for(str(tmp_path), 7, True)
+
+
+@pytest.mark.parametrize("given, message", [
+    ("front={missing}", "{missing} does not exist: give a photo of the workspace, or a folder of them"),
+    ("front={text}", "{text} cannot be read as a picture: give a .png, .jpg, .jpeg, .bmp, .webp file"),
+    ("front={empty}", "{empty} holds no images (.png, .jpg, .jpeg, .bmp, .webp)"),
+    ("side={good}", "--backdrop takes NAME=IMAGE, NAME front or wrist: got 'side="),
+])
+def test_what_is_not_a_photo_is_refused_in_one_line_and_nothing_is_written(tmp_path, given, message):
+    paths = {"missing": tmp_path / "missing.png", "text": tmp_path / "notes.png", "empty": tmp_path / "empty",
+             "good": photo(tmp_path / "good.png")}
+    paths["text"].write_text("not a picture")
+    paths["empty"].mkdir()
+    with pytest.raises(BackdropError, match="^" + re.escape(message.format(**paths))):
+        checked_backdrop(given.format(**paths))
+    out = tmp_path / "demos"
+    done = run_so101("demos", str(out), "--task", "cube_to_box", "--episodes", "1", "--camera-size", "96x72",
+                     "--backdrop", given.format(**paths))
+    assert done.returncode == 2 and message.format(**paths) in error_lines(done.stderr)[-1], done.stderr
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("body", SIMULATED_BODIES)
+def test_the_photo_is_drawn_where_the_floor_was_from_either_body_and_the_dataset_keeps_it(tmp_path, body):
+    from so101.dataset.layout import SCENARIOS_KEY
+    from so101.dataset.reader import Dataset
+
+    backdrop, out = photo(tmp_path / "table.png"), tmp_path / "demos"
+    done = run_so101("demos", str(out), "--task", "cube_to_box", "--body", body, "--episodes", "1", "--seed", "3",
+                     "--camera-size", "96x72", "--time-limit", "0.5", "--keep", "all", "--backdrop", f"front={backdrop}")
+    assert done.returncode == 0, done.stdout + done.stderr
+    dataset = Dataset.open(out)
+    front = next(dataset.episode_images(0, "observation.images.front")).astype(int)
+    wrist = next(dataset.episode_images(0, "observation.images.wrist")).astype(int)
+    near_magenta = np.abs(front - MAGENTA).max(axis=2) < 40  # an mp4's colours, a few levels off
+    assert near_magenta[60:, :30].mean() > 0.95  # the floor in front of the arm is the photo
+    assert 0.5 < near_magenta.mean() < 0.95  # and the arm, the cube and the box are drawn over it
+    assert (np.abs(wrist - MAGENTA).max(axis=2) < 40).mean() < 0.05  # the wrist has no backdrop of its own
+    kept = dataset.info[SCENARIOS_KEY]["0"]["backdrops"]
+    assert set(kept) == {"front"} and kept["front"]["photo"] == str(backdrop.resolve())
+    assert len(kept["front"]["sha256"]) == 64
+
+
+def test_the_backdrop_picture_is_the_photo_fitted_and_tinted(tmp_path):
+    placement = Placement(photo(tmp_path / "grey.png", colour=(100, 100, 100)), gains=(1.1, 1.0, 0.9))
+    assert backdrop_picture(placement, 32, 24)[0, 0].tolist() == [110, 100, 90]
+
+
+if __name__ == "__main__":
+    sys.exit(pytest.main([__file__]))
