@@ -201,6 +201,57 @@ def test_learn_keeps_the_policy_that_scored_best_on_the_validation_layouts(tmp_p
     assert Learning(tmp_path, tmp_path, {"seed": 1, "candidates": 1}, {}, Path("python"), {}).best() == "seed1"
 
 
+def test_learn_teaches_the_eyes_from_the_camera_and_over_the_backdrop_given_and_the_folder_keeps_them(tmp_path,
+                                                                                                       capsys):
+    import argparse
+    import shutil
+    from dataclasses import replace
+
+    from so101.bodies.camera_file import default_camera_file, orbit_of
+    from so101.cli import learn
+    from so101.cli.learn import Learning
+    from so101.perception.eyes import default_eyes_facts
+    from so101.perception.recipe import read_recipe
+    from tests.helpers.dataflow import ROOT
+
+    parser = argparse.ArgumentParser()
+    learn.add_arguments(parser, "learn")
+    cv2 = pytest.importorskip("cv2")
+    cv2.imwrite(str(tmp_path / "table.png"), np.full((30, 40, 3), 90, dtype=np.uint8))
+    camera = tmp_path / "front.json"
+    moved = default_camera_file("front")
+    camera.write_text(replace(moved, fov_deg=50.0).as_json())
+    given = ["--camera-pose", f"front={camera}", "--backdrop", f"front={tmp_path / 'table.png'}"]
+    assert learn.run(parser.parse_args([str(tmp_path / "state"), "--task", "cube_to_box", "--policy-python",
+                                        str(fake_policy_env(tmp_path)), *given])) == 2
+    assert capsys.readouterr().err == ("so101 learn: --camera-pose and --backdrop shape the eyes' pictures: they go "
+                                       "with --sees\n")
+    args = parser.parse_args([str(tmp_path / "out"), "--task", "cube_to_box", "--sees", *given])
+    settings = {"seed": 1, "candidates": 1, "sees": True, "task": "cube_to_box", "body": "pybullet",
+                "camera_poses": {"front": args.camera_poses["front"].as_dict()},
+                "backdrops": {"front": str((tmp_path / "table.png").resolve())}}
+    learning = Learning(tmp_path / "out", tmp_path, settings, {}, Path("python"), {})
+    assert learning.scenario_args() == ["--scenario", json.dumps({key: settings[key] for key in ("camera_poses", "backdrops")})]
+    assert learning.camera_args() == ["--camera-pose", f"front={tmp_path / 'camera-front.json'}",
+                                      "--backdrop", f"front={settings['backdrops']['front']}"]
+    (tmp_path / "eyes").mkdir()  # what the eyes' training leaves: then the folder says what they assume
+    (tmp_path / "eyes" / "eyes.pt").write_bytes(b"weights")
+    (tmp_path / "eyes" / "eyes.json").write_text(default_eyes_facts((64, 48), {}).as_json())
+    shutil.copytree(ROOT / "tests" / "data" / "policy_act_tiny", tmp_path / "policy")
+    learning.assemble_into(tmp_path / "folder", tmp_path / "policy")
+    eyes = json.loads((tmp_path / "folder" / "eyes" / "eyes.json").read_text())
+    assert eyes["camera"]["fov_deg"] == pytest.approx(orbit_of(args.camera_poses["front"]).fov_deg) == 50.0
+    recipe = json.loads((tmp_path / "folder" / "so101_recipe.json").read_text())
+    assert recipe["backdrops"] == settings["backdrops"] and recipe["camera_poses"] == settings["camera_poses"]
+    recipe = read_recipe(tmp_path / "folder")
+    assert recipe is not None and recipe.elsewhere(settings["backdrops"], settings["camera_poses"]) == []
+    assert recipe.elsewhere({}, {}) == [  # eval or teleop run without them: said, one line each
+        f"note: the eyes were taught over {settings['backdrops']['front']} behind the front camera, and run over the "
+        "simulator's floor",
+        "note: the eyes were taught from the front camera at a camera file's pose, and this run draws it at the "
+        "simulator's own"]
+
+
 # -- a seeing recipe's folder, and the dataflows that run it ---------------------------------------------------
 
 def recipe_folder(tmp_path):

@@ -107,7 +107,7 @@ def policy_driver(args: argparse.Namespace) -> tuple[Driver, tuple[tuple[str, ..
                                python_elsewhere=args.policy_machine is not None)
     except ValueError as error:
         return str(error)
-    for line in chosen.notes():
+    for line in chosen.notes(args.backdrops, args.camera_poses):
         print(f"so101 eval: {line}", flush=True)
     print(f"so101 eval: {chosen.reads()}", flush=True)
     driver = Driver("policy", POLICY_NODE_FILE, chosen.inputs, chosen.env(args.task, args.policy_device),

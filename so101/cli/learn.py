@@ -26,12 +26,15 @@ import signal
 import subprocess
 import sys
 import time
+from dataclasses import asdict
 from pathlib import Path
 from typing import Callable
 
+from so101.bodies.camera_file import camera_file_from, orbit_of
 from so101.bodies.physics import physics_mode
 from so101.bodies.registry import SIMULATED_BODIES
 from so101.perception.recipe import EYES_DIR, POLICY_DIR, write_recipe
+from so101.launch.camera_poses import add_backdrop_option, add_camera_pose_option
 from so101.policy.environment import OFFLINE, PolicyEnvError, build, default_dir, python_in, with_checkout
 from so101.runtime.argtypes import parsed_by, whole_number
 from so101.runtime.dataflow import ROOT
@@ -74,6 +77,8 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
                              "calibration off by up to 2°: docs/loop/physics.md) or a ranges file to vary within (one "
                              "`so101 physics --fit` wrote, for your arm; the folder keeps its ranges); the eyes' "
                              "pictures are drawn with each episode's")
+    add_camera_pose_option(parser)
+    add_backdrop_option(parser)
     parser.add_argument("--episodes", type=whole_number(10, 100_000), default=300, metavar="N",
                         help="demonstrations (default 300)")
     parser.add_argument("--pictures", type=whole_number(100, 1_000_000), default=40_000, metavar="N",
@@ -128,6 +133,12 @@ def run(args: argparse.Namespace) -> int:
                 "rounds": args.rounds, "round_episodes": args.round_episodes if args.rounds else 0,
                 "round_steps": args.round_steps if args.rounds else 0,
                 "validation": args.validation if args.candidates > 1 or args.rounds else 0}
+    if (args.camera_poses or args.backdrops) and not args.sees:
+        return _fail("--camera-pose and --backdrop shape the eyes' pictures: they go with --sees")
+    if args.camera_poses:  # kept in the state file whole: the pictures are drawn from there, the eyes assume it
+        settings["camera_poses"] = {name: pose.as_dict() for name, pose in sorted(args.camera_poses.items())}
+    if args.backdrops:
+        settings["backdrops"] = dict(sorted(args.backdrops.items()))
     state_file = out / STATE_FILE
     if out.exists() and not state_file.is_file() and any(out.iterdir()):
         return _fail(f"{out} is not empty and not a folder `so101 learn` began: give a new folder")
@@ -271,13 +282,31 @@ class Learning:
         for index, part in enumerate(halves):
             log = self.work / f"pictures-{index}.log"
             command = [sys.executable, "-m", "so101.perception.draw", str(self.out / "demos"),
-                       str(self.work / f"pictures-{index}.npz"), "--count", str(part), "--seed", str(index + 1)]
+                       str(self.work / f"pictures-{index}.npz"), "--count", str(part), "--seed", str(index + 1),
+                       *self.scenario_args()]
             children.append((self.start(command, log), log, "drawing the pictures"))
         log = self.work / "pictures-held-out.log"
         self.wait(children)
         command = [sys.executable, "-m", "so101.perception.draw", str(self.work / "held-out-demos"),
-                   str(self.work / "pictures-held-out.npz"), "--count", "1500", "--seed", "77", "--held-out"]
+                   str(self.work / "pictures-held-out.npz"), "--count", "1500", "--seed", "77", "--held-out",
+                   *self.scenario_args()]
         self.wait([(self.start(command, log), log, "drawing the held-out pictures")])
+
+    def scenario_args(self) -> list[str]:
+        """What the pictures are drawn in, beyond varied looks: the camera poses and backdrops given."""
+        given = {key: self.settings[key] for key in ("camera_poses", "backdrops") if key in self.settings}
+        return ["--scenario", json.dumps(given)] if given else []
+
+    def camera_args(self) -> list[str]:
+        """The validation's --camera-pose and --backdrop options: where the eyes were taught."""
+        args: list[str] = []
+        for name, fields in self.settings.get("camera_poses", {}).items():
+            path = self.work / f"camera-{name}.json"
+            path.write_text(json.dumps(fields, indent=1) + "\n", encoding="utf-8")
+            args += ["--camera-pose", f"{name}={path}"]
+        for name, path in self.settings.get("backdrops", {}).items():
+            args += ["--backdrop", f"{name}={path}"]
+        return args
 
     def candidates(self) -> list[str]:
         """The names of the state policies trained from scratch, one per seed."""
@@ -366,7 +395,7 @@ class Learning:
                        "--body", self.settings["body"], "--policy", str(folder if self.settings["sees"] else folder / POLICY_DIR),
                        "--policy-python", str(self.python), "--episodes", str(episodes), "--seed", str(VALIDATION_SEED),
                        "--workers", "2", "--physics", self.settings["physics"],
-                       *(("--looks", "varied") if self.settings["sees"] else ())]
+                       *(("--looks", "varied", *self.camera_args()) if self.settings["sees"] else ())]
             self.wait([(self.start(command, log, OFFLINE), log, f"so101 eval ({self.describe(name)})")])
             successes = validation_successes(log.read_text(encoding="utf-8", errors="replace"))
             if successes is None:
@@ -388,11 +417,15 @@ class Learning:
             for name in ("eyes.pt", "eyes.json"):  # the weights at each 1,000 steps stay in work/eyes/steps
                 shutil.copy2(self.work / EYES_DIR / name, folder / EYES_DIR / name)
             eyes = json.loads((folder / EYES_DIR / "eyes.json").read_text(encoding="utf-8"))
+            if "front" in self.settings.get("camera_poses", {}):  # the geometry the eyes assume: the camera taught from
+                front = orbit_of(camera_file_from(self.settings["camera_poses"]["front"], "front"))
+                eyes["camera"] = asdict(front)
+                (folder / EYES_DIR / "eyes.json").write_text(json.dumps(eyes, indent=1) + "\n", encoding="utf-8")
             write_recipe(folder, {"recipe": "eyes + state policy", "task": self.settings["task"],
                                   "body": self.settings["body"], "eyes": EYES_DIR, "policy": POLICY_DIR,
                                   "eyes_held_out": eyes.get("trained", {}).get("held_out", {}),
-                                  "kept": self.best(), "validation": self.scores,
-                                  "stages_s": self.done})
+                                  "kept": self.best(), "validation": self.scores, "stages_s": self.done,
+                                  **{key: self.settings[key] for key in ("camera_poses", "backdrops") if key in self.settings}})
 
 
 def validation_successes(eval_output: str) -> int | None:

@@ -271,7 +271,7 @@ def finish_policy(descriptor: dict, body: BodyKind, args: argparse.Namespace, ch
                   real_cameras: tuple[str, ...] = ()) -> None:
     """The policy node added, once its pictures (if it sees) have a camera; `real_cameras`: the real arm's,
     one that stops sending stops the policy's drive."""
-    for line in chosen.notes():
+    for line in chosen.notes(args.backdrops, args.camera_poses):
         print(f"so101 teleop: {line}", flush=True)
     print(f"so101 teleop: {chosen.reads()}", flush=True)
     if chosen.recipe is not None:  # the cameras its eyes see: the front one

@@ -11,8 +11,16 @@ from pathlib import Path
 import numpy as np
 
 from so101.bodies.looks import LOOKS_CHOICES
+from so101.bodies.scenario import Scenario, parse_scenario
 from so101.perception.pictures import draw_pictures, read_frames
 from so101.runtime.argtypes import image_size
+
+
+def parse_scenario_argument(text: str) -> Scenario:
+    try:
+        return parse_scenario(text)
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -23,12 +31,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--looks", choices=LOOKS_CHOICES, default="varied")
     parser.add_argument("--size", type=image_size, default=(160, 120))
+    parser.add_argument("--scenario", type=parse_scenario_argument, default=Scenario(), metavar="JSON",
+                        help="the camera poses and backdrops to draw from (so101.bodies.scenario; its looks are "
+                             "--looks')")
     parser.add_argument("--held-out", action="store_true",
                         help="pictures to measure on: looks and layouts from seeds the training pictures never draw")
     args = parser.parse_args(argv)
     started = time.monotonic()
     drawn = draw_pictures(read_frames(args.dataset), args.count, args.seed, tuple(args.size), args.looks,
-                          held_out=args.held_out)
+                          held_out=args.held_out, poses=args.scenario.camera_poses, backdrops=args.scenario.backdrops)
     partial = args.out.with_name(args.out.name + ".part.npz")
     np.savez(partial, **drawn)  # type: ignore[arg-type]  # numpy's stub reads a keyword as allow_pickle
     partial.replace(args.out)  # whole or not at all: a stopped run leaves no half file under the name

@@ -28,6 +28,7 @@ import numpy as np
 import numpy.typing as npt
 import pyarrow.parquet as pq
 
+from so101.bodies.camera_file import CameraFile
 from so101.bodies.physics import Physics, physics_from_metadata
 from so101.dataset.features import ENVIRONMENT_KEY, STATE_KEY, from_lerobot
 from so101.dataset.layout import INFO_PATH, SCENARIOS_KEY, episode_scenario
@@ -108,10 +109,13 @@ def picture_seeds(held_out: bool) -> tuple[tuple[int, int], tuple[int, int]]:
 
 
 def draw_pictures(frames: Frames, count: int, seed: int, size: tuple[int, int], looks: str,
-                  progress: Callable[[int], None] = lambda done: None, held_out: bool = False) -> dict[str, np.ndarray]:
+                  progress: Callable[[int], None] = lambda done: None, held_out: bool = False,
+                  poses: dict[str, CameraFile] | None = None, backdrops: dict[str, str] | None = None,
+                  ) -> dict[str, np.ndarray]:
     """`count` front pictures at `size` (width, height) of frames drawn from `frames` by `seed`, each in
     looks of its own, with their answers (see the module's doc); `held_out`: looks and layouts that
-    training pictures never draw."""
+    training pictures never draw. `poses` and `backdrops` (so101.bodies.scenario's): where the cameras
+    stand, and the photos behind them."""
     from so101.bodies.task_cameras import TaskCameras
     from so101.kinematics import Kinematics
 
@@ -127,7 +131,8 @@ def draw_pictures(frames: Frames, count: int, seed: int, size: tuple[int, int], 
     cube_px, box_px, tip_px = np.zeros((count, 2)), np.zeros((count, 2)), np.zeros((count, 2))
     states, tips, cube_half = np.zeros((count, 10)), np.zeros((count, 3)), np.zeros(count)
     looks_seeds, layout_seeds = picture_seeds(held_out)
-    with TaskCameras(CUBE_TO_BOX, log=lambda message: None, looks=looks) as cameras, Kinematics() as kinematics:
+    with TaskCameras(CUBE_TO_BOX, log=lambda message: None, looks=looks, poses=poses, backdrops=backdrops) as cameras, \
+            Kinematics() as kinematics:
         for done, frame in enumerate(chosen):
             cameras.show_seed(int(draw.integers(*looks_seeds)))
             physics = frames.physics_of(frame)

@@ -7,7 +7,7 @@ of the simulator's."""
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from so101.perception.eyes import EyesFacts, read_eyes_facts
@@ -22,6 +22,26 @@ class Recipe:
     folder: Path
     eyes: EyesFacts
     task: str  # the task it learned, whose objects the eyes find
+    # What the eyes were taught in beyond varied looks (so101 learn --backdrop, --camera-pose): camera -> photo, and
+    # camera -> its camera file's fields; empty: the simulator's floor and cameras.
+    backdrops: dict[str, str] = field(default_factory=dict)
+    camera_poses: dict[str, dict] = field(default_factory=dict)
+
+    def elsewhere(self, backdrops: dict[str, str], camera_poses: dict[str, dict]) -> list[str]:
+        """One line for each camera this run draws otherwise than the eyes were taught: another backdrop, or
+        another pose (`camera_poses` as files' fields)."""
+        lines, floor = [], "the simulator's floor"
+        for name in sorted(set(self.backdrops) | set(backdrops)):
+            if self.backdrops.get(name) != backdrops.get(name):
+                lines.append(f"note: the eyes were taught over {self.backdrops.get(name) or floor} behind the {name} "
+                             f"camera, and run over {backdrops.get(name) or floor}")
+        for name in sorted(set(self.camera_poses) | set(camera_poses)):
+            if self.camera_poses.get(name) != camera_poses.get(name):
+                taught = "a camera file's pose" if name in self.camera_poses else "the simulator's own"
+                drawn = "another file's pose" if name in camera_poses else "the simulator's own"
+                lines.append(f"note: the eyes were taught from the {name} camera at {taught}, and this run draws it "
+                             f"at {drawn}")
+        return lines
 
     @property
     def eyes_dir(self) -> Path:
@@ -38,10 +58,12 @@ def read_recipe(folder: Path) -> Recipe | None:
     if not (folder / RECIPE_FILE).is_file():
         return None
     try:
-        task = str(json.loads((folder / RECIPE_FILE).read_text(encoding="utf-8"))["task"])
-    except (OSError, ValueError, KeyError, TypeError) as error:
+        written = json.loads((folder / RECIPE_FILE).read_text(encoding="utf-8"))
+        task = str(written["task"])
+        backdrops, camera_poses = dict(written.get("backdrops", {})), dict(written.get("camera_poses", {}))
+    except (OSError, ValueError, KeyError, TypeError, AttributeError) as error:
         raise ValueError(f"{folder / RECIPE_FILE} is not a recipe file ({type(error).__name__}: {error})") from None
-    recipe = Recipe(folder, read_eyes_facts(folder / EYES_DIR), task)
+    recipe = Recipe(folder, read_eyes_facts(folder / EYES_DIR), task, backdrops, camera_poses)
     if not (recipe.policy_dir / "config.json").is_file():
         raise ValueError(f"{folder} is a recipe without its policy ({POLICY_DIR}/config.json): "
                          "`so101 learn` did not finish; run it again to resume")

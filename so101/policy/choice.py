@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Mapping
 
+from so101.bodies.camera_file import CameraFile
 from so101.dataset.features import ENVIRONMENT_KEY, IMAGE_KEY
 from so101.dataset.layout import DatasetError
 from so101.dataset.units import DEGREES, UNITS_KEY, UnitsError
@@ -57,9 +58,13 @@ class ChosenPolicy:
             return {}
         return {"SO101_EYES_DIR": str(self.recipe.eyes_dir), "SO101_TASK": self.recipe.task, "SO101_LANG": lang}
 
-    def notes(self) -> list[str]:
-        """What a user should know before scoring or driving with it, one line each."""
-        return [f"note: the policy takes {name} unscaled (its config.json's normalization_mapping has no {kind}, "
+    def notes(self, backdrops: Mapping[str, str] | None = None,
+              camera_poses: Mapping[str, CameraFile] | None = None) -> list[str]:
+        """What a user should know before scoring or driving with it, one line each; a recipe's eyes run over
+        other `backdrops` or from other `camera_poses` than they were taught with, too."""
+        elsewhere = [] if self.recipe is None else self.recipe.elsewhere(
+            dict(backdrops or {}), {name: pose.as_dict() for name, pose in (camera_poses or {}).items()})
+        return elsewhere + [f"note: the policy takes {name} unscaled (its config.json's normalization_mapping has no {kind}, "
                 "as ACT's default): docs/loop/policy.md says what that costs and how --policy.normalization_mapping "
                 "scales it" for name, kind in self.unscaled.items()] + ([self.units_note] if self.units_note else [])
 
