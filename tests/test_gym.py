@@ -85,6 +85,7 @@ def test_reward_and_the_end_come_from_the_tasks_success():
     ({"obs_type": "pixels"}, "obs_type='pixels' is not one of: 'state', 'pixels_agent_pos', 'all'"),
     ({"looks": "shiny"}, "looks='shiny' is not one of: 'fixed', 'varied'"),
     ({"physics": "heavy"}, "physics: unknown physics 'heavy'; use fixed, varied, or a JSON file of ranges"),
+    ({"backdrop": "front=/no/table.png"}, "backdrop: /no/table.png does not exist: give a photo of the workspace"),
     ({"render_mode": "ansi"}, "render_mode='ansi' is not one of: 'rgb_array'"),
     ({"camera_size": (63, 48)}, "camera_size=(63, 48) is not (width, height) in even pixels from 16 to 4096"),
     ({"camera_size": "320x240"}, "camera_size='320x240' is not (width, height)"),

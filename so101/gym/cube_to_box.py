@@ -24,7 +24,7 @@ from so101.bodies.protocol import Body, ObjectState, RgbImage, TaskScene
 from so101.bodies.registry import BODIES
 from so101.bodies.task_cameras import TaskCameras
 from so101.gym.spaces import (
-    DEFAULT_CAMERA_SIZE, action_space, agent_pos, check_body, check_camera_pose, check_camera_size, check_looks, check_obs_type, check_physics,
+    DEFAULT_CAMERA_SIZE, action_space, agent_pos, check_backdrop, check_body, check_camera_pose, check_camera_size, check_looks, check_obs_type, check_physics,
     check_render_mode, clamped_targets_deg, observation_space, observes_objects, sees, step_outcome,
 )
 from so101.runtime.dataflow import TICK_PERIOD_S
@@ -44,7 +44,8 @@ class CubeToBoxEnv(gymnasium.Env[dict[str, Any], npt.NDArray[Any]]):
     and `all`; `pixels` (`front`, `wrist`: HxWx3 uint8 at `camera_size`, (width, height)) for
     `pixels_agent_pos` and `all`. `looks` "varied" draws each layout's light, colours and camera
     placement from its seed (so101.bodies.looks); `camera_pose` ({"front": FILE}, or "front=FILE") draws
-    a camera from where a camera file puts it (so101.bodies.camera_file). `physics` "varied" (or a ranges file)
+    a camera from where a camera file puts it (so101.bodies.camera_file); `backdrop` ({"front": IMAGE}, or
+    "front=IMAGE") a photo of a workspace behind a camera's scene (so101.bodies.backdrop). `physics` "varied" (or a ranges file)
     draws each layout's physics from its seed (so101.bodies.physics): `agent_pos` is then as the arm's
     calibration reports it. info["is_success"]: the task's success function."""
 
@@ -52,11 +53,13 @@ class CubeToBoxEnv(gymnasium.Env[dict[str, Any], npt.NDArray[Any]]):
 
     def __init__(self, body: str = "pybullet", obs_type: str = "state",
                  camera_size: tuple[int, int] = DEFAULT_CAMERA_SIZE, looks: str = "fixed", camera_pose: object = None,
-                 render_mode: str | None = "rgb_array", assets_dir: str | None = None, physics: str = "fixed"):
+                 render_mode: str | None = "rgb_array", assets_dir: str | None = None, physics: str = "fixed",
+                 backdrop: object = None):
         # Every argument checked before a simulator loads: a bad one is one line.
         self.body_name, self.obs_type = check_body(body), check_obs_type(obs_type)
         self.camera_size, self.looks = check_camera_size(camera_size), check_looks(looks)
         self.camera_poses = check_camera_pose(camera_pose)
+        self.backdrops = check_backdrop(backdrop)
         self.physics = check_physics(physics)
         self.render_mode = check_render_mode(render_mode)
         # What LeRobot's rollout hands a policy that reads language (its `task`).
@@ -123,7 +126,7 @@ class CubeToBoxEnv(gymnasium.Env[dict[str, Any], npt.NDArray[Any]]):
     # -- the parts
     def _make_cameras(self) -> TaskCameras:
         cameras = TaskCameras(CUBE_TO_BOX, self._assets_dir, log=logger.info, looks=self.looks, poses=self.camera_poses,
-                              physics=self.physics)
+                              physics=self.physics, backdrops=self.backdrops)
         cameras.show_seed(self.layout_seed)
         return cameras
 

@@ -46,6 +46,7 @@ class SO101CubeToBoxEnv(EnvConfig):
     looks: str = "fixed"
     camera_pose: str = ""  # "front=FILE[,wrist=FILE]": the simulated cameras drawn from camera files
     physics: str = "fixed"  # "varied", or a JSON file of ranges: each layout's physics drawn from its seed
+    backdrop: str = ""  # "front=IMAGE[,wrist=IMAGE]": a photo of the workspace behind a camera's scene
     render_mode: str = "rgb_array"
     features: dict[str, PolicyFeature] = field(default_factory=lambda: {
         ACTION: PolicyFeature(type=FeatureType.ACTION, shape=(len(ACTUATED_JOINTS),))})
@@ -75,7 +76,7 @@ class SO101CubeToBoxEnv(EnvConfig):
     @property
     def gym_kwargs(self) -> dict:
         return {"body": self.body, "obs_type": self.obs_type, "looks": self.looks, "camera_pose": self.camera_pose,
-                "physics": self.physics,
+                "physics": self.physics, "backdrop": self.backdrop,
                 "render_mode": self.render_mode,
                 "camera_size": (self.observation_width, self.observation_height),
                 "max_episode_steps": self.episode_length}

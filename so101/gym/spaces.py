@@ -13,6 +13,7 @@ import numpy as np
 import numpy.typing as npt
 from gymnasium import spaces
 
+from so101.bodies.backdrop import BackdropError, checked_backdrop
 from so101.bodies.camera_file import (
     CameraFile, CameraFileError, camera_file_from, camera_pose_given, read_camera_file, simulated_camera,
 )
@@ -81,6 +82,21 @@ def check_camera_pose(camera_pose: object) -> dict[str, CameraFile]:
                 else read_camera_file(given, name) for name, given in camera_pose.items()}
     except CameraFileError as error:
         raise ValueError(f"camera_pose: {error}") from None
+
+
+def check_backdrop(backdrop: object) -> dict[str, str]:
+    """`backdrop`: photos behind the simulated cameras' scenes, as {name: a photo's or a folder's path}, or the
+    text "front=IMAGE[,wrist=IMAGE]" (LeRobot's --env.backdrop); None or "" for none (so101.bodies.backdrop)."""
+    if backdrop is None or backdrop == "":
+        return {}
+    try:
+        if isinstance(backdrop, str):
+            return dict(checked_backdrop(part.strip()) for part in backdrop.split(","))
+        if not isinstance(backdrop, dict):
+            raise ValueError(f"backdrop={backdrop!r} is not a map from a camera's name to a photo")
+        return dict(checked_backdrop(f"{name}={path}") for name, path in backdrop.items())
+    except BackdropError as error:
+        raise ValueError(f"backdrop: {error}") from None
 
 
 def check_render_mode(render_mode: object) -> str | None:
