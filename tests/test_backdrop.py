@@ -87,6 +87,12 @@ def test_the_photo_is_drawn_where_the_floor_was_from_either_body_and_the_dataset
     kept = dataset.info[SCENARIOS_KEY]["0"]["backdrops"]
     assert set(kept) == {"front"} and kept["front"]["photo"] == str(backdrop.resolve())
     assert len(kept["front"]["sha256"]) == 64
+    # Made again from the episode: the arm left out where the simulator draws it, the photo is what remains.
+    made = tmp_path / "made.png"
+    done = run_so101("cameras", "--backdrop", "front", "--from", str(out), "-o", str(made), "--max-holes", "0.5")
+    assert done.returncode == 0 and "the episode's pictures with the arm left out" in done.stderr, done.stderr
+    again = cv2.imread(str(made))[:, :, ::-1].astype(int)
+    assert (np.abs(again - MAGENTA).max(axis=2) < 40).mean() > 0.9  # the box stays: it is on every floor
 
 
 def test_the_backdrop_picture_is_the_photo_fitted_and_tinted(tmp_path):
@@ -96,3 +102,60 @@ def test_the_backdrop_picture_is_the_photo_fitted_and_tinted(tmp_path):
 
 if __name__ == "__main__":
     sys.exit(pytest.main([__file__]))
+
+
+# -- a backdrop made from what a camera saw (so101 cameras --backdrop) ------------------------------------------
+
+def test_each_pixel_is_the_median_of_the_frames_that_do_not_cover_it_and_too_many_holes_are_refused():
+    from so101.perception.backdrop_maker import BackdropMakingError, median_backdrop
+
+    room = np.random.default_rng(0).integers(0, 256, (24, 32, 3), dtype=np.uint8)
+    frames, covered = [], []
+    for step in range(8):  # an arm, black, sweeping across; its top row never leaves row 0..3, column 0..3
+        frame, mask = room.copy(), np.zeros((24, 32), dtype=bool)
+        mask[:, 4 * step:4 * step + 4] = True
+        mask[0:4, 0:4] = True
+        frame[mask] = 0
+        frames.append(frame)
+        covered.append(mask)
+    made, seen = median_backdrop(frames, covered, max_holes=0.05)
+    assert seen == pytest.approx(1 - 16 / (24 * 32))
+    assert np.array_equal(made[4:], room[4:]) and np.array_equal(made[:4, 4:], room[:4, 4:])  # seen: exact
+    with pytest.raises(BackdropMakingError, match=r"^the arm covers 2\.1% of the picture in every frame, more than 1%"):
+        median_backdrop(frames, covered, max_holes=0.01)
+    assert np.array_equal(median_backdrop([room, room, frames[0]])[0], room)  # no masks: the median of all
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--backdrop", "front", "-o", "{out}"], "--backdrop front needs --from SOURCE: a camera (/dev/video0"),
+    (["--backdrop", "front", "--from", "{video}"], "--backdrop front needs -o FILE.png (or .jpg)"),
+    (["--backdrop", "wrist", "--from", "{dataset}", "-o", "{out}"], "--backdrop wrist --from DATASET: the wrist camera "
+                                                                     "moves with the jaws"),
+    (["--backdrop", "front", "--from", "{dataset}", "-o", "{out}"], "--backdrop front --from {dataset} needs "
+                                                                     "--camera-pose front=FILE"),
+    (["--fit", "front", "--from", "{dataset}", "--max-holes", "0.1"], "--max-holes goes with --backdrop NAME"),
+])
+def test_making_a_backdrop_refuses_in_one_line_and_writes_nothing(tmp_path, args, message):
+    paths = {"out": tmp_path / "made.png", "video": tmp_path / "room.mp4",
+             "dataset": Path(__file__).parent / "data" / "lerobot_made"}
+    done = run_so101("cameras", *[arg.format(**paths) for arg in args])
+    lines = error_lines(done.stderr)
+    assert done.returncode == 2 and len(lines) == 1, done.stderr
+    assert lines[0].startswith(f"so101 cameras: {message.format(**paths)}") and not paths["out"].exists(), lines
+
+
+def test_a_backdrop_from_a_video_of_the_arm_moving_is_the_room(tmp_path):
+    room = np.zeros((48, 64, 3), dtype=np.uint8)
+    room[:, :32], room[:, 32:] = (40, 160, 90), (200, 120, 30)
+    video = cv2.VideoWriter(str(tmp_path / "room.mp4"), cv2.VideoWriter.fourcc(*"mp4v"), 30, (64, 48))
+    for step in range(30):  # an arm, black, crossing: no pixel covered in more than a third of the frames
+        frame = room.copy()
+        frame[:, 2 * step:2 * step + 8] = 0
+        video.write(frame[:, :, ::-1])
+    video.release()
+    done = run_so101("cameras", "--backdrop", "front", "--from", str(tmp_path / "room.mp4"), "-o", str(tmp_path / "b.png"))
+    assert done.returncode == 0, done.stderr
+    assert error_lines(done.stderr)[-1] == (f"wrote {tmp_path / 'b.png'} (64x48): the median of its frames, 30 frames; "
+                                            f"100.0% of the picture seen. Use it: --backdrop front={tmp_path / 'b.png'}")
+    made = cv2.imread(str(tmp_path / "b.png"))[:, :, ::-1].astype(int)
+    assert np.abs(made[:, 4:28] - room[:, 4:28]).max() < 20 and np.abs(made[:, 36:60] - room[:, 36:60]).max() < 20

@@ -18,7 +18,7 @@ from pathlib import Path
 
 from so101.cameras.listing import find_cameras, listing_lines, picture_file_name
 from so101.dataset.units import UNITS, UNITS_HELP
-from so101.runtime.argtypes import whole_number
+from so101.runtime.argtypes import number, whole_number
 
 # A camera's first pictures are often dark or half-exposed while it adjusts: this many are let go first.
 WARM_UP_PICTURES = 10
@@ -36,21 +36,31 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
     doing.add_argument("--fit", choices=("front",), metavar="NAME", default=None,
                        help="fit camera NAME's place and field of view (front: the wrist camera is not fitted) to the "
                             "pictures of the arm in --from DATASET's episode, and write its camera file (-o FILE)")
+    doing.add_argument("--backdrop", choices=CAMERA_NAMES, metavar="NAME", default=None,
+                       help="make a backdrop for camera NAME (`--backdrop NAME=IMAGE` on demos, eval, teleop, learn) "
+                            "from --from SOURCE: a camera (/dev/video0, 0) or a video, the arm out of view or moving "
+                            "(each pixel the median of the frames), or a recorded episode, the arm drawn by the "
+                            "simulator from --camera-pose NAME=FILE and left out; writes -o FILE.png")
     doing.add_argument("--align", choices=("front",), metavar="NAME", default=None,
                        help="show camera NAME's live picture (--camera NAME=SOURCE) with the simulated camera's "
                             "picture of the arm (--port, or so101 fake-arm) over it, to move the camera into place")
     parser.add_argument("--from", dest="dataset", type=Path, metavar="DATASET", default=None,
-                        help="--fit: the LeRobot dataset whose episode's video and joint states are fitted")
+                        help="--fit: the LeRobot dataset whose episode's video and joint states are fitted; "
+                             "--backdrop: that, or a camera (/dev/video0, 0) or a video file")
     parser.add_argument("--units", choices=UNITS, default=None, help="--fit: " + UNITS_HELP)
     parser.add_argument("--episode", type=whole_number(0, 10**9), metavar="N", default=None,
-                        help="--fit: the episode fitted (default 0)")
+                        help="--fit, --backdrop: the dataset's episode (default 0)")
     parser.add_argument("--near", type=Path, metavar="FILE", default=None,
                         help="--fit: start from this camera file (a rough measurement) instead of the simulated camera's")
     parser.add_argument("-o", "--output", type=Path, metavar="FILE", default=None,
-                        help="--fit: the camera file written (default: printed only); an existing file is kept "
-                             "unless the fit succeeds")
+                        help="--fit: the camera file written (default: printed only); --backdrop: the picture "
+                             "written (.png, .jpg); an existing file is kept unless it succeeds")
     parser.add_argument("--size", metavar="WxH", default=None,
                         help="--default: the pictures' size the file says (default 320x240)")
+    parser.add_argument("--max-holes", type=number(lambda value: 0 <= value < 1, "a share from 0 to below 1"),
+                        default=0.05, metavar="SHARE",
+                        help="--backdrop: the most of the picture the arm may cover in every frame, filled from "
+                             "around it (default 0.05); more is refused")
     add_align_arguments(parser)
 
 
@@ -171,12 +181,13 @@ def say(line: str) -> None:
 
 LISTING = "the cameras' listing (no --default, --fit or --align)"
 # Each mode's own options: (the option, its argparse name, the mode, or modes, it goes with).
-OWN_OPTIONS = (("--from", "dataset", "--fit NAME"), ("--episode", "episode", "--fit NAME"), ("--near", "near", "--fit NAME"),
-               ("-o", "output", "--fit NAME"), ("--size", "size", "--default NAME"), ("--save", "save", LISTING),
+MAKING = ("--fit NAME", "--backdrop NAME")
+OWN_OPTIONS = (("--from", "dataset", MAKING), ("--episode", "episode", MAKING), ("--near", "near", "--fit NAME"),
+               ("-o", "output", MAKING), ("--size", "size", "--default NAME"), ("--save", "save", LISTING),
                ("--camera", "align_camera", "--align NAME"), ("--port", "port", "--align NAME"),
-               ("--calibration", "calibration", ("--align NAME", "--fit NAME")), ("--units", "units", "--fit NAME"),
-               ("--fitted", "fitted", "--align NAME"),
-               ("--camera-pose", "camera_poses", "--align NAME"))
+               ("--calibration", "calibration", ("--align NAME", *MAKING)), ("--units", "units", MAKING),
+               ("--fitted", "fitted", "--align NAME"), ("--max-holes", "max_holes", "--backdrop NAME"),
+               ("--camera-pose", "camera_poses", ("--align NAME", "--backdrop NAME")))
 
 
 def misplaced_option(args: argparse.Namespace, mode: str) -> str | None:
@@ -186,6 +197,104 @@ def misplaced_option(args: argparse.Namespace, mode: str) -> str | None:
         if mode not in modes and getattr(args, dest):
             return f"{option} goes with {' or '.join(modes)}"
     return None
+
+
+def make_backdrop(args: argparse.Namespace) -> int:
+    """--backdrop NAME: the median of a source's frames, the arm left out, written to -o FILE.png."""
+    import cv2
+
+    from so101.perception.backdrop_maker import BackdropMakingError, median_backdrop
+
+    name = args.backdrop
+    if args.dataset is None:
+        return fail(f"--backdrop {name} needs --from SOURCE: a camera (/dev/video0, or its index 0), a video file, "
+                    "or a recorded dataset")
+    if args.output is None or args.output.suffix.lower() not in (".png", ".jpg", ".jpeg"):
+        return fail(f"--backdrop {name} needs -o FILE.png (or .jpg): the backdrop written")
+    source = args.dataset.expanduser()
+    try:
+        if (source / "meta" / "info.json").is_file():
+            frames, covered, how = episode_frames(args, source)
+        else:
+            frames, covered, how = source_frames(str(args.dataset)), None, "the median of its frames"
+        picture, seen = median_backdrop(frames, covered, args.max_holes)
+    except (BackdropMakingError, ValueError) as error:
+        return fail(str(error))
+    target = args.output.expanduser()
+    partial = target.with_name(f".{target.name}.partial{target.suffix}")
+    if not cv2.imwrite(str(partial), cv2.cvtColor(picture, cv2.COLOR_RGB2BGR)):
+        return fail(f"{target} cannot be written")
+    partial.replace(target)
+    filled = "" if seen == 1 else f", the other {1 - seen:.1%} filled from around it"
+    say(f"wrote {target} ({picture.shape[1]}x{picture.shape[0]}): {how}, {len(frames)} frames; {seen:.1%} of the "
+        f"picture seen{filled}. Use it: --backdrop {name}={target}")
+    return 0
+
+
+def source_frames(text: str, most: int = 600) -> list:
+    """Up to `most` frames of a camera or a video file, as fast as it gives them, spread to the backdrop's."""
+    from so101.cameras.capture import VideoSource
+    from so101.cameras.sources import capture_source, is_device
+    from so101.perception.backdrop_maker import BackdropMakingError, spread
+
+    given = capture_source(text)
+    source = VideoSource(given, None, None, 30, sleep=lambda seconds: None)
+    why = source.open()
+    if why is not None:
+        raise BackdropMakingError(f"{text}: {why}")
+    frames = []
+    try:
+        for _ in range(90 if is_device(given) else most):  # a camera: three seconds
+            read = source.read()
+            if read is None:
+                break
+            frames.append(read[0])
+    finally:
+        source.close()
+    if not frames:
+        raise BackdropMakingError(f"{text} gave no picture")
+    return [frames[index] for index in spread(len(frames))]
+
+
+def episode_frames(args: argparse.Namespace, root: Path) -> tuple[list, list, str]:
+    """A recorded episode's front pictures and, in each, where the simulator draws the arm (and a simulated
+    task's cube) from the camera file, grown by a margin."""
+    from so101.bodies.camera_file import CameraFileError, camera_file_from, orbit_of
+    from so101.bodies.task_cameras import TaskCameras
+    from so101.dataset.features import ENVIRONMENT_KEY, IMAGE_KEY, STATE_KEY
+    from so101.dataset.layout import DatasetError, episode_scenario
+    from so101.dataset.reader import Dataset
+    from so101.perception.backdrop_maker import BackdropMakingError, grown, spread
+    from so101.tasks import CUBE_TO_BOX
+
+    if args.backdrop != "front":
+        raise BackdropMakingError("--backdrop wrist --from DATASET: the wrist camera moves with the jaws; make its "
+                                  "backdrop from a video of the wrist camera instead")
+    episode = args.episode or 0
+    try:
+        dataset = Dataset.open(root)
+        kept = episode_scenario(dataset.info, episode).get("cameras", {}).get("front")  # a simulated episode's
+        pose = args.camera_poses.get("front") or (camera_file_from(kept, "front") if kept else None)
+        if pose is None:
+            raise BackdropMakingError(f"--backdrop front --from {root} needs --camera-pose front=FILE: where the "
+                                      f"camera stood (so101 cameras --fit front --from {root} -o FILE)")
+        units = dataset.joint_units(args.units, args.calibration and args.calibration.expanduser(), episode)
+        states = dataset.episode_joints_deg(episode, units)[STATE_KEY]
+        objects = dataset.episode_frames(episode).get(ENVIRONMENT_KEY)
+        chosen = set(spread(len(states)))
+        pictures = {index: picture for index, picture in enumerate(dataset.episode_images(episode, IMAGE_KEY))
+                    if index in chosen}
+    except (DatasetError, CameraFileError) as error:
+        raise BackdropMakingError(str(error)) from None
+    frames, covered = [], []
+    with TaskCameras(CUBE_TO_BOX if objects is not None else None, log=lambda line: None) as cameras:
+        camera = orbit_of(pose)
+        for index, picture in sorted(pictures.items()):
+            height, width = picture.shape[:2]
+            mask = cameras.arm_mask(states[index], camera, width, height, objects[index] if objects is not None else ())
+            frames.append(picture)
+            covered.append(grown(mask, max(2, width // 40)))
+    return frames, covered, "the episode's pictures with the arm left out"
 
 
 def align(args: argparse.Namespace) -> int:
@@ -225,7 +334,8 @@ def align(args: argparse.Namespace) -> int:
 
 def run(args: argparse.Namespace) -> int:
     mode = ("--default NAME" if args.default is not None else "--fit NAME" if args.fit is not None
-            else "--align NAME" if args.align is not None else LISTING)
+            else "--align NAME" if args.align is not None else "--backdrop NAME" if args.backdrop is not None
+            else LISTING)
     misplaced = misplaced_option(args, mode)
     if misplaced is not None:
         return fail(misplaced)
@@ -235,6 +345,8 @@ def run(args: argparse.Namespace) -> int:
         return fit(args)
     if args.align is not None:
         return align(args)
+    if args.backdrop is not None:
+        return make_backdrop(args)
     cameras = find_cameras()
     for line in listing_lines(cameras):
         print(line)
