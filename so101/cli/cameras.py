@@ -203,7 +203,7 @@ def make_backdrop(args: argparse.Namespace) -> int:
     """--backdrop NAME: the median of a source's frames, the arm left out, written to -o FILE.png."""
     import cv2
 
-    from so101.perception.backdrop_maker import BackdropMakingError, median_backdrop
+    from so101.perception.backdrop_maker import BackdropMakingError, episode_frames, median_backdrop, source_frames
 
     name = args.backdrop
     if args.dataset is None:
@@ -214,7 +214,11 @@ def make_backdrop(args: argparse.Namespace) -> int:
     source = args.dataset.expanduser()
     try:
         if (source / "meta" / "info.json").is_file():
-            frames, covered, how = episode_frames(args, source)
+            if name != "front":
+                return fail("--backdrop wrist --from DATASET: the wrist camera moves with the jaws; make its "
+                            "backdrop from a video of the wrist camera instead")
+            frames, covered, how = episode_frames(source, args.episode or 0, args.camera_poses.get("front"), args.units,
+                                                  args.calibration and args.calibration.expanduser())
         else:
             frames, covered, how = source_frames(str(args.dataset)), None, "the median of its frames"
         picture, seen = median_backdrop(frames, covered, args.max_holes)
@@ -229,72 +233,6 @@ def make_backdrop(args: argparse.Namespace) -> int:
     say(f"wrote {target} ({picture.shape[1]}x{picture.shape[0]}): {how}, {len(frames)} frames; {seen:.1%} of the "
         f"picture seen{filled}. Use it: --backdrop {name}={target}")
     return 0
-
-
-def source_frames(text: str, most: int = 600) -> list:
-    """Up to `most` frames of a camera or a video file, as fast as it gives them, spread to the backdrop's."""
-    from so101.cameras.capture import VideoSource
-    from so101.cameras.sources import capture_source, is_device
-    from so101.perception.backdrop_maker import BackdropMakingError, spread
-
-    given = capture_source(text)
-    source = VideoSource(given, None, None, 30, sleep=lambda seconds: None)
-    why = source.open()
-    if why is not None:
-        raise BackdropMakingError(f"{text}: {why}")
-    frames = []
-    try:
-        for _ in range(90 if is_device(given) else most):  # a camera: three seconds
-            read = source.read()
-            if read is None:
-                break
-            frames.append(read[0])
-    finally:
-        source.close()
-    if not frames:
-        raise BackdropMakingError(f"{text} gave no picture")
-    return [frames[index] for index in spread(len(frames))]
-
-
-def episode_frames(args: argparse.Namespace, root: Path) -> tuple[list, list, str]:
-    """A recorded episode's front pictures and, in each, where the simulator draws the arm (and a simulated
-    task's cube) from the camera file, grown by a margin."""
-    from so101.bodies.camera_file import CameraFileError, camera_file_from, orbit_of
-    from so101.bodies.task_cameras import TaskCameras
-    from so101.dataset.features import ENVIRONMENT_KEY, IMAGE_KEY, STATE_KEY
-    from so101.dataset.layout import DatasetError, episode_scenario
-    from so101.dataset.reader import Dataset
-    from so101.perception.backdrop_maker import BackdropMakingError, grown, spread
-    from so101.tasks import CUBE_TO_BOX
-
-    if args.backdrop != "front":
-        raise BackdropMakingError("--backdrop wrist --from DATASET: the wrist camera moves with the jaws; make its "
-                                  "backdrop from a video of the wrist camera instead")
-    episode = args.episode or 0
-    try:
-        dataset = Dataset.open(root)
-        kept = episode_scenario(dataset.info, episode).get("cameras", {}).get("front")  # a simulated episode's
-        pose = args.camera_poses.get("front") or (camera_file_from(kept, "front") if kept else None)
-        if pose is None:
-            raise BackdropMakingError(f"--backdrop front --from {root} needs --camera-pose front=FILE: where the "
-                                      f"camera stood (so101 cameras --fit front --from {root} -o FILE)")
-        units = dataset.joint_units(args.units, args.calibration and args.calibration.expanduser(), episode)
-        states = dataset.episode_joints_deg(episode, units)[STATE_KEY]
-        objects = dataset.episode_frames(episode).get(ENVIRONMENT_KEY)
-        chosen = set(spread(len(states)))
-        pictures = {index: picture for index, picture in enumerate(dataset.episode_images(episode, IMAGE_KEY))
-                    if index in chosen}
-    except (DatasetError, CameraFileError) as error:
-        raise BackdropMakingError(str(error)) from None
-    frames, covered = [], []
-    with TaskCameras(CUBE_TO_BOX if objects is not None else None, log=lambda line: None) as cameras:
-        camera = orbit_of(pose)
-        for index, picture in sorted(pictures.items()):
-            height, width = picture.shape[:2]
-            mask = cameras.arm_mask(states[index], camera, width, height, objects[index] if objects is not None else ())
-            frames.append(picture)
-            covered.append(grown(mask, max(2, width // 40)))
-    return frames, covered, "the episode's pictures with the arm left out"
 
 
 def align(args: argparse.Namespace) -> int:

@@ -11,10 +11,14 @@ them is refused.
 
 from __future__ import annotations
 
-from typing import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 import numpy.typing as npt
+
+if TYPE_CHECKING:
+    from so101.bodies.camera_file import CameraFile
 
 MAX_FRAMES = 120  # frames a backdrop is the median of: evenly spread over what the source gives
 DEFAULT_MAX_HOLES = 0.05  # the most of the picture that may be filled from around rather than seen
@@ -62,3 +66,64 @@ def grown(mask: npt.NDArray[np.bool_], margin_px: int) -> npt.NDArray[np.bool_]:
         return mask
     kernel = np.ones((2 * margin_px + 1, 2 * margin_px + 1), dtype=np.uint8)
     return cv2.dilate(mask.astype(np.uint8), kernel).astype(bool)
+
+
+def source_frames(text: str, most: int = 600) -> list:
+    """Up to `most` frames of a camera or a video file, as fast as it gives them, spread to the backdrop's."""
+    from so101.cameras.capture import VideoSource
+    from so101.cameras.sources import capture_source, is_device
+
+    given = capture_source(text)
+    source = VideoSource(given, None, None, 30, sleep=lambda seconds: None)
+    why = source.open()
+    if why is not None:
+        raise BackdropMakingError(f"{text}: {why}")
+    frames = []
+    try:
+        for _ in range(90 if is_device(given) else most):  # a camera: three seconds
+            read = source.read()
+            if read is None:
+                break
+            frames.append(read[0])
+    finally:
+        source.close()
+    if not frames:
+        raise BackdropMakingError(f"{text} gave no picture")
+    return [frames[index] for index in spread(len(frames))]
+
+
+def episode_frames(root: Path, episode: int, pose: CameraFile | None, units: str | None = None,
+                   calibration: Path | None = None) -> tuple[list, list, str]:
+    """Episode `episode`'s front pictures and, in each, where the simulator draws the arm (and a simulated task's
+    cube) from the camera file `pose` (None: the one its scenario keeps), grown by a margin; its joints' units
+    as so101.dataset.units reads them (`units`, the recording follower's `calibration`)."""
+    from so101.bodies.camera_file import CameraFileError, camera_file_from, orbit_of
+    from so101.bodies.task_cameras import TaskCameras
+    from so101.dataset.features import ENVIRONMENT_KEY, IMAGE_KEY, STATE_KEY
+    from so101.dataset.layout import DatasetError, episode_scenario
+    from so101.dataset.reader import Dataset
+    from so101.tasks import CUBE_TO_BOX
+
+    try:
+        dataset = Dataset.open(root)
+        kept = episode_scenario(dataset.info, episode).get("cameras", {}).get("front")  # a simulated episode's
+        pose = pose or (camera_file_from(kept, "front") if kept else None)
+        if pose is None:
+            raise BackdropMakingError(f"--backdrop front --from {root} needs --camera-pose front=FILE: where the "
+                                      f"camera stood (so101 cameras --fit front --from {root} -o FILE)")
+        states = dataset.episode_joints_deg(episode, dataset.joint_units(units, calibration, episode))[STATE_KEY]
+        objects = dataset.episode_frames(episode).get(ENVIRONMENT_KEY)
+        chosen = set(spread(len(states)))
+        pictures = {index: picture for index, picture in enumerate(dataset.episode_images(episode, IMAGE_KEY))
+                    if index in chosen}
+    except (DatasetError, CameraFileError) as error:
+        raise BackdropMakingError(str(error)) from None
+    frames, covered = [], []
+    with TaskCameras(CUBE_TO_BOX if objects is not None else None, log=lambda line: None) as cameras:
+        camera = orbit_of(pose)
+        for index, picture in sorted(pictures.items()):
+            height, width = picture.shape[:2]
+            mask = cameras.arm_mask(states[index], camera, width, height, objects[index] if objects is not None else ())
+            frames.append(picture)
+            covered.append(grown(mask, max(2, width // 40)))
+    return frames, covered, "the episode's pictures with the arm left out"
