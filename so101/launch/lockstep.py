@@ -181,7 +181,7 @@ def scenario_of(args: argparse.Namespace, pictured: bool = True) -> Scenario:
     """The scenario --looks, --camera-pose, --physics and --backdrop ask for; the looks, the cameras and the
     backdrops only where there are pictures (`pictured`) to draw them in."""
     return Scenario(looks=args.looks if pictured else DEFAULT_LOOKS,
-                    camera_poses=dict(args.camera_poses) if pictured else {}, physics=args.physics,
+                    camera_poses=dict(getattr(args, "camera_poses", {})) if pictured else {}, physics=args.physics,
                     backdrops=dict(getattr(args, "backdrops", {})) if pictured else {})
 
 
