@@ -68,6 +68,18 @@ def test_what_is_not_a_photo_is_refused_in_one_line_and_nothing_is_written(tmp_p
     assert not out.exists()
 
 
+@pytest.mark.parametrize("command, line", [
+    (["eval", "--idle"], "so101 eval: --backdrop shapes a task's pictures, and this run draws none: it goes with --video FILE, or "
+               "a --policy that sees"),
+    (["demos", "{out}", "--no-video"], "so101 demos: --backdrop shapes a task's pictures, and this run draws none"),
+])
+def test_a_backdrop_where_no_picture_is_drawn_is_refused_in_one_line(tmp_path, command, line):
+    done = run_so101(*[arg.format(out=tmp_path / "demos") for arg in command], "--task", "cube_to_box",
+                     "--backdrop", f"front={photo(tmp_path / 'table.png')}")
+    assert done.returncode == 1 and error_lines(done.stderr)[0].startswith(line), done.stderr  # as demos' and eval's others
+    assert len(error_lines(done.stderr)) == 1 and not (tmp_path / "demos").exists()
+
+
 @pytest.mark.parametrize("body", SIMULATED_BODIES)
 def test_the_photo_is_drawn_where_the_floor_was_from_either_body_and_the_dataset_keeps_it(tmp_path, body):
     from so101.dataset.layout import SCENARIOS_KEY
@@ -77,6 +89,8 @@ def test_the_photo_is_drawn_where_the_floor_was_from_either_body_and_the_dataset
     done = run_so101("demos", str(out), "--task", "cube_to_box", "--body", body, "--episodes", "1", "--seed", "3",
                      "--camera-size", "96x72", "--time-limit", "0.5", "--keep", "all", "--backdrop", f"front={backdrop}")
     assert done.returncode == 0, done.stdout + done.stderr
+    assert f"demos: the front camera's backdrop: {backdrop.resolve()}, 400x200; scaled to cover the 96x72 pictures and " \
+           "cropped about the centre" in done.stdout.splitlines()
     dataset = Dataset.open(out)
     front = next(dataset.episode_images(0, "observation.images.front")).astype(int)
     wrist = next(dataset.episode_images(0, "observation.images.wrist")).astype(int)

@@ -19,7 +19,10 @@ from pathlib import Path
 
 from so101.observe import OBSERVE_HELP
 from so101.runtime.argtypes import add_camera_size_option, number, observed_list
-from so101.launch.lockstep import add_common_arguments, expert_driver, fail, flows_for, log_place, refuse_real, run_flows, work_folder
+from so101.launch.lockstep import (
+    add_common_arguments, backdrop_lines, expert_driver, fail, flows_for, log_place, refuse_real, run_flows, unpictured_problem,
+    work_folder,
+)
 from so101.launch.on_cluster import cluster_place
 from so101.dataset.settings import DEFAULT_IMAGE_SIZE
 from so101.runtime.lockstep import DEFAULT_LOCKSTEP_FPS
@@ -85,6 +88,9 @@ def run(args: argparse.Namespace) -> int:
     if problem:
         return fail(f"so101 demos: --observe {observed}: {problem}")
     picture_size = args.image_size if observed.front or observed.wrist else None
+    problem = unpictured_problem(args, picture_size is not None, "video (no --no-video), and --observe with a camera")
+    if problem:
+        return fail(f"so101 demos: {problem}")
     video_sizes = video_keys_and_sizes(picture_size, True, observed)
     merged = args.workers > 1
     try:  # another dataset's folder (other features, another rate) is refused here, before anything starts
@@ -110,6 +116,8 @@ def run(args: argparse.Namespace) -> int:
     print(f"demos: {args.task} on {args.body} by the expert (noise {args.noise:g}, misses {args.misses:g}{taking_over}), seeds {args.seed}.."
           f"{args.seed + args.episodes - 1}, observing {observed} ({cameras}), into {root}{workers} "
           f"(logs: {log_place(args, work)})", flush=True)
+    for line in backdrop_lines(args, picture_size):
+        print(f"demos: {line}", flush=True)
     started = time.monotonic()
     kept = 0
 

@@ -21,7 +21,8 @@ from pathlib import Path
 from so101.policy.settings import torch_device
 from so101.runtime.argtypes import add_camera_size_option
 from so101.launch.lockstep import (
-    Driver, add_common_arguments, expert_driver, fail, flows_for, log_place, refuse_real, run_flows, work_folder,
+    Driver, add_common_arguments, backdrop_lines, expert_driver, fail, flows_for, log_place, refuse_real, run_flows,
+    unpictured_problem, work_folder,
 )
 from so101.launch.on_cluster import add_policy_machine_argument, cluster_place
 from so101.dataset.settings import DEFAULT_IMAGE_SIZE
@@ -76,6 +77,9 @@ def run(args: argparse.Namespace) -> int:
         return fail("so101 eval: --policy-python goes with --policy DIR")
     else:
         driver = expert_driver(args) if args.expert else None
+    problem = unpictured_problem(args, picture_size is not None, "--video FILE, or a --policy that sees")
+    if problem:
+        return fail(f"so101 eval: {problem}")
     work = work_folder("eval")
     flows = flows_for(args, work, driver, pictures, picture_size, lambda folder: {"SO101_VIDEO_DIR": video})
     who = ("the expert" if args.expert else f"the policy in {args.policy}" if args.policy is not None
@@ -85,6 +89,8 @@ def run(args: argparse.Namespace) -> int:
     print(f"eval: {args.task} on {args.body}, {who}, seeds {args.seed}..{args.seed + args.episodes - 1}, "
           f"time limit {args.time_limit:g} s, {args.workers} worker{'s' if args.workers > 1 else ''} "
           f"(logs: {log_place(args, work)})", flush=True)
+    for line in backdrop_lines(args, picture_size):
+        print(f"eval: {line}", flush=True)
     outcomes, problem = run_flows("eval", flows, work, args.log, lambda outcome, worker: print(outcome.line(), flush=True),
                                   place)
     if problem:

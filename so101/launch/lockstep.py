@@ -185,6 +185,30 @@ def scenario_of(args: argparse.Namespace, pictured: bool = True) -> Scenario:
                     backdrops=dict(getattr(args, "backdrops", {})) if pictured else {})
 
 
+def unpictured_problem(args: argparse.Namespace, pictured: bool, how: str) -> str | None:
+    """One line where --looks, --camera-pose or --backdrop is given to a run that draws no pictures (`how`
+    says what would draw them); None otherwise."""
+    given = [option for option, value in (("--looks", args.looks != DEFAULT_LOOKS), ("--camera-pose", args.camera_poses),
+                                          ("--backdrop", getattr(args, "backdrops", {}))) if value]
+    if given and not pictured:
+        return f"{given[0]} shapes a task's pictures, and this run draws none: it goes with {how}"
+    return None
+
+
+def backdrop_lines(args: argparse.Namespace, size: tuple[int, int] | None) -> list[str]:
+    """What each --backdrop is, said once: its photos, and how they fit the pictures."""
+    from so101.bodies.backdrop import backdrop_photos, read_photo
+
+    lines = []
+    for name, path in sorted(getattr(args, "backdrops", {}).items()):
+        photos = backdrop_photos(path)
+        height, width = read_photo(photos[0].resolve()).shape[:2]
+        which = f"{path}, {width}x{height}" if len(photos) == 1 else f"{len(photos)} photos in {path}, one a seed"
+        fit = f"scaled to cover the {size[0]}x{size[1]} pictures and cropped about the centre" if size else ""
+        lines.append(f"the {name} camera's backdrop: {which}; {fit}")
+    return lines
+
+
 def lockstep_dataflow(flow: Flow, placement: Placement | None = None, root: PurePath = ROOT) -> dict:
     """The dataflow's descriptor: the body, the driver and the runner, every node's path absolute
     under `root` (the project's folder on the machines that run them); with a `placement`, each on
