@@ -1,16 +1,16 @@
 """What an episode looks like and how it behaves: one value, from the command line to every node.
 
-A task's episode is laid out from its seed. Three things vary with it beyond the layout:
+A task's episode is laid out from its seed. Four things vary with it beyond the layout:
 - its pictures' looks (so101.bodies.looks: `fixed`, `varied`, `unseen`);
 - where its simulated cameras stand (so101.bodies.camera_file: `--camera-pose NAME=FILE`);
 - its physics (so101.bodies.physics: `fixed`, `varied`, or a ranges file's ranges);
 - a photo of the workspace behind each camera's scene (so101.bodies.backdrop: `--backdrop NAME=IMAGE`).
 
-A `Scenario` holds the three as a run asks for them. It travels whole: one environment variable
-(`SCENARIO_ENV_VAR`, JSON, so that a node on another machine needs no file) to the body, the camera,
-the recorder, the episodes' runner and the perception node (a backdrop by its path, which must be there
-on the node's machine). Each episode's are drawn from its seed
-(`metadata`), and a dataset keeps them under one key by episode (so101.dataset.layout.SCENARIOS_KEY).
+A `Scenario` holds the four as a run asks for them. It travels whole: one environment variable
+(`SCENARIO_ENV_VAR`, JSON, so that a node on another machine needs no ranges file) to the body, the
+camera, the recorder, the episodes' runner and the perception node; a backdrop travels by its path,
+which must be there on the node's machine. Each episode's are drawn from its seed (`metadata`), and a
+dataset keeps them under one key by episode (so101.dataset.layout.SCENARIOS_KEY).
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ FIELDS = ("looks", "camera_poses", "physics", "backdrops")
 
 @dataclass(frozen=True)
 class Scenario:
-    """A run's looks, camera poses and physics, as asked for; each episode's are drawn from its seed."""
+    """A run's looks, camera poses, physics and backdrops, as asked for; each episode's are drawn from its seed."""
 
     looks: str = DEFAULT_LOOKS
     camera_poses: dict[str, CameraFile] = field(default_factory=dict)
@@ -104,3 +104,21 @@ def parse_scenario(text: str) -> Scenario:
     except (CameraFileError, PhysicsError, BackdropError) as error:
         raise ValueError(f"the scenario: {error}") from None
     return Scenario(looks, poses, mode, dict(backdrops))
+
+
+class ReadsScenario:
+    """For a node's settings that read the scenario (`scenario`): its parts by name."""
+
+    scenario: Scenario
+
+    @property
+    def looks(self) -> str:
+        return self.scenario.looks
+
+    @property
+    def camera_poses(self) -> dict[str, CameraFile]:
+        return self.scenario.camera_poses
+
+    @property
+    def physics(self) -> str:
+        return self.scenario.physics

@@ -15,9 +15,8 @@ from pathlib import Path
 from typing import Mapping, Self
 
 from so101.assets import ASSETS_ENV_VAR
-from so101.bodies.camera_file import CameraFile
 from so101.bodies.pd_servo import DEFAULT_DAMPING_RATIO
-from so101.bodies.scenario import SCENARIO_ENV_VAR, SCENARIO_HELP, Scenario, parse_scenario
+from so101.bodies.scenario import SCENARIO_ENV_VAR, SCENARIO_HELP, ReadsScenario, Scenario, parse_scenario
 from so101.feetech.calibration import parse_joint_signs
 from so101.runtime.display import MODE_ENV_VAR
 from so101.lang import DEFAULT_LANGUAGE, ENV_VAR as LANG_ENV_VAR, language_from_environ
@@ -78,7 +77,7 @@ def read_torque_percent(environ: Mapping[str, str], declared_setting: Setting) -
 
 
 @dataclass(frozen=True)
-class NodeSettings(EnvironSettings):
+class NodeSettings(ReadsScenario, EnvironSettings):
     """What the shared loop reads for every body (the body's own settings apart)."""
 
     display_mode: str = setting(
@@ -120,18 +119,6 @@ class NodeSettings(EnvironSettings):
         if problem:
             raise ValueError(problem)
         return super().from_environ(environ)
-
-    @property
-    def looks(self) -> str:
-        return self.scenario.looks
-
-    @property
-    def camera_poses(self) -> dict[str, CameraFile]:
-        return self.scenario.camera_poses
-
-    @property
-    def physics(self) -> str:
-        return self.scenario.physics
 
 
 @dataclass(frozen=True)

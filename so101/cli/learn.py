@@ -33,8 +33,8 @@ from typing import Callable
 from so101.bodies.camera_file import camera_file_from, orbit_of
 from so101.bodies.physics import physics_mode
 from so101.bodies.registry import SIMULATED_BODIES
-from so101.perception.recipe import EYES_DIR, POLICY_DIR, write_recipe
 from so101.launch.camera_poses import add_backdrop_option, add_camera_pose_option
+from so101.perception.recipe import EYES_DIR, POLICY_DIR, write_recipe
 from so101.policy.environment import OFFLINE, PolicyEnvError, build, default_dir, python_in, with_checkout
 from so101.runtime.argtypes import parsed_by, whole_number
 from so101.runtime.dataflow import ROOT

@@ -7,8 +7,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from so101.assets import ASSETS_ENV_VAR
-from so101.bodies.camera_file import CameraFile
-from so101.bodies.scenario import SCENARIO_ENV_VAR, SCENARIO_HELP, Scenario, parse_scenario
+from so101.bodies.scenario import SCENARIO_ENV_VAR, SCENARIO_HELP, ReadsScenario, Scenario, parse_scenario
 from so101.bodies.settings import read_language
 from so101.tasks.settings import read_task
 from so101.dataset.features import DEFAULT_FPS
@@ -26,7 +25,7 @@ DEFAULT_IMAGE_SIZE = "320x240"
 
 
 @dataclass(frozen=True)
-class RecorderSettings(EnvironSettings):
+class RecorderSettings(ReadsScenario, EnvironSettings):
     """nodes/recorder.py."""
 
     root: Path = setting(
@@ -54,21 +53,9 @@ class RecorderSettings(EnvironSettings):
         "SO101_RECORD_CAMERA_LOST", "save", "with real cameras, what becomes of the episode when one stops sending "
         "pictures: `save` it up to then, or `discard` it", read_choice(CAMERA_LOST_CHOICES))
 
-    @property
-    def looks(self) -> str:
-        return self.scenario.looks
-
-    @property
-    def camera_poses(self) -> dict[str, CameraFile]:
-        return self.scenario.camera_poses
-
-    @property
-    def physics(self) -> str:
-        return self.scenario.physics
-
 
 @dataclass(frozen=True)
-class CameraSettings(EnvironSettings):
+class CameraSettings(ReadsScenario, EnvironSettings):
     """nodes/camera.py."""
 
     image_size: tuple[int, int] | None = setting(
@@ -79,18 +66,6 @@ class CameraSettings(EnvironSettings):
     task: str = setting("SO101_TASK", "", "the task whose objects the pictures show, posed by `object_state`; empty = none",
                         read_task)
     scenario: Scenario = setting(SCENARIO_ENV_VAR, "", SCENARIO_HELP, read_parsed(parse_scenario))
-
-    @property
-    def looks(self) -> str:
-        return self.scenario.looks
-
-    @property
-    def camera_poses(self) -> dict[str, CameraFile]:
-        return self.scenario.camera_poses
-
-    @property
-    def physics(self) -> str:
-        return self.scenario.physics
 
 
 @dataclass(frozen=True)

@@ -7,8 +7,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Mapping
 
-from so101.bodies.camera_file import CameraFile
-from so101.bodies.scenario import SCENARIO_ENV_VAR, SCENARIO_HELP, Scenario, parse_scenario
+from so101.bodies.scenario import SCENARIO_ENV_VAR, SCENARIO_HELP, ReadsScenario, Scenario, parse_scenario
 from so101.bodies.settings import read_language, read_lockstep_fps
 from so101.lang import DEFAULT_LANGUAGE, ENV_VAR as LANG_ENV_VAR
 from so101.observe import ALL_OBSERVED, OBSERVE_ENV_VAR, Observed, parse_observed
@@ -75,7 +74,7 @@ class ExpertSettings(EnvironSettings):
 
 
 @dataclass(frozen=True)
-class EpisodeSettings(EnvironSettings):
+class EpisodeSettings(ReadsScenario, EnvironSettings):
     """The episodes' runner's (nodes/episodes.py): which layouts, how long, what is written."""
 
     task: str = setting("SO101_TASK", "cube_to_box", "the task whose episodes run", read_required_task)
@@ -107,15 +106,3 @@ class EpisodeSettings(EnvironSettings):
         OBSERVE_ENV_VAR, str(ALL_OBSERVED), "what the written frames show, from state,environment,front,wrist "
         "(so101.observe): state,front,wrist leaves the objects' exact poses out", read_parsed(parse_observed))
     lang: str = setting(LANG_ENV_VAR, DEFAULT_LANGUAGE, "log language, `zh` or `en`", read_language)
-
-    @property
-    def looks(self) -> str:
-        return self.scenario.looks
-
-    @property
-    def camera_poses(self) -> dict[str, CameraFile]:
-        return self.scenario.camera_poses
-
-    @property
-    def physics(self) -> str:
-        return self.scenario.physics
