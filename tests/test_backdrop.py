@@ -147,7 +147,6 @@ def test_each_pixel_is_the_median_of_the_frames_that_do_not_cover_it_and_too_man
                                                                      "moves with the jaws"),
     (["--backdrop", "front", "--from", "{dataset}", "-o", "{out}"], "--backdrop front --from {dataset} needs "
                                                                      "--camera-pose front=FILE"),
-    (["--fit", "front", "--from", "{dataset}", "--max-holes", "0.1"], "--max-holes goes with --backdrop NAME"),
 ])
 def test_making_a_backdrop_refuses_in_one_line_and_writes_nothing(tmp_path, args, message):
     paths = {"out": tmp_path / "made.png", "video": tmp_path / "room.mp4",

@@ -135,8 +135,9 @@ def test_a_fit_that_fails_leaves_the_file_there_and_says_why_in_one_line(tmp_pat
     assert kept.read_text(encoding="utf-8") == "mine\n"
     # An option of another mode, or a negative episode: one line each, nothing done.
     for argv, said in ((["--fit", "front", "--from", str(tmp_path), "--port", "/dev/ttyACM0"], "--port goes with --align NAME"),
-                       (["--default", "front", "--from", str(tmp_path)], "--from goes with --fit NAME"),
-                       (["--default", "front", "--episode", "2"], "--episode goes with --fit NAME"),
+                       (["--default", "front", "--from", str(tmp_path)], "--from goes with --fit NAME or --backdrop NAME"),
+                       (["--default", "front", "--episode", "2"], "--episode goes with --fit NAME or --backdrop NAME"),
+                       (["--fit", "front", "--max-holes", "0.1"], "--max-holes goes with --backdrop NAME"),
                        (["--fit", "front", "--size", "64x48"], "--size goes with --default NAME"),
                        (["--port", "/dev/ttyACM0"], "--port goes with --align NAME")):
         assert main(["cameras", *argv]) == 2

@@ -58,7 +58,7 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
     parser.add_argument("--size", metavar="WxH", default=None,
                         help="--default: the pictures' size the file says (default 320x240)")
     parser.add_argument("--max-holes", type=number(lambda value: 0 <= value < 1, "a share from 0 to below 1"),
-                        default=0.05, metavar="SHARE",
+                        default=None, metavar="SHARE",
                         help="--backdrop: the most of the picture the arm may cover in every frame, filled from "
                              "around it (default 0.05); more is refused")
     add_align_arguments(parser)
@@ -203,7 +203,9 @@ def make_backdrop(args: argparse.Namespace) -> int:
     """--backdrop NAME: the median of a source's frames, the arm left out, written to -o FILE.png."""
     import cv2
 
-    from so101.perception.backdrop_maker import BackdropMakingError, episode_frames, median_backdrop, source_frames
+    from so101.perception.backdrop_maker import (
+        DEFAULT_MAX_HOLES, BackdropMakingError, episode_frames, median_backdrop, source_frames,
+    )
 
     name = args.backdrop
     if args.dataset is None:
@@ -221,7 +223,7 @@ def make_backdrop(args: argparse.Namespace) -> int:
                                                   args.calibration and args.calibration.expanduser())
         else:
             frames, covered, how = source_frames(str(args.dataset)), None, "the median of its frames"
-        picture, seen = median_backdrop(frames, covered, args.max_holes)
+        picture, seen = median_backdrop(frames, covered, DEFAULT_MAX_HOLES if args.max_holes is None else args.max_holes)
     except (BackdropMakingError, ValueError) as error:
         return fail(str(error))
     target = args.output.expanduser()
