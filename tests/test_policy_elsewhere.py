@@ -108,10 +108,11 @@ def test_eval_with_the_policy_on_another_daemon_scores_as_on_one_machine(cluster
         capture_output=True, text=True, timeout=300, env=on(cluster))
     assert done.returncode == 0, done.stdout + done.stderr
     lines = done.stdout.strip().splitlines()
-    assert lines[3:5] == ["eval: worker 0 (seeds 5..5) on machine 'arm', its policy on machine 'desk'",
+    assert lines[1].startswith("so101 eval: note: the policy's joints are taken as degrees")  # its dataset is elsewhere
+    assert lines[4:6] == ["eval: worker 0 (seeds 5..5) on machine 'arm', its policy on machine 'desk'",
                           "eval: worker 1 (seeds 6..6) on machine 'arm', its policy on machine 'desk'"]
     # What test_policy.py's test_eval_scores_a_policy_in_lockstep_episode_by_episode scores on one machine.
-    assert lines[5:8] == ["episode 0 (seed 5): failed (time limit, 2.0 s), 51 frames",
+    assert lines[6:9] == ["episode 0 (seed 5): failed (time limit, 2.0 s), 51 frames",
                           "episode 1 (seed 6): failed (time limit, 2.0 s), 51 frames",
                           "success: 0/2 (0%, 95% CI 0–66%, Wilson), mean time to success none (no success)"]
     assert ran_on(cluster, "simulation", "episodes", "policy") == {HERE: {"simulation", "episodes"},
