@@ -7,7 +7,7 @@ five arm joints in degrees, the gripper 0-100. No simulator is imported here.
 
 from __future__ import annotations
 
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence, TypeVar
 
 import numpy as np
 import numpy.typing as npt
@@ -23,6 +23,8 @@ from so101.bodies.registry import SIMULATED_BODIES
 from so101.dataset.features import joint_targets_deg, to_lerobot
 from so101.robot import ACTUATED_JOINTS
 from so101.tasks.cube_to_box import CubeToBox
+
+Parsed = TypeVar("Parsed")
 
 OBS_TYPES = ("state", "pixels_agent_pos", "all")
 RENDER_MODES = ("rgb_array",)
@@ -68,35 +70,36 @@ def check_physics(physics: object) -> str:
         raise ValueError(f"physics: {error}") from None
 
 
+def per_camera(option: str, value: object, given: Callable[[str], tuple[str, Parsed]],
+               from_map: Callable[[dict], dict[str, Parsed]], error: type[ValueError], each: str) -> dict[str, Parsed]:
+    """An option that says something of each camera, as {name: ...} (`from_map` reads it) or the text
+    "front=...,wrist=..." (LeRobot's --env.OPTION; `given` reads each part); None or "" for nothing. ValueError in
+    one line, naming the option, for a value that is neither or an `error` reading it."""
+    if value is None or value == "":
+        return {}
+    try:
+        if isinstance(value, str):
+            return dict(given(part.strip()) for part in value.split(","))
+        if not isinstance(value, dict):
+            raise ValueError(f"{option}={value!r} is not a map from a camera's name to {each}")
+        return from_map(value)
+    except error as problem:
+        raise ValueError(f"{option}: {problem}") from None
+
+
 def check_camera_pose(camera_pose: object) -> dict[str, CameraFile]:
     """`camera_pose`: where the simulated cameras stand, as {name: camera file's path, or its fields}, or the
     text "front=FILE,wrist=FILE" (LeRobot's --env.camera_pose); None or "" for the simulator's own."""
-    if camera_pose is None or camera_pose == "":
-        return {}
-    try:
-        if isinstance(camera_pose, str):
-            return dict(camera_pose_given(part.strip()) for part in camera_pose.split(","))
-        if not isinstance(camera_pose, dict):
-            raise ValueError(f"camera_pose={camera_pose!r} is not a map from a camera's name to its camera file")
-        return {simulated_camera(name): camera_file_from(given, name) if isinstance(given, dict)
-                else read_camera_file(given, name) for name, given in camera_pose.items()}
-    except CameraFileError as error:
-        raise ValueError(f"camera_pose: {error}") from None
+    return per_camera("camera_pose", camera_pose, camera_pose_given, lambda poses: {
+        simulated_camera(name): camera_file_from(given, name) if isinstance(given, dict) else read_camera_file(given, name)
+        for name, given in poses.items()}, CameraFileError, "its camera file")
 
 
 def check_backdrop(backdrop: object) -> dict[str, str]:
     """`backdrop`: photos behind the simulated cameras' scenes, as {name: a photo's or a folder's path}, or the
     text "front=IMAGE[,wrist=IMAGE]" (LeRobot's --env.backdrop); None or "" for none (so101.bodies.backdrop)."""
-    if backdrop is None or backdrop == "":
-        return {}
-    try:
-        if isinstance(backdrop, str):
-            return dict(checked_backdrop(part.strip()) for part in backdrop.split(","))
-        if not isinstance(backdrop, dict):
-            raise ValueError(f"backdrop={backdrop!r} is not a map from a camera's name to a photo")
-        return dict(checked_backdrop(f"{name}={path}") for name, path in backdrop.items())
-    except BackdropError as error:
-        raise ValueError(f"backdrop: {error}") from None
+    return per_camera("backdrop", backdrop, checked_backdrop, lambda photos: dict(
+        checked_backdrop(f"{name}={path}") for name, path in photos.items()), BackdropError, "a photo")
 
 
 def check_render_mode(render_mode: object) -> str | None:

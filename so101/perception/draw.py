@@ -13,14 +13,7 @@ import numpy as np
 from so101.bodies.looks import LOOKS_CHOICES
 from so101.bodies.scenario import Scenario, parse_scenario
 from so101.perception.pictures import draw_pictures, read_frames
-from so101.runtime.argtypes import image_size
-
-
-def parse_scenario_argument(text: str) -> Scenario:
-    try:
-        return parse_scenario(text)
-    except ValueError as error:
-        raise argparse.ArgumentTypeError(str(error)) from None
+from so101.runtime.argtypes import image_size, parsed_by
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -31,7 +24,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--looks", choices=LOOKS_CHOICES, default="varied")
     parser.add_argument("--size", type=image_size, default=(160, 120))
-    parser.add_argument("--scenario", type=parse_scenario_argument, default=Scenario(), metavar="JSON",
+    parser.add_argument("--scenario", type=parsed_by(parse_scenario), default=Scenario(), metavar="JSON",
                         help="the camera poses and backdrops to draw from (so101.bodies.scenario; its looks are "
                              "--looks')")
     parser.add_argument("--held-out", action="store_true",

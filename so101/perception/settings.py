@@ -6,14 +6,13 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from so101.lang import DEFAULT_LANGUAGE, ENV_VAR as LANG_ENV_VAR, language_from_environ
-from so101.bodies.camera_file import CameraFile
-from so101.bodies.scenario import SCENARIO_ENV_VAR, Scenario, parse_scenario
+from so101.bodies.scenario import SCENARIO_ENV_VAR, ReadsScenario, Scenario, parse_scenario
 from so101.runtime.settings import EnvironSettings, read_parsed, read_stripped_text, read_threads, setting
 from so101.tasks.settings import read_task
 
 
 @dataclass(frozen=True)
-class PerceptionSettings(EnvironSettings):
+class PerceptionSettings(ReadsScenario, EnvironSettings):
     eyes_dir: Path = setting("SO101_EYES_DIR", "", "the eyes' folder (eyes.pt, eyes.json), as `so101 learn --sees` "
                              "writes it in its output's eyes/",
                              lambda environ, declared_setting: Path(read_stripped_text(environ, declared_setting)).expanduser(),
@@ -25,7 +24,3 @@ class PerceptionSettings(EnvironSettings):
     threads: int = setting("SO101_EYES_THREADS", "1", "PyTorch's threads for the eyes on the CPU", read_threads)
     lang: str = setting(LANG_ENV_VAR, DEFAULT_LANGUAGE, "log language, `zh` or `en`",
                         lambda environ, declared_setting: language_from_environ(environ))
-
-    @property
-    def camera_poses(self) -> dict[str, CameraFile]:
-        return self.scenario.camera_poses
