@@ -99,7 +99,10 @@ def main() -> int:
     recorded = tuple(name for name, input_id in (("front", "image"), ("wrist", "wrist_image")) if written[input_id])
     pictures = tuple(input_id for input_id in ("image", "wrist_image") if settings.image_size and (
         (writer is not None and written[input_id]) or (input_id == "image" and settings.video_dir is not None)))
-    observation = ("joint_state", "gripper_state", "object_state", "task_status", *pictures)
+    observation = ("joint_state", "gripper_state", "object_state", "task_status", *pictures,
+                   *(("seen_state",) if settings.environment_seen else ()))
+    # what the policy trained on these frames will read: the eyes' findings (DAgger behind the eyes), or the simulator's
+    environment_input = "seen_state" if settings.environment_seen else "object_state"
     frames = FrameParts(observation if idle else (*observation, "action"))
     clock = EpisodeClock(settings.lockstep_fps, settings.time_limit_s)
     seeds = seeds_for(settings.first_seed, settings.episodes)
@@ -191,7 +194,7 @@ def main() -> int:
             values = {STATE_KEY: to_lerobot(state_deg), ACTION_KEY: to_lerobot(action_deg),
                       SUCCESS_KEY: np.array([success]), REWARD_KEY: np.array([task.reward(success)], dtype=np.float32)}
             if observed.environment:
-                values[ENVIRONMENT_KEY] = np.asarray(frame["object_state"].to_numpy(zero_copy_only=False), np.float32)
+                values[ENVIRONMENT_KEY] = np.asarray(frame[environment_input].to_numpy(zero_copy_only=False), np.float32)
             for input_id, key in (("image", IMAGE_KEY), ("wrist_image", WRIST_IMAGE_KEY)):
                 if written[input_id] and settings.image_size:
                     values[key] = picture(frame[input_id], settings.image_size)

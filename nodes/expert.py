@@ -10,7 +10,9 @@ While it plays a miss on purpose (SO101_EXPERT_MISSES) its answers say `not_writ
 runner keeps the recovery that follows, not the miss. With a learner (SO101_EXPERT_LEARNER, DAgger:
 `so101 demos --learner`), a trained state policy drives each episode first, its answers not written,
 and at a frame drawn from the episode's seed the expert takes over from wherever the learner left the
-arm and the cube: what is written is the expert's way on from the states the learner reaches.
+arm and the cube: what is written is the expert's way on from the states the learner reaches. A seeing
+recipe's learner (SO101_EXPERT_LEARNER_SEES) reads `seen_state`, what its eyes found, while the expert
+reads the simulator's `object_state`.
 At the prompt (`so101 teleop --task`), it stands between the prompt and the body, as the leader
 does: what the prompt sends (`typed_cmd`) goes on to the body as it is; `expert_cmd` `run` has it
 do the task once from where things are, a target every `tick` (40 ms) by the wall clock, until
@@ -92,7 +94,8 @@ def main() -> int:
     except (ValueError, ModelFilesError) as error:
         return cannot_start(error, NODE_ID)
     text = TEXT[settings.lang]
-    frames = FrameParts(OBSERVED)
+    # behind a seeing recipe's eyes, the learner reads what they found (seen_state), the expert the simulator's truth
+    frames = FrameParts((*OBSERVED, "seen_state") if settings.learner_sees else OBSERVED)
     expert: Expert | None = None
     answered: LastAnswer[tuple[tuple[float, ...], bool]] = LastAnswer()  # lockstep: (targets, not written)
     takeover = 0  # lockstep, with a learner: the frame of this episode at which the expert takes over
@@ -110,7 +113,8 @@ def main() -> int:
                 learner.reset()
                 takeover = takeover_frame(tag.seed, settings.takeover_s, settings.lockstep_fps)
         if learner is not None and tag.frame < takeover:
-            action, _ = learner.act(observation(frame, None))
+            seen = {**frame, "object_state": frame["seen_state"]} if settings.learner_sees else frame
+            action, _ = learner.act(observation(seen, None))
             return tuple(joint_targets_deg(action)), True
         if expert is None:
             expert = Expert(planner, noise=settings.noise, seed=tag.seed, misses=settings.misses)

@@ -45,7 +45,8 @@ def add_arguments(parser: argparse.ArgumentParser, name: str) -> None:
                         help="DAgger: a trained state policy (a LeRobot folder, or so101 learn's) drives each episode "
                              "first, unwritten, and the expert takes over from where it left things at a moment drawn "
                              "from the seed; what is written is the expert's way on (an episode the learner finished "
-                             "alone writes nothing)")
+                             "alone writes nothing). A seeing recipe's folder drives behind its eyes (the front picture "
+                             "drawn in --looks), and the environment state written is what its eyes found")
     parser.add_argument("--takeover-s", type=number(lambda value: 0 < value <= 60, "seconds above 0, at most 60"),
                         default=None, metavar="S",
                         help="--learner: the expert takes over between 0 and S simulated seconds in (default 12)")
@@ -78,7 +79,7 @@ def run(args: argparse.Namespace) -> int:
             return fail(f"so101 demos: --learner: {error}")
         if learner.picture_size is not None:
             return fail(f"so101 demos: --learner {args.learner} sees pictures: a learner reads the arm and the objects "
-                        "only (a state policy, or the policy of so101 learn's folder)")
+                        "only (a state policy, or so101 learn's folder)")
     place = cluster_place(args, "the runners keep the episodes")
     if isinstance(place, str):
         return fail(f"so101 demos: {place}")
@@ -88,7 +89,13 @@ def run(args: argparse.Namespace) -> int:
     if problem:
         return fail(f"so101 demos: --observe {observed}: {problem}")
     picture_size = args.image_size if observed.front or observed.wrist else None
-    problem = unpictured_problem(args, picture_size is not None, "video (no --no-video), and --observe with a camera")
+    # a seeing recipe's learner drives behind its eyes, which see the front picture at their size
+    eyes_size = learner.recipe.eyes.size if learner is not None and learner.recipe is not None else None
+    if eyes_size is not None and picture_size not in (None, eyes_size):
+        return fail(f"so101 demos: --learner {args.learner} sees through its eyes at {eyes_size[0]}x{eyes_size[1]}: "
+                    f"record at --camera-size {eyes_size[0]}x{eyes_size[1]}, or give --no-video")
+    problem = unpictured_problem(args, picture_size is not None or eyes_size is not None,
+                                 "video (no --no-video), --observe with a camera, or a seeing recipe's --learner")
     if problem:
         return fail(f"so101 demos: {problem}")
     video_sizes = video_keys_and_sizes(picture_size, True, observed)
@@ -104,14 +111,18 @@ def run(args: argparse.Namespace) -> int:
         opened.close()
     work = work_folder("demos")
     pictures = tuple(input_id for input_id, key in (("image", IMAGE_KEY), ("wrist_image", WRIST_IMAGE_KEY))
-                     if key in video_sizes)
-    flows = flows_for(args, work, expert_driver(args, learner), pictures, picture_size,
+                     if key in video_sizes or (input_id == "image" and eyes_size is not None))
+    # behind the eyes, what is written is what the eyes found: what the policy trained on it will read
+    seen = {"SO101_ENVIRONMENT_SEEN": "1"} if eyes_size is not None and observed.environment else {}
+    flows = flows_for(args, work, expert_driver(args, learner), pictures, picture_size or eyes_size,
                       lambda folder: {"SO101_SPOOL_DIR" if merged else "SO101_RECORD_DIR": str(folder / "spool" if merged else root),
-                                      "SO101_KEEP": args.keep, OBSERVE_ENV_VAR: str(observed)})
+                                      "SO101_KEEP": args.keep, OBSERVE_ENV_VAR: str(observed), **seen})
     cameras = (f"{' and '.join(name for name in ('front', 'wrist') if getattr(observed, name))} {flows[0].picture_size}"
-               if flows[0].picture_size else "no video")
+               if picture_size else "no video")
     workers = f", {args.workers} workers merged in seed order" if merged else ""
-    taking_over = (f", taking over from the learner {learner.folder} between 0 and {args.takeover_s:g} s in"
+    behind_eyes = (f" behind its eyes (front {eyes_size[0]}x{eyes_size[1]}, looks {args.looks}; the environment "
+                   "state written is what they found)" if eyes_size is not None else "")
+    taking_over = (f", taking over from the learner {learner.folder}{behind_eyes} between 0 and {args.takeover_s:g} s in"
                    if learner is not None else "")
     print(f"demos: {args.task} on {args.body} by the expert (noise {args.noise:g}, misses {args.misses:g}{taking_over}), seeds {args.seed}.."
           f"{args.seed + args.episodes - 1}, observing {observed} ({cameras}), into {root}{workers} "

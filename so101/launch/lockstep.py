@@ -115,18 +115,23 @@ class Driver:
     python: str | None = None
     # The perception node's settings where eyes fill the driver's object_state (a seeing recipe), else None.
     perception_env: dict[str, str] | None = None
+    # With perception_env: the eyes' object_state goes to the driver and the runner as `seen_state`, beside the
+    # simulator's (DAgger behind the eyes: the learner reads what they found, the expert the truth), not in its place.
+    eyes_beside: bool = False
 
 
 def expert_driver(args: argparse.Namespace, learner: "ChosenPolicy | None" = None) -> Driver:
     """The expert as the driver; with `learner` (DAgger: `so101 demos --learner`), under the policy environment's
-    Python, the learner driving each episode until the expert takes over (SO101_EXPERT_LEARNER)."""
+    Python, the learner driving each episode until the expert takes over (SO101_EXPERT_LEARNER); a seeing recipe's
+    learner behind its eyes, the perception node beside the expert."""
     env = {"SO101_TASK": args.task, "SO101_EXPERT_NOISE": repr(args.noise), "SO101_EXPERT_MISSES": repr(args.misses)}
     if learner is None:
         return Driver("expert", EXPERT_NODE_FILE, ("joint_state", "gripper_state", "object_state"), env)
     env.update({"SO101_EXPERT_LEARNER": str(learner.folder), "SO101_EXPERT_TAKEOVER_S": repr(args.takeover_s),
-                "HF_HUB_OFFLINE": "1", "OMP_NUM_THREADS": "1"})
+                "SO101_EXPERT_LEARNER_SEES": "1" if learner.recipe else "0", "HF_HUB_OFFLINE": "1", "OMP_NUM_THREADS": "1"})
     return Driver("expert", EXPERT_NODE_FILE, ("joint_state", "gripper_state", "object_state"), env,
-                  python=str(learner.python))
+                  python=str(learner.python), perception_env=learner.perception_env(args.lang) if learner.recipe else None,
+                  eyes_beside=learner.recipe is not None)
 
 
 @dataclass(frozen=True)
@@ -241,7 +246,10 @@ def lockstep_dataflow(flow: Flow, placement: Placement | None = None, root: Pure
         runner_inputs["action"] = queued(f"{driver.node_id}/joint_cmd")
         driver_inputs = {name: queued(f"{body_id}/{name}") for name in driver.inputs if name in frame_outputs}
         if driver.perception_env is not None:  # the eyes, beside the driver: its object_state is theirs
-            driver_inputs["object_state"] = queued(f"{PERCEPTION_NODE_ID}/object_state")
+            seen = queued(f"{PERCEPTION_NODE_ID}/object_state")
+            driver_inputs["seen_state" if driver.eyes_beside else "object_state"] = seen
+            if driver.eyes_beside:
+                runner_inputs["seen_state"] = seen
             nodes.append({
                 "id": PERCEPTION_NODE_ID, "restart_policy": "never",
                 **node_launch(PERCEPTION_NODE_FILE, under(driver.node_id), driver.python),

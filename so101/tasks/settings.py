@@ -71,6 +71,10 @@ class ExpertSettings(EnvironSettings):
     takeover_s: float = setting(
         "SO101_EXPERT_TAKEOVER_S", "12", "with a learner: the expert takes over at a moment drawn from the episode's "
         "seed, from 0 to this many simulated seconds", read_positive_number)
+    learner_sees: bool = setting(
+        "SO101_EXPERT_LEARNER_SEES", "0", "`1`: the learner reads `seen_state`, what a seeing recipe's eyes (the "
+        "perception node) found, where the expert reads the simulator's `object_state`",
+        lambda environ, declared_setting: read_choice(("0", "1"))(environ, declared_setting) == "1")
 
 
 @dataclass(frozen=True)
@@ -102,6 +106,10 @@ class EpisodeSettings(ReadsScenario, EnvironSettings):
     video_dir: Path | None = setting(
         "SO101_VIDEO_DIR", "", "a folder for each episode's front picture as an mp4; empty = none", read_optional_path)
     scenario: Scenario = setting(SCENARIO_ENV_VAR, "", SCENARIO_HELP, read_parsed(parse_scenario))
+    environment_seen: bool = setting(
+        "SO101_ENVIRONMENT_SEEN", "0", "`1`: the environment state written is `seen_state`, what a seeing recipe's eyes "
+        "found (DAgger behind the eyes), rather than the simulator's `object_state`",
+        lambda environ, declared_setting: read_choice(("0", "1"))(environ, declared_setting) == "1")
     observed: Observed = setting(
         OBSERVE_ENV_VAR, str(ALL_OBSERVED), "what the written frames show, from state,environment,front,wrist "
         "(so101.observe): state,front,wrist leaves the objects' exact poses out", read_parsed(parse_observed))
