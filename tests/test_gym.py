@@ -26,6 +26,7 @@ from so101.gym.spaces import (
     JOINT_OVERSHOOT_DEG, action_space, agent_pos_space, check_camera_size, clamped_targets_deg, environment_state_space,
     observation_space, step_outcome,
 )
+from so101.policy.environment import with_checkout
 from so101.robot import ACTUATED_JOINTS, HOME_POSE_DEG
 from so101.tasks import CUBE_TO_BOX
 from so101.tasks.expert import seen_in
@@ -307,10 +308,16 @@ tasks[0].close()
 """
 
 
+def this_checkout_first() -> dict[str, str]:
+    """The environment for LeRobot's own commands, as a user runs them: offline, and importing this checkout's so101
+    (the policy environment's link names whichever checkout last made it)."""
+    return {**os.environ, "HF_HUB_OFFLINE": "1", "PYTHONPATH": with_checkout(os.environ.get("PYTHONPATH"))}
+
+
 @pytest.mark.slow
 def test_lerobots_envhub_loader_loads_env_py_and_calls_its_make_env(policy_python):  # noqa: F811
     done = subprocess.run([str(policy_python), "-c", HUB_PROBE, str(ROOT / "so101" / "gym" / "env.py")],
-                          capture_output=True, text=True, timeout=300, cwd="/", env={**os.environ, "HF_HUB_OFFLINE": "1"})
+                          capture_output=True, text=True, timeout=300, cwd="/", env=this_checkout_first())
     assert done.returncode == 0, done.stderr[-3000:]
     assert json.loads(done.stdout.strip().splitlines()[-1]) == {
         "suite": "so101_cube_to_box", "vector": "AsyncVectorEnv", "state": [2, 6], "seeds": [1000, 1001], "max_steps": 750}
@@ -323,7 +330,7 @@ def test_lerobot_eval_scores_a_state_only_checkpoint_on_the_environment(policy_p
                "--env.discover_packages_path=so101.gym", "--env.episode_length=40", "--eval.n_episodes=2",
                "--eval.batch_size=1", "--policy.device=cpu", f"--output_dir={out}"]
     done = subprocess.run(command, capture_output=True, text=True, timeout=600, cwd="/",
-                          env={**os.environ, "HF_HUB_OFFLINE": "1"})
+                          env=this_checkout_first())
     assert done.returncode == 0, done.stderr[-3000:]
     (task,) = json.loads((out / "eval_info.json").read_text())["per_task"]
     assert task["task_group"] == "so101_cube_to_box"
