@@ -290,23 +290,30 @@ def test_eval_scores_a_policy_in_lockstep_episode_by_episode(policy_python, kind
                         lines[7]), lines[7]
 
 
-def test_demos_with_a_learner_write_the_experts_way_on_from_where_the_learner_left_the_arm(tmp_path, policy_python):
+@pytest.mark.parametrize("learner", ["state policy", "seeing recipe"])
+def test_demos_with_a_learner_write_the_experts_way_on_from_where_the_learner_left_the_arm(tmp_path, policy_python,
+                                                                                          learner, request):
     """DAgger (so101 demos --learner): the learner drives until the takeover frame drawn from the seed (44 for seed
     21), unwritten; the expert finishes from there, and only its frames are written, the first of them where the
-    learner left the arm."""
+    learner left the arm. A seeing recipe drives behind its eyes, and what is written is what they found: its
+    untrained eyes place the cube nowhere near the box the expert put it in."""
     import pyarrow.parquet as pq
 
     from so101.tasks.expert import takeover_frame
 
+    folder = TINY_POLICY if learner == "state policy" else request.getfixturevalue("seeing_recipe")
     done = subprocess.run([str(SO101), "demos", str(tmp_path / "dagger"), "--task", "cube_to_box", "--episodes", "1",
-                           "--seed", "21", "--no-video", "--learner", str(TINY_POLICY), "--policy-python", str(policy_python)],
+                           "--seed", "21", "--no-video", "--learner", str(folder), "--policy-python", str(policy_python)],
                           capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stdout + done.stderr
     assert "taking over from the learner" in done.stdout.splitlines()[0]
+    assert ("behind its eyes (front 32x24" in done.stdout.splitlines()[0]) == (learner == "seeing recipe")
     frames = int(re.search(r"^episode 0 \(seed 21\): success in [\d.]+ s, (\d+) frames, kept$", done.stdout, re.M).group(1))
     written = pq.read_table(next((tmp_path / "dagger" / "data").rglob("*.parquet"))).to_pydict()
     assert takeover_frame(21, 12.0, 25) == 44 and len(written["frame_index"]) == frames - 44
     assert max(abs(angle) for angle in written[STATE_KEY][0][:5]) > 3.0  # the learner moved the arm off home
+    cube_xy, box_xy = np.array(written[ENVIRONMENT_KEY][-1][:2]), np.array(written[ENVIRONMENT_KEY][-1][7:9])
+    assert (np.linalg.norm(cube_xy - box_xy) < 0.03) == (learner == "state policy")
 
 
 def test_a_python_without_lerobot_refuses_the_policy_node_in_one_line(tmp_path):
