@@ -71,3 +71,34 @@ def test_fixed_looks_change_nothing_and_a_dataset_keeps_either_as_json():
 def test_a_bad_mode_or_seed_is_refused_in_one_line(mode, seed, message):
     with pytest.raises(ValueError, match=message):
         looks_for(mode, seed)
+
+
+@pytest.mark.parametrize("looks", ["varied", "fixed"])
+def test_pybullets_window_lays_a_layout_out_as_its_pictures_show_it(looks):
+    """The window's process (so101.gui.viewer) draws layout 1007 under varied physics with its cube's size and, in
+    varied looks, its floor's and objects' colours; fixed looks keep PyBullet's own."""
+    import pybullet as p
+    import pybullet_data
+
+    from so101.bodies.physics import physics_for
+    from so101.gui.viewer import show_layout
+    from so101.tasks import CUBE_TO_BOX
+
+    client = p.connect(p.DIRECT)
+    try:
+        p.setAdditionalSearchPath(pybullet_data.getDataPath(), physicsClientId=client)
+        plane = p.loadURDF("plane.urdf", physicsClientId=client)
+        scene = CUBE_TO_BOX.pybullet_scene(client, 0)
+        show_layout(scene, plane, client, 1007, looks, "varied")
+        colour = {body: p.getVisualShapeData(body, physicsClientId=client)[0][7] for body in (plane, *scene.object_ids)}
+        cube_extent_m = p.getVisualShapeData(scene.cube_id, physicsClientId=client)[0][3]
+    finally:
+        p.disconnect(client)
+    assert cube_extent_m == pytest.approx([2 * physics_for("varied", 1007).cube_half_size_m] * 3, abs=1e-6)
+    drawn = looks_for(looks, 1007)
+    if drawn is None:
+        assert colour[scene.cube_id] == pytest.approx(CUBE_TO_BOX.cube.rgba)
+        assert colour[plane] == pytest.approx((1, 1, 1, 1))  # PyBullet's checkered floor, untinted
+    else:
+        assert [colour[body] for body in (plane, *scene.object_ids)] == pytest.approx(
+            [drawn.floor_rgba, *drawn.object_rgbas])

@@ -22,6 +22,7 @@ from so101.bodies.camera import DEFAULT_CAMERA, WRIST_CAMERA_NAME, Camera, Wrist
 from so101.bodies.camera_meshes import camera_meshes
 from so101.bodies.mujoco_model import collision_hulls, scene_model
 from so101.bodies.command_path import CommandPath
+from so101.bodies.looks import DEFAULT_LOOKS
 from so101.bodies.physics import DEFAULT_PHYSICS, Physics, physics_for, physics_ranges
 from so101.bodies.protocol import BodyName, RgbImage, SceneTask, TaskScene
 from so101.bodies.settings import MuJoCoSettings, NodeSettings
@@ -70,6 +71,7 @@ class SO101MuJoCo:
         seed: int = 0,
         light_pictures: bool = False,
         physics: str = DEFAULT_PHYSICS,
+        looks: str = DEFAULT_LOOKS,  # the window's: each layout's colours and light, as the pictures have them
     ):
         if joint_damping_n_m_s is not None and not joint_damping_n_m_s >= 0:
             raise ValueError(f"joint damping must be a number >= 0 N·m·s/rad, got {joint_damping_n_m_s!r}")
@@ -107,11 +109,12 @@ class SO101MuJoCo:
         if self.display_mode == "gui":
             self._window = Window(["so101.gui.mujoco_viewer", "--mjcf", str(mjcf), *(["--task", task.name] if task else [])],
                                   on_showing=lambda: log(WINDOW_SHOWING),
-                                  object_values=len(task.object_state_names) if task else 0)
+                                  object_values=len(task.object_state_names) if task else 0, looks=looks, physics=physics)
         self.set_time_step_s(time_step_s)
         self.set_targets_deg(HOME_POSE_DEG)
         mujoco.mj_forward(self.model, self.data)
         self.scene: TaskScene | None = None if task is None else task.mujoco_scene(self.model, self.data, seed)
+        self.layout_seed: int | None = None if task is None else seed  # the window draws its looks and cube
         if self.scene is not None and physics != DEFAULT_PHYSICS:
             self.reset_task(seed)
         elif physics != DEFAULT_PHYSICS:  # the arm alone (a replay): its servos and command path
@@ -126,7 +129,7 @@ class SO101MuJoCo:
             mode=node.display_mode, time_step_s=TICK_PERIOD_S, assets_dir=settings.assets_dir, log=log,
             joint_damping_n_m_s=settings.joint_damping_n_m_s,
             renders=False,  # the node's pictures are so101.bodies.task_cameras'
-            task=task, seed=node.seed, physics=node.physics,
+            task=task, seed=node.seed, physics=node.physics, looks=node.looks,
         )
 
     # -- control ---------------------------------------------------------------------
@@ -151,6 +154,7 @@ class SO101MuJoCo:
         self.data.qvel[self._qvel] = 0.0
         self.data.ctrl[self._actuators] = np.radians(self._command.goal_deg)
         self.scene.lay_out_seed(seed, self.physics)  # also recomputes the kinematics
+        self.layout_seed = seed
 
     def _take_physics(self, physics: Physics | None) -> None:
         """The actuators, the joints and the command path as `physics` has them (None: the model's own)."""
@@ -191,7 +195,8 @@ class SO101MuJoCo:
                 mujoco.mj_step(self.model, self.data, nstep=self.substeps)
                 self.steps += 1
         if self._window is not None and self._window.due():
-            self._window.show(self.data.qpos[self._qpos], None if self.scene is None else self.scene.object_state())
+            self._window.show(self.data.qpos[self._qpos], None if self.scene is None else self.scene.object_state(),
+                              self.layout_seed)
 
     # -- state -----------------------------------------------------------------------
     def joint_angles_deg(self) -> FloatArray:

@@ -24,6 +24,7 @@ from so101.bodies.camera import DEFAULT_CAMERA, Camera, WristCamera, check_pictu
 from so101.bodies.camera_meshes import camera_meshes, urdf_for_cameras
 from so101.bodies.jaw_pads import jaw_pads, urdf_with_pads
 from so101.bodies.command_path import CommandPath
+from so101.bodies.looks import DEFAULT_LOOKS
 from so101.bodies.physics import DEFAULT_PHYSICS, Physics, physics_for, physics_ranges
 from so101.bodies.protocol import BodyName, RgbImage, SceneTask, TaskScene
 from so101.bodies.settings import NodeSettings, PyBulletSettings, check_control_mode
@@ -150,6 +151,7 @@ class SO101Sim:
         seed: int = 0,
         light_pictures: bool = False,  # the cameras' meshes (so101.bodies.camera_meshes); no shadows to leave out here
         physics: str = DEFAULT_PHYSICS,
+        looks: str = DEFAULT_LOOKS,  # the window's: each layout's colours and light, as the pictures have them
     ):
         check_control_mode(control_mode)
         physics_ranges(physics)  # an unknown mode or a ranges file that makes no sense: refused in one line
@@ -192,7 +194,7 @@ class SO101Sim:
         if self.display_mode == "gui":
             self._window = Window(["so101.gui.viewer", "--urdf", str(urdf), *(["--task", task.name] if task else [])],
                                   on_showing=lambda: log(WINDOW_SHOWING),
-                                  object_values=len(task.object_state_names) if task else 0)
+                                  object_values=len(task.object_state_names) if task else 0, looks=looks, physics=physics)
         self.joints = [self._joint_info(i) for i in range(p.getNumJoints(self.robot_id, physicsClientId=cid))]
         self._indices = [joint.index for joint in ACTUATED_JOINTS]
         if link_damping is not None:
@@ -221,6 +223,7 @@ class SO101Sim:
                 targetVelocities=[0.0] * len(self._indices), forces=[0.0] * len(self._indices),
                 physicsClientId=cid,
             )
+        self.layout_seed: int | None = None if task is None else seed  # the window draws its looks and cube
         if self.scene is not None and physics != DEFAULT_PHYSICS:
             self.reset_task(seed)
         elif physics != DEFAULT_PHYSICS:  # the arm alone (a replay): its servos and command path
@@ -286,7 +289,7 @@ class SO101Sim:
             mode=node.display_mode, time_step_s=TICK_PERIOD_S, assets_dir=settings.assets_dir, log=log,
             control_mode=settings.control_mode, servo_damping_ratio=settings.servo_damping_ratio,
             renders=False,  # the node's pictures are so101.bodies.task_cameras'
-            task=task, seed=node.seed, physics=node.physics,
+            task=task, seed=node.seed, physics=node.physics, looks=node.looks,
         )
 
     # -- control ---------------------------------------------------------------------
@@ -319,6 +322,7 @@ class SO101Sim:
         self.physics = physics_for(self.physics_mode, seed)
         self._command = CommandPath(self.physics, HOME_POSE_DEG)
         self.scene.lay_out_seed(seed, self.physics)
+        self.layout_seed = seed
         for joint_index, home_rad in zip(self._indices, np.radians(self._command.goal_deg).tolist()):
             p.resetJointState(self.robot_id, joint_index, home_rad, 0.0, physicsClientId=self.client)
         self.set_targets_deg(HOME_POSE_DEG)
@@ -353,7 +357,8 @@ class SO101Sim:
             self.steps += 1
         if self._window is not None and self._window.due():
             states = p.getJointStates(robot_id, self._indices, physicsClientId=client)
-            self._window.show([state[0] for state in states], None if self.scene is None else self.scene.object_state())
+            self._window.show([state[0] for state in states], None if self.scene is None else self.scene.object_state(),
+                              self.layout_seed)
 
     def _send_varied_motor_goals(self, physics: Physics) -> None:
         # Every tick (the command path moves the goal): gains times PyBullet's defaults, the gripper's force drawn.

@@ -15,7 +15,7 @@ from __future__ import annotations
 import ctypes
 import os
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 import numpy.typing as npt
@@ -53,6 +53,30 @@ def mujoco_drawn_by() -> str:
     return f"MuJoCo {mujoco.__version__}, {os.environ.get('MUJOCO_GL', 'glfw').upper()}: {opengl_renderer() or 'unknown'}"
 
 
+class ModelLooks:
+    """What looks change in a MuJoCo model of a task's scene (its light, its floor's and its objects' colours),
+    and the model's own, which fixed looks put back: the renderer's model, and MuJoCo's window's."""
+
+    def __init__(self, model: Any) -> None:
+        arm_root = int(model.body_rootid[model.joint(ACTUATED_JOINTS[0].name).bodyid[0]])
+        self.object_roots = sorted({int(root) for root in model.body_rootid[1:]} - {arm_root})  # in the model's order
+        self.object_geoms = [[geom for geom in range(model.ngeom) if int(model.body_rootid[model.geom_bodyid[geom]]) == root]
+                             for root in self.object_roots]
+        self.floor_geom = int(model.geom("floor").id)
+        self.arm_root = arm_root
+        self._own = (model.light_dir.copy(), model.light_diffuse.copy(), model.geom_rgba.copy())
+
+    def show(self, model: Any, looks: Looks | None) -> None:
+        """`looks` on `model` (None: the model's own)."""
+        model.light_dir[:], model.light_diffuse[:], model.geom_rgba[:] = self._own
+        if looks is not None:
+            model.light_dir[:] = looks.light_dir
+            model.light_diffuse[:] = looks.light_diffuse
+            model.geom_rgba[self.floor_geom] = looks.floor_rgba
+            for geoms, rgba in zip(self.object_geoms, looks.object_rgbas):
+                model.geom_rgba[geoms] = rgba
+
+
 class TaskCameras:
     """`draw(angles_deg, object_state, width, height)`: the front picture, and with a task the wrist's.
 
@@ -84,15 +108,12 @@ class TaskCameras:
                                   light_pictures=True)
         model = self._model.model
         # What the looks change, as the model has it: the fixed looks put these back.
-        arm_root = int(model.body_rootid[model.joint(ACTUATED_JOINTS[0].name).bodyid[0]])
-        roots = sorted({int(root) for root in model.body_rootid[1:]} - {arm_root})
-        self._object_geoms = [[geom for geom in range(model.ngeom) if int(model.body_rootid[model.geom_bodyid[geom]]) == root]
-                              for root in roots]
-        self._floor_geom = int(model.geom("floor").id)
+        self._model_looks = ModelLooks(model)
+        arm_root = self._model_looks.arm_root
         geom_roots = [int(model.body_rootid[model.geom_bodyid[geom]]) for geom in range(model.ngeom)]
         self._arm_geoms = np.array([root == arm_root for root in geom_roots])
         # The objects that can move (a joint of their own: the cube), not those fixed to the floor (the box).
-        loose = {root for root in roots if model.body_jntnum[root] > 0}
+        loose = {root for root in self._model_looks.object_roots if model.body_jntnum[root] > 0}
         self._loose_geoms = np.array([root in loose for root in geom_roots])
         self._wrist = int(model.camera(WRIST_CAMERA_NAME).id) if task is not None else None
         # A task's front camera frames its workspace, where `poses` (camera files) put it or where the
@@ -105,8 +126,7 @@ class TaskCameras:
         if self._wrist is not None and "wrist" in self.poses:
             pos, quat = wrist_placement(wrist)
             model.cam_pos[self._wrist], model.cam_quat[self._wrist], model.cam_fovy[self._wrist] = pos, quat, wrist.fov_deg
-        self._fixed = (model.light_dir.copy(), model.light_diffuse.copy(), model.geom_rgba.copy(),
-                       float(model.vis.global_.fovy), model.cam_pos.copy(), model.cam_fovy.copy())
+        self._fixed = (float(model.vis.global_.fovy), model.cam_pos.copy(), model.cam_fovy.copy())
 
     def show_seed(self, seed: int) -> None:
         """The looks and physics of episode seed `seed` from now on (varied ones; fixed ones stay as they are)."""
@@ -114,19 +134,14 @@ class TaskCameras:
             self.show_physics(physics_for(self.physics_mode, seed))
         self.placements = {name: placement_for(path, seed, self.looks_mode != DEFAULT_LOOKS)
                             for name, path in self.backdrops.items()}
-        looks = looks_for(self.looks_mode, seed, len(self._object_geoms))
+        looks = looks_for(self.looks_mode, seed, len(self._model_looks.object_geoms))
         if looks == self.looks:
             return
         model = self._model.model
-        light_dir, light_diffuse, geom_rgba, fovy, cam_pos, cam_fovy = self._fixed
-        model.light_dir[:], model.light_diffuse[:], model.geom_rgba[:] = light_dir, light_diffuse, geom_rgba
+        fovy, cam_pos, cam_fovy = self._fixed
         model.vis.global_.fovy, model.cam_pos[:], model.cam_fovy[:] = fovy, cam_pos, cam_fovy
+        self._model_looks.show(model, looks)
         if looks is not None:
-            model.light_dir[:] = looks.light_dir
-            model.light_diffuse[:] = looks.light_diffuse
-            model.geom_rgba[self._floor_geom] = looks.floor_rgba
-            for geoms, rgba in zip(self._object_geoms, looks.object_rgbas):
-                model.geom_rgba[geoms] = rgba
             model.vis.global_.fovy = fovy + looks.front_fov_deg
             if self._wrist is not None:
                 model.cam_pos[self._wrist] = cam_pos[self._wrist] + looks.wrist_shift_m
@@ -172,7 +187,7 @@ class TaskCameras:
             return picture
         height, width = picture.shape[:2]
         geoms = self._model.render_geoms(width, height, camera)
-        behind = (geoms < 0) | (geoms == self._floor_geom)
+        behind = (geoms < 0) | (geoms == self._model_looks.floor_geom)
         return np.where(behind[:, :, None], backdrop_picture(placement, width, height), picture).astype(np.uint8)
 
     def arm_mask(self, angles_deg: AnglesDeg | Sequence[float], camera: Camera, width: int, height: int,

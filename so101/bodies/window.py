@@ -2,8 +2,10 @@
 
 A body that shows a window (PyBullet's or MuJoCo's, in GUI mode) starts the viewer's module in
 another process and shares one small file with it, mapped into both: a frame counter, the
-viewer's state, the six joint angles in radians (so101.robot.ACTUATED_JOINTS order) and, with a
-task, its objects' poses (its object_state). The viewer draws; the physics never waits for it.
+viewer's state, the seed of the layout shown, the six joint angles in radians
+(so101.robot.ACTUATED_JOINTS order) and, with a task, its objects' poses (its object_state). The
+viewer draws; the physics never waits for it. Told the run's looks and physics (`--looks varied`,
+`--physics varied`), the viewer draws each layout's as its seed has them: what the pictures show.
 """
 
 from __future__ import annotations
@@ -21,6 +23,8 @@ from typing import Callable, Sequence
 import numpy as np
 import numpy.typing as npt
 
+from so101.bodies.looks import DEFAULT_LOOKS
+from so101.bodies.physics import DEFAULT_PHYSICS
 from so101.bodies.protocol import BodyFailed
 from so101.robot import ACTUATED_JOINTS
 from so101.runtime.dataflow import ROOT
@@ -28,7 +32,8 @@ from so101.runtime.processes import stop_process
 
 DEFAULT_FPS = 30.0
 # Slots of the shared file, float64 each.
-FRAME, STATUS, ANGLES = 0, 1, 2
+FRAME, STATUS, LAYOUT, ANGLES = 0, 1, 2, 3
+NO_LAYOUT = -1.0  # LAYOUT before a task's first layout (seeds are whole numbers from 0)
 OBJECTS = ANGLES + len(ACTUATED_JOINTS)
 STARTING, OPEN, SHOWING = 0.0, 1.0, 2.0  # the window: not yet, open, showing the arm
 # Differences below these are not drawn (a hundredth of a degree; a tenth of a millimetre).
@@ -56,11 +61,12 @@ class Window:
     `viewer` is the viewer's module with its model options: PyBullet's window
     (`["so101.gui.viewer", "--urdf", URDF]`) or MuJoCo's (`["so101.gui.mujoco_viewer", "--mjcf", MJCF]`);
     both take `--shared FILE --fps N` and keep to this file's shared slots. `object_values` is
-    how many numbers a task's object_state has (0: the arm alone).
+    how many numbers a task's object_state has (0: the arm alone). `looks` and `physics` (modes, as
+    so101.bodies.looks and so101.bodies.physics take them) are the run's: the viewer draws each layout's.
     """
 
     def __init__(self, viewer: list[str], fps: float = DEFAULT_FPS, on_showing: Callable[[], None] = lambda: None,
-                 object_values: int = 0):
+                 object_values: int = 0, looks: str = DEFAULT_LOOKS, physics: str = DEFAULT_PHYSICS):
         """`on_showing` is called once, from show(), when the window first shows the arm."""
         self.frame_period_s = 1.0 / fps
         self.showing = False
@@ -70,9 +76,12 @@ class Window:
             shared.write(bytes((OBJECTS + object_values) * 8))
         self._path = Path(name)
         self._mapping, self._shared = shared_array(self._path)
+        self._shared[LAYOUT] = NO_LAYOUT
         self._next_frame_s = 0.0
+        scenario = [*(["--looks", looks] if looks != DEFAULT_LOOKS else []),
+                    *(["--physics", physics] if physics != DEFAULT_PHYSICS else [])]
         self.process = subprocess.Popen(
-            [sys.executable, "-m", *viewer, "--shared", str(self._path), "--fps", f"{fps:g}"],
+            [sys.executable, "-m", *viewer, "--shared", str(self._path), "--fps", f"{fps:g}", *scenario],
             # The GUIs chatter on stdout (GL versions, threads); their errors, such as
             # "X connection ... broken", stay on stderr, in the node's log.
             stdout=subprocess.DEVNULL,
@@ -84,9 +93,9 @@ class Window:
         return time.monotonic() >= self._next_frame_s
 
     def show(self, angles_rad: Sequence[float] | npt.NDArray[np.float64],
-             object_state: Sequence[float] | npt.NDArray[np.float32] | None = None) -> None:
-        """Hand the viewer the latest angles (and a task's object_state, if any); raises WindowClosed
-        once its process has ended."""
+             object_state: Sequence[float] | npt.NDArray[np.float32] | None = None, layout_seed: int | None = None) -> None:
+        """Hand the viewer the latest angles (and a task's object_state and the seed of its layout, if any);
+        raises WindowClosed once its process has ended."""
         self._next_frame_s = time.monotonic() + self.frame_period_s
         code = self.process.poll()
         if code is not None:
@@ -101,6 +110,9 @@ class Window:
         # A new frame only when something moved: a still scene costs the viewer nothing.
         angles = np.asarray(angles_rad, dtype=np.float64)
         moved = bool(np.any(np.abs(self._shared[ANGLES:OBJECTS] - angles) > STILL_RAD))
+        if layout_seed is not None and self._shared[LAYOUT] != layout_seed:  # before the objects: the viewer lays it out first
+            self._shared[LAYOUT] = layout_seed
+            moved = True
         if object_state is not None and np.any(np.abs(self._shared[OBJECTS:] - np.asarray(object_state)) > STILL_M):
             self._shared[OBJECTS:] = object_state
             moved = True

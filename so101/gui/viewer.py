@@ -12,9 +12,15 @@ zooms, Ctrl + middle drag pans).
 The two processes share one small file, mapped into both (so101/bodies/window.py, the physics'
 side): a frame counter, the viewer's state, the six joint angles in radians
 (so101.robot.ACTUATED_JOINTS order) and, with a task (`--task NAME`), its objects' poses
-(so101.tasks' object_state), which this process shows with the task's own scene.
+(so101.tasks' object_state), which this process shows with the task's own scene, and the seed of
+the layout shown. Each layout is drawn as the pictures draw it: the cube at the size its physics
+gives it (`--physics`), and with `--looks varied` (or unseen) the floor's and the objects' colours
+and the light's direction drawn from its seed. PyBullet's window cannot dim or brighten its light,
+and its camera is the person's (the mouse), not the front camera; fixed looks keep PyBullet's own
+checkered floor, the course's.
 
-    python -m so101.gui.viewer --shared FILE --urdf URDF [--fps N] [--task NAME]    (started by `Window`, not by hand)
+    python -m so101.gui.viewer --shared FILE --urdf URDF [--fps N] [--task NAME] [--looks L] [--physics P]
+    (started by `Window`, not by hand)
 """
 
 from __future__ import annotations
@@ -29,7 +35,9 @@ from pathlib import Path
 
 import numpy as np
 
-from so101.bodies.window import ANGLES, DEFAULT_FPS, FRAME, OBJECTS, OPEN, SHOWING, STATUS, shared_array
+from so101.bodies.looks import DEFAULT_LOOKS, LOOKS_CHOICES, looks_for
+from so101.bodies.physics import DEFAULT_PHYSICS, physics_for
+from so101.bodies.window import ANGLES, DEFAULT_FPS, FRAME, LAYOUT, OBJECTS, OPEN, SHOWING, STATUS, shared_array
 from so101.robot import ACTUATED_JOINTS
 
 # With the arm still and the mouse unused, the window is drawn this seldom; any
@@ -84,7 +92,24 @@ def lowest_priority() -> None:
         pass  # not allowed here: the same priority as the physics
 
 
-def run_viewer(shared_path: Path, urdf: Path, fps: float, task_name: str = "") -> int:
+def show_layout(scene, plane_id: int, client: int, seed: int, looks: str, physics: str) -> None:
+    """The task's `scene` laid out as episode seed `seed`'s pictures show it: its cube at the size `physics`
+    gives it, and `looks`' colours and light (fixed: the window's own)."""
+    import pybullet as p
+
+    scene.lay_out_seed(seed, physics_for(physics, seed))  # a cube of another size is a new body
+    drawn = looks_for(looks, seed, len(scene.object_ids))
+    if drawn is None:
+        return
+    p.changeVisualShape(plane_id, -1, rgbaColor=list(drawn.floor_rgba), textureUniqueId=-1, physicsClientId=client)
+    for body, rgba in zip(scene.object_ids, drawn.object_rgbas):
+        p.changeVisualShape(body, -1, rgbaColor=list(rgba), physicsClientId=client)
+    # The light stands where it shines from: against its direction, far off.
+    p.configureDebugVisualizer(lightPosition=[-10.0 * part for part in drawn.light_dir], physicsClientId=client)
+
+
+def run_viewer(shared_path: Path, urdf: Path, fps: float, task_name: str = "", looks: str = DEFAULT_LOOKS,
+               physics: str = DEFAULT_PHYSICS) -> int:
     """The viewer process: a GUI client that shows the angles the physics hands it.
 
     The window draws nothing until the arm stands at the physics' angles: drawn while
@@ -113,7 +138,7 @@ def run_viewer(shared_path: Path, urdf: Path, fps: float, task_name: str = "") -
         p.configureDebugVisualizer(p.COV_ENABLE_RENDERING, 0, physicsClientId=client)
         p.resetDebugVisualizerCamera(**CAMERA, physicsClientId=client)
         p.setAdditionalSearchPath(pybullet_data.getDataPath(), physicsClientId=client)
-        p.loadURDF("plane.urdf", physicsClientId=client)
+        plane_id = p.loadURDF("plane.urdf", physicsClientId=client)
         # Nothing collides in a mirror: no collision shapes, which are most of the loading time.
         robot_id = p.loadURDF(str(urdf), useFixedBase=True, flags=p.URDF_IGNORE_COLLISION_SHAPES, physicsClientId=client)
         indices = [joint.index for joint in ACTUATED_JOINTS]
@@ -123,13 +148,20 @@ def run_viewer(shared_path: Path, urdf: Path, fps: float, task_name: str = "") -
 
             scene = task_named(task_name).pybullet_scene(client, 0)
 
+        shown_layout = -1.0
+
         def pose(slots: np.ndarray) -> float:
-            """The arm (and the task's objects) as the shared `slots` have them; returns the frame they belong to."""
+            """The arm (and the task's objects, in their layout's looks) as the shared `slots` have them; returns
+            the frame they belong to."""
+            nonlocal shown_layout
             frame = slots[FRAME]  # before the angles: the physics writes them, then counts the frame
             p.resetJointStatesMultiDof(
                 robot_id, indices, [[angle] for angle in slots[ANGLES:OBJECTS].tolist()], physicsClientId=client,
             )
             if scene is not None:
+                if slots[LAYOUT] != shown_layout and slots[LAYOUT] >= 0:
+                    shown_layout = float(slots[LAYOUT])
+                    show_layout(scene, plane_id, client, int(shown_layout), looks, physics)
                 scene.show_object_state(slots[OBJECTS:].tolist())
             return frame
 
@@ -165,8 +197,12 @@ def viewer_main(argv: list[str] | None, module: str, description: str, model_opt
     parser.add_argument(f"--{model_option}", type=Path, required=True, help="the arm's model file")
     parser.add_argument("--fps", type=float, default=DEFAULT_FPS, help=f"frames per second at most (default {DEFAULT_FPS:g})")
     parser.add_argument("--task", default="", help="a task's objects to show too (so101.tasks), posed from the shared file")
+    parser.add_argument("--looks", choices=LOOKS_CHOICES, default=DEFAULT_LOOKS,
+                        help="the run's looks: each layout's colours and light, as its pictures have them")
+    parser.add_argument("--physics", default=DEFAULT_PHYSICS,
+                        help="the run's physics (fixed, varied, or ranges as JSON): each layout's cube at its size")
     args = parser.parse_args(argv)
-    return run(args.shared, getattr(args, model_option), args.fps, args.task)
+    return run(args.shared, getattr(args, model_option), args.fps, args.task, args.looks, args.physics)
 
 
 def main(argv: list[str] | None = None) -> int:

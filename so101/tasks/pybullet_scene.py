@@ -53,6 +53,11 @@ class PyBulletScene:
         p.changeDynamics(cube_id, -1, lateralFriction=cube.friction, frictionAnchor=1, physicsClientId=client)
         return cube_id
 
+    @property
+    def object_ids(self) -> tuple[int, int]:
+        """The objects' bodies in the task's order (the looks' colours): the cube, the box."""
+        return self.cube_id, self.box_id
+
     def lay_out_seed(self, seed: int, physics: Physics | None = None) -> None:
         """The layout of `seed`, its cube as `physics` makes it (a new size: a new body; PyBullet's shapes keep theirs)."""
         cube = cube_with(self.task.cube, physics)
