@@ -90,7 +90,7 @@ def run(args: argparse.Namespace) -> int:
         return fail(f"so101 demos: --observe {observed}: {problem}")
     picture_size = args.image_size if observed.front or observed.wrist else None
     # a seeing recipe's learner drives behind its eyes, which see the front picture at their size
-    eyes_size = learner.recipe.eyes.size if learner is not None and learner.recipe is not None else None
+    eyes_size = learner.body_pictures[1] if learner is not None else None
     if eyes_size is not None and picture_size not in (None, eyes_size):
         return fail(f"so101 demos: --learner {args.learner} sees through its eyes at {eyes_size[0]}x{eyes_size[1]}: "
                     f"record at --camera-size {eyes_size[0]}x{eyes_size[1]}, or give --no-video")

@@ -151,6 +151,11 @@ def read_choice(choices: tuple[str, ...]) -> Callable[[Mapping[str, str], Settin
     return read
 
 
+def read_switch(environ: Mapping[str, str], declared_setting: Setting) -> bool:
+    """`1` on, `0` off (read_choice's refusal for anything else)."""
+    return read_choice(("0", "1"))(environ, declared_setting) == "1"
+
+
 def read_parsed(parse: Callable[[str], Any]) -> Callable[[Mapping[str, str], Setting], Any]:
     """`parse(text)`, whose ValueError (one line) is named by the setting."""
     def read(environ: Mapping[str, str], declared_setting: Setting) -> Any:

@@ -13,7 +13,7 @@ from so101.lang import DEFAULT_LANGUAGE, ENV_VAR as LANG_ENV_VAR
 from so101.observe import ALL_OBSERVED, OBSERVE_ENV_VAR, Observed, parse_observed
 from so101.runtime.settings import (
     EnvironSettings, Setting, parse_number, read_choice, read_image_size, read_number, read_optional_path,
-    read_parsed, read_stripped_text, read_text, read_whole_number, setting,
+    read_parsed, read_stripped_text, read_switch, read_text, read_whole_number, setting,
 )
 from so101.tasks import task_for_setting
 from so101.tasks.episodes import DEFAULT_TIME_LIMIT_S
@@ -74,7 +74,7 @@ class ExpertSettings(EnvironSettings):
     learner_sees: bool = setting(
         "SO101_EXPERT_LEARNER_SEES", "0", "`1`: the learner reads `seen_state`, what a seeing recipe's eyes (the "
         "perception node) found, where the expert reads the simulator's `object_state`",
-        lambda environ, declared_setting: read_choice(("0", "1"))(environ, declared_setting) == "1")
+        read_switch)
 
 
 @dataclass(frozen=True)
@@ -98,7 +98,7 @@ class EpisodeSettings(ReadsScenario, EnvironSettings):
         "in seed order (instead of SO101_RECORD_DIR); empty = none", read_optional_path)
     idle: bool = setting(
         "SO101_IDLE", "0", "`1`: no driver, the runner answers every frame with home (`so101 eval --idle`)",
-        lambda environ, declared_setting: read_choice(("0", "1"))(environ, declared_setting) == "1")
+        read_switch)
     keep: str = setting("SO101_KEEP", "success", "which episodes are written: `success` or `all`", read_choice(KEEP_CHOICES))
     image_size: tuple[int, int] | None = setting(
         "SO101_LOCKSTEP_PICTURES", "", "WIDTHxHEIGHT of the front and wrist pictures written; empty = no video",
@@ -109,7 +109,7 @@ class EpisodeSettings(ReadsScenario, EnvironSettings):
     environment_seen: bool = setting(
         "SO101_ENVIRONMENT_SEEN", "0", "`1`: the environment state written is `seen_state`, what a seeing recipe's eyes "
         "found (DAgger behind the eyes), rather than the simulator's `object_state`",
-        lambda environ, declared_setting: read_choice(("0", "1"))(environ, declared_setting) == "1")
+        read_switch)
     observed: Observed = setting(
         OBSERVE_ENV_VAR, str(ALL_OBSERVED), "what the written frames show, from state,environment,front,wrist "
         "(so101.observe): state,front,wrist leaves the objects' exact poses out", read_parsed(parse_observed))
