@@ -12,7 +12,7 @@ import pytest
 
 from so101.bodies.command_path import CommandPath
 from so101.bodies.physics import (
-    DEFAULT_RANGES, PhysicsError, PhysicsRanges, centred, draw_physics, physics_for, physics_from_metadata, physics_metadata,
+    DEFAULT_RANGES, NOMINAL, PhysicsError, PhysicsRanges, centred, draw_physics, physics_for, physics_from_metadata, physics_metadata,
     physics_mode,
 )
 from so101.bodies.registry import BODIES, SIMULATED_BODIES
@@ -80,7 +80,7 @@ def test_a_mode_or_ranges_that_make_no_sense_are_one_line(tmp_path, text, messag
 
 def test_the_command_path_delays_limits_speed_and_is_off_by_the_calibration():
     physics = draw_physics(11)
-    path = CommandPath(physics, HOME_POSE_DEG)
+    path = CommandPath(physics, HOME_POSE_DEG, slews=True)
     offsets = np.array(physics.calibration_offsets_deg)
     assert np.allclose(path.goal_deg, -offsets)  # home, where the arm believes it is
     assert np.allclose(path.reported(path.goal_deg), HOME_POSE_DEG)
@@ -93,9 +93,43 @@ def test_the_command_path_delays_limits_speed_and_is_off_by_the_calibration():
     steps = np.abs(np.diff(np.array(goals), axis=0))
     assert steps.max() <= physics.speed_limit_deg_s * tick + 1e-9  # never faster than the speed limit
     assert np.allclose(goals[-1], target - offsets)  # where the arm believes the target is
-    unvaried = CommandPath(None, HOME_POSE_DEG)
-    unvaried.send(target, now_s=0.0)
-    assert np.array_equal(unvaried.goal_at(0.0, tick), target) and np.array_equal(unvaried.reported(target), target)
+    # Fixed physics, on PyBullet (its motors cap the speed): the targets at once, reported as they are.
+    fixed = CommandPath(NOMINAL, HOME_POSE_DEG, slews=False)
+    fixed.send(target, now_s=0.0)
+    assert np.array_equal(fixed.goal_at(0.0, tick), target) and np.array_equal(fixed.reported(target), target)
+    assert fixed.settled
+
+
+@pytest.mark.parametrize("body", SIMULATED_BODIES)
+def test_fixed_physics_is_the_nominal_point_of_the_same_servos(tmp_path, body):
+    """A ranges file drawn to NOMINAL's values moves the arm as fixed physics does, on either simulator: one
+    controller, whose fixed physics is its centre (the course's 3 rad/s, the gripper's 3.35 N·m). MuJoCo's fixed
+    physics has no speed limit, as its MJCF: there the file's limit is out of reach."""
+    speed_deg_s = NOMINAL.speed_limit_deg_s if body == "pybullet" else 1e6
+    nominal = tmp_path / "nominal.json"
+    nominal.write_text(json.dumps({name: value if name == "calibration_deg" else [value, value]
+                                   for name, value in {**asdict(NOMINAL), "calibration_deg": 0.0,
+                                                       "speed_limit_deg_s": speed_deg_s}.items()
+                                   if name not in ("seed", "calibration_offsets_deg")}))
+    moves = [[40.0, -20.0, 30.0, -30.0, 60.0, 40.0], list(HOME_POSE_DEG)]
+    paths = []
+    for physics in ("fixed", str(nominal)):
+        simulation = BODIES[body].body_class()(mode="direct", renders=False, time_step_s=TICK_PERIOD_S, physics=physics)
+        try:
+            path = []
+            for targets in moves:
+                simulation.set_targets_deg(targets)
+                for _ in range(120):  # 0.48 s: 60 degrees at 3 rad/s, and settled
+                    simulation.step()
+                    path.append(simulation.joint_angles_deg())
+            paths.append(np.array(path))
+        finally:
+            simulation.close()
+    assert np.allclose(paths[0], paths[1], atol=1e-9)
+    if body == "pybullet":  # no joint faster than the course's 3 rad/s, its motors' maxVelocity
+        speeds = np.abs(np.diff(paths[0], axis=0)).max(axis=0) / TICK_PERIOD_S
+        assert speeds.max() <= NOMINAL.speed_limit_deg_s * 1.01, speeds
+    assert np.abs(paths[0][-1] - HOME_POSE_DEG).max() < 2.5  # and back home (MuJoCo's servos sag a little)
 
 
 @pytest.mark.parametrize("body", SIMULATED_BODIES)

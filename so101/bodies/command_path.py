@@ -1,6 +1,7 @@
 """Between the targets sent to a simulated arm and its servos' goals: the command delay, the speed limit
-and the calibration of an episode's varied physics (so101.bodies.physics). Both simulated bodies step
-it each tick, so both see the same goals. Pure numpy.
+and the calibration of an episode's physics (so101.bodies.physics; fixed physics is its `NOMINAL` point:
+no delay, an exact calibration). Both simulated bodies step it each tick, so both see the same goals.
+Pure numpy.
 """
 
 from __future__ import annotations
@@ -14,39 +15,44 @@ from so101.bodies.physics import Physics
 
 
 class CommandPath:
-    """Between the targets sent and the servos' goals: the delay, the speed limit and the calibration
-    (`physics`; None: the targets go through at once, as they always have). Both bodies step it each
-    tick (`goal_at`), so both simulators see the same goals."""
+    """Between the targets sent and the servos' goals: `physics`' delay and calibration and, where the body's
+    motors cannot cap their own speed (`slews`: MuJoCo's position actuators), its speed limit, by moving the
+    goal no faster. PyBullet's motors take the limit as their maxVelocity, as the course's call does."""
 
-    def __init__(self, physics: Physics | None, goal_deg: npt.ArrayLike):
+    def __init__(self, physics: Physics, goal_deg: npt.ArrayLike, slews: bool):
         self.physics = physics
+        self.slews = slews
         self.goal_deg = self._true(goal_deg)
         self._wanted = self.goal_deg.copy()
         self._queue: deque[tuple[float, npt.NDArray[np.float64]]] = deque()
 
     def _true(self, believed_deg: npt.ArrayLike) -> npt.NDArray[np.float64]:
-        if self.physics is None:
-            return np.array(believed_deg, dtype=np.float64)
         return np.array(self.physics.true_deg(np.ravel(believed_deg)), dtype=np.float64)
 
     def send(self, targets_deg: npt.ArrayLike, now_s: float) -> None:
         """Targets as the arm believes them, sent at `now_s`: they reach the servos after the delay."""
-        if self.physics is None:
-            self._wanted = self.goal_deg = self._true(targets_deg)
-            return
-        self._queue.append((now_s + self.physics.command_delay_s, self._true(targets_deg)))
+        if self.physics.command_delay_s <= 0 and not self._queue:
+            self._wanted = self._true(targets_deg)
+        else:
+            self._queue.append((now_s + self.physics.command_delay_s, self._true(targets_deg)))
+
+    @property
+    def settled(self) -> bool:
+        """Nothing on its way and the goal where it is wanted: ticks until the next send change nothing."""
+        return not self._queue and np.array_equal(self.goal_deg, self._wanted)
 
     def goal_at(self, now_s: float, tick_s: float) -> npt.NDArray[np.float64]:
         """The servos' goals (true degrees) for the tick starting at `now_s`, `tick_s` long."""
-        if self.physics is None:
-            return self.goal_deg
         while self._queue and self._queue[0][0] <= now_s + 1e-9:
             self._wanted = self._queue.popleft()[1]
+        if not self.slews:
+            self.goal_deg = self._wanted
+            return self.goal_deg
         most = self.physics.speed_limit_deg_s * tick_s
         self.goal_deg = self.goal_deg + np.clip(self._wanted - self.goal_deg, -most, most)
         return self.goal_deg
 
     def reported(self, true_deg: npt.ArrayLike) -> npt.NDArray[np.float64]:
         """What the arm reports of joints at `true_deg`."""
-        true = np.asarray(true_deg, dtype=np.float64)
-        return true if self.physics is None else true + np.asarray(self.physics.calibration_offsets_deg)
+        offsets = np.asarray(self.physics.calibration_offsets_deg, dtype=np.float64)
+        return np.asarray(true_deg, dtype=np.float64) + offsets

@@ -23,7 +23,7 @@ from so101.bodies.camera_meshes import camera_meshes
 from so101.bodies.mujoco_model import collision_hulls, scene_model
 from so101.bodies.command_path import CommandPath
 from so101.bodies.looks import DEFAULT_LOOKS
-from so101.bodies.physics import DEFAULT_PHYSICS, Physics, physics_for, physics_ranges
+from so101.bodies.physics import DEFAULT_PHYSICS, NOMINAL, Physics, physics_for, physics_ranges
 from so101.bodies.protocol import BodyName, RgbImage, SceneTask, TaskScene
 from so101.bodies.settings import MuJoCoSettings, NodeSettings
 from so101.runtime.display import DisplayError, resolve_mode
@@ -51,7 +51,9 @@ class SO101MuJoCo:
     `task` puts that task's scene (it makes it: so101.bodies.protocol.SceneTask) on the floor, laid out from `seed`, and switches
     the gripper's jaw pads on (so101.bodies.jaw_pads); None: the arm alone.
     `physics` "varied" (or a ranges file) draws each layout's physics from its seed (so101.bodies.physics): the
-    cube, the actuators' kp, the joints' damping, the gripper's force range, and the command path; "fixed": the MJCF's.
+    cube, the actuators' kp, the joints' damping, the gripper's force range, and the command path (its speed limit
+    moves the goals no faster: a position actuator has no limit of its own). "fixed" is its nominal point
+    (`NOMINAL`: the MJCF's servos, the gripper's 3.35 N·m) without a speed limit, as the MJCF has none.
     `light_pictures` draws the cameras' meshes (so101.bodies.camera_meshes), without shadows,
     multisampling, reflections and skybox: on Mesa's software renderer these cost far more than
     a picture a policy learns from needs (`so101 bench --cameras` measures it).
@@ -98,8 +100,8 @@ class SO101MuJoCo:
         self._own_damping = self.model.dof_damping[self._qvel].copy()
         self._own_force_range = self.model.actuator_forcerange[self._actuators].copy()
         self.physics_mode = physics
-        self.physics: Physics | None = None
-        self._command = CommandPath(None, HOME_POSE_DEG)
+        self.physics: Physics | None = None  # varied physics' draw; None: fixed, the servos `NOMINAL`
+        self._command = CommandPath(NOMINAL, HOME_POSE_DEG, slews=False)
         self.renders = renders
         self.light_pictures = light_pictures
         self._renderer: Any = None  # a mujoco.Renderer once render_rgb has drawn
@@ -117,7 +119,7 @@ class SO101MuJoCo:
         self.layout_seed: int | None = None if task is None else seed  # the window draws its looks and cube
         if self.scene is not None and physics != DEFAULT_PHYSICS:
             self.reset_task(seed)
-        elif physics != DEFAULT_PHYSICS:  # the arm alone (a replay): its servos and command path
+        else:  # the arm alone (a replay under a ranges file: its servos and command path)
             self._take_physics(physics_for(physics, seed))
 
     @classmethod
@@ -141,8 +143,6 @@ class SO101MuJoCo:
         """Goal angles in degrees for all six actuated joints (arm 0-4, gripper); with varied physics they
         go through its command path (its delay, speed limit and calibration)."""
         self._command.send(goal_deg(targets_deg), self.sim_time_s)
-        if self.physics is None:
-            self.data.ctrl[self._actuators] = np.radians(self._command.goal_deg)
 
     def reset_task(self, seed: int) -> None:
         """The task's scene laid out from `seed`, and the arm at home, still, its goal home (with varied
@@ -157,17 +157,19 @@ class SO101MuJoCo:
         self.layout_seed = seed
 
     def _take_physics(self, physics: Physics | None) -> None:
-        """The actuators, the joints and the command path as `physics` has them (None: the model's own)."""
+        """The actuators, the joints and the command path as `physics` has them (None: fixed, `NOMINAL`)."""
         self.physics = physics
+        servos = NOMINAL if physics is None else physics
         model, actuators = self.model, self._actuators
-        stiffness, damping = (1.0, 1.0) if physics is None else (physics.servo_stiffness, physics.servo_damping)
-        model.actuator_gainprm[actuators, 0] = self._own_kp * stiffness
-        model.actuator_biasprm[actuators, 1] = -self._own_kp * stiffness
-        model.dof_damping[self._qvel] = self._own_damping * damping
+        model.actuator_gainprm[actuators, 0] = self._own_kp * servos.servo_stiffness
+        model.actuator_biasprm[actuators, 1] = -self._own_kp * servos.servo_stiffness
+        model.dof_damping[self._qvel] = self._own_damping * servos.servo_damping
         model.actuator_forcerange[actuators] = self._own_force_range
-        if physics is not None:
-            model.actuator_forcerange[actuators[-1]] = (-physics.gripper_torque_nm, physics.gripper_torque_nm)
-        self._command = CommandPath(physics, HOME_POSE_DEG)
+        model.actuator_forcerange[actuators[-1]] = (-servos.gripper_torque_nm, servos.gripper_torque_nm)
+        # Fixed physics keeps the MJCF's actuators, which have no speed limit: a goal moved at the course's 3 rad/s
+        # trails it by ~14° on MuJoCo's slower servo, and the grasp's margins shrink (docs/loop/physics.md).
+        self._command = CommandPath(servos, HOME_POSE_DEG, slews=physics is not None)
+        self.data.ctrl[actuators] = np.radians(self._command.goal_deg)
 
     def joint_damping_n_m_s(self) -> float:
         """The joints' damping (one value for all, as the MJCF's STS3215 class and this class set it)."""
@@ -184,9 +186,8 @@ class SO101MuJoCo:
         self.time_step_s = self.substeps * self.model_step_s
 
     def step(self, count: int = 1) -> None:
-        """Advance the physics by `count` periods of `time_step_s` (varied physics: the command path's goals
-        each period)."""
-        if self.physics is None:
+        """Advance the physics by `count` periods of `time_step_s`, the command path's goals each period."""
+        if self._command.settled:  # the goals already where they are wanted: all the steps at once
             mujoco.mj_step(self.model, self.data, nstep=count * self.substeps)
             self.steps += count
         else:

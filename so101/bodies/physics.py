@@ -8,7 +8,9 @@ file of ranges: `physics_ranges`):
 - the calibration: each joint's zero off by up to ±N°, as a real calibration is: the arm reports
   the angles it believes it is at, and goes where it believes a target is;
 - the gripper's torque limit.
-`fixed` (the default) keeps each simulator's physics as it always was. The same seed gives the same
+`fixed` (the default) is the nominal point of the same physics (`NOMINAL`): the task's cube, the servos at
+their simulator's own gains, no delay, the course's 3 rad/s speed limit, an exact calibration and the
+STS3215's full 3.35 N·m at the gripper, through the same command path and motors as varied. The same seed gives the same
 physics on every machine and on both simulators (Python's `random.Random`, seeded by text). Pure: the
 bodies (so101.bodies.pybullet_sim, so101.bodies.mujoco_sim) apply it, the renderer
 (so101.bodies.task_cameras) draws the cube's size and the arm where it truly is, a dataset keeps it by
@@ -47,7 +49,7 @@ class PhysicsRanges:
     cube_friction: tuple[float, float] = (0.6, 1.2)  # printed plastic to rubbery; fixed 1.0
     servo_stiffness: tuple[float, float] = (0.7, 1.3)  # times the simulator's own; LeRobot halves the STS3215's P
     servo_damping: tuple[float, float] = (0.7, 1.3)  # times the simulator's own
-    command_delay_s: tuple[float, float] = (0.0, 0.08)  # 0-2 frames at 25 fps: a bus's and a servo loop's latency
+    command_delay_s: tuple[float, float] = (0.0, 0.15)  # a bus, a servo's loop; a real follower trails ~133 ms
     speed_limit_deg_s: tuple[float, float] = (150.0, 270.0)  # an STS3215 loaded, to its 0.222 s/60° unloaded
     calibration_deg: float = 2.0  # each joint's zero, ± this
     gripper_torque_nm: tuple[float, float] = (1.2, 3.35)  # below LeRobot's 50% limit, to the servo's full
@@ -83,8 +85,8 @@ RANGE_REASONS = {
     "cube_friction": "slippery printed plastic to rubbery: the cube's own coefficient, against the jaws and the floor",
     "servo_stiffness": "times the simulator's own gain: LeRobot halves the STS3215's P coefficient, and owners tune it",
     "servo_damping": "times the simulator's own damping",
-    "command_delay_s": "0-2 frames at 25 fps: a bus round trip, the servo's loop, a busy host "
-                       "(a real follower can trail by more: `so101 physics --fit` measures yours)",
+    "command_delay_s": "a bus round trip, the servo's loop, a busy host: a real LeRobot follower's state trails "
+                       "its action by about 4 frames at 30 fps (133 ms); `so101 physics --fit` measures yours",
     "speed_limit_deg_s": "an STS3215 loaded, up to its 0.222 s per 60 degrees unloaded",
     "calibration_deg": "each joint's zero, as a calibration by hand puts it (plus or minus)",
     "gripper_torque_nm": "LeRobot's half torque limit (about 1.7 N.m) to the servo's full 3.35 N.m",
@@ -181,6 +183,16 @@ class Physics:
     def as_metadata(self) -> dict[str, object]:
         metadata: dict[str, object] = json.loads(json.dumps(asdict(self)))
         return metadata
+
+
+# Fixed physics: the values every body runs at when nothing varies, the centre varied physics spreads around.
+# The cube's are the task's own cube (so101.tasks.objects); the speed limit the course's maxVelocity, 3 rad/s.
+COURSE_SPEED_LIMIT_DEG_S = math.degrees(3.0)
+NOMINAL = Physics(
+    seed=0, cube_size_m=0.025, cube_mass_kg=0.030, cube_friction=1.0, servo_stiffness=1.0, servo_damping=1.0,
+    command_delay_s=0.0, speed_limit_deg_s=COURSE_SPEED_LIMIT_DEG_S, calibration_offsets_deg=(0.0,) * JOINTS,
+    gripper_torque_nm=3.35,
+)
 
 
 def centred(ranges: PhysicsRanges) -> PhysicsRanges:

@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import ctypes
 import tempfile
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable, Sequence
 
@@ -25,7 +26,7 @@ from so101.bodies.camera_meshes import camera_meshes, urdf_for_cameras
 from so101.bodies.jaw_pads import jaw_pads, urdf_with_pads
 from so101.bodies.command_path import CommandPath
 from so101.bodies.looks import DEFAULT_LOOKS
-from so101.bodies.physics import DEFAULT_PHYSICS, Physics, physics_for, physics_ranges
+from so101.bodies.physics import DEFAULT_PHYSICS, NOMINAL, Physics, physics_for, physics_ranges
 from so101.bodies.protocol import BodyName, RgbImage, SceneTask, TaskScene
 from so101.bodies.settings import NodeSettings, PyBulletSettings, check_control_mode
 from so101.runtime.display import resolve_mode
@@ -79,7 +80,8 @@ def release_freed_memory() -> None:
     libc.mallopt(M_MMAP_THRESHOLD, 64 * 1024)
 
 
-# PyBullet's own POSITION_CONTROL gains and force, when none are given (pybullet.c): varied physics scales the gains.
+# PyBullet's own POSITION_CONTROL gains and force, when none are given (pybullet.c): the course's call gives none.
+# Physics scales the gains; the arm's joints keep the force, the gripper's is the physics' torque.
 POSITION_GAIN = 0.1
 VELOCITY_GAIN = 1.0
 MOTOR_FORCE_N_M = 100000.0
@@ -125,8 +127,9 @@ class SO101Sim:
 
     `physics` "varied" (or a ranges file) draws each layout's physics from its seed (so101.bodies.physics): the
     cube, the motors' gains (times PyBullet's defaults, POSITION_GAIN and VELOCITY_GAIN; the servo's kp and kd),
-    the gripper's force, and the command path, whose speed limit then stands for the course's maxVelocity;
-    "fixed": as always.
+    the gripper's force, the command path's delay and calibration, and the speed limit, the motors' maxVelocity
+    as in the course's call. "fixed" is the same motors and path at the physics' nominal point (`NOMINAL`, with
+    `max_velocity_rad_s` the speed limit): the course's call, the gripper's force the STS3215's 3.35 N·m.
 
     `mode` is the display mode asked for (auto, gui, direct); `display_mode` the one it got.
     """
@@ -207,8 +210,9 @@ class SO101Sim:
                 )
         self.max_velocity_rad_s = float(max_velocity_rad_s)
         self.physics_mode = physics
-        self.physics: Physics | None = None
-        self._command = CommandPath(None, HOME_POSE_DEG)
+        self.physics: Physics | None = None  # varied physics' draw; None: fixed, the servos `NOMINAL`
+        self._fixed_servos = replace(NOMINAL, speed_limit_deg_s=math.degrees(self.max_velocity_rad_s))
+        self._command = CommandPath(self._fixed_servos, HOME_POSE_DEG, slews=False)
         self._goal_rad: FloatArray = np.radians(np.asarray(HOME_POSE_DEG, dtype=np.float64))
         # (joint index, goal in radians) pairs for the per-joint motor calls, while they are
         # still to be made; None once the motors have them.
@@ -227,8 +231,7 @@ class SO101Sim:
         if self.scene is not None and physics != DEFAULT_PHYSICS:
             self.reset_task(seed)
         elif physics != DEFAULT_PHYSICS:  # the arm alone (a replay): its servos and command path
-            self.physics = physics_for(physics, seed)
-            self._command = CommandPath(self.physics, HOME_POSE_DEG)
+            self._take_physics(physics_for(physics, seed))
 
     # -- set-up helpers --------------------------------------------------------------
     def _load_arm(self, physics_urdf: Path, assets_dir: Path | str | None, with_pads: bool,
@@ -301,9 +304,7 @@ class SO101Sim:
         """Goal angles in degrees for all six actuated joints (arm 0-4, gripper); with varied physics they
         go through its command path (its delay, speed limit and calibration)."""
         self._command.send(goal_deg(targets_deg), self.sim_time_s)
-        if self.physics is None:
-            self._goal_rad = np.radians(self._command.goal_deg)
-            self._motor_goals = list(zip(self._indices, self._goal_rad.tolist()))
+        self._take_goal()
 
     def set_time_step_s(self, time_step_s: float) -> None:
         """Change the physics step (before the first step: `sim_time_s` assumes one step size)."""
@@ -319,8 +320,7 @@ class SO101Sim:
         """The task's scene laid out from `seed`, and the arm at home, still, its goal home."""
         if self.scene is None:
             raise ValueError("this simulation runs no task (start it with one: --task)")
-        self.physics = physics_for(self.physics_mode, seed)
-        self._command = CommandPath(self.physics, HOME_POSE_DEG)
+        self._take_physics(physics_for(self.physics_mode, seed))
         self.scene.lay_out_seed(seed, self.physics)
         self.layout_seed = seed
         for joint_index, home_rad in zip(self._indices, np.radians(self._command.goal_deg).tolist()):
@@ -329,17 +329,15 @@ class SO101Sim:
 
     def step(self, count: int = 1) -> None:
         """Send new motor commands, if any, and advance the physics by `count` time steps."""
-        client, robot_id, max_velocity = self.client, self.robot_id, self.max_velocity_rad_s
+        client, robot_id = self.client, self.robot_id
         for _ in range(count):
-            if self.physics is not None:
-                self._goal_rad = np.radians(self._command.goal_at(self.sim_time_s, self.time_step_s))
+            if not self._command.settled:  # a goal on its way (a delay)
+                self._take_goal()
             if self.control_mode == "servo":
                 # A servo gets the goal as a step, as a real one does over its bus; the
                 # torque limit bounds its speed. (A goal slewed at 3 rad/s would hide the
                 # lesson: a PD loop follows a ramp with little overshoot whatever ζ.)
                 self._send_servo_torques()
-            elif self.physics is not None:
-                self._send_varied_motor_goals(self.physics)
             elif self._motor_goals is not None:
                 # The course's own call, joint by joint: setJointMotorControlArray has no
                 # maxVelocity, and PyBullet applies maxVelocity as a cap on the motor's
@@ -347,11 +345,14 @@ class SO101Sim:
                 # course re-sends it every step; PyBullet keeps a motor's command until
                 # it changes, so sending it once per goal moves the arm the same, step for
                 # step (tests/test_course_motion.py), for less work per tick.
+                servos = self._servos
+                gains = dict(maxVelocity=math.radians(servos.speed_limit_deg_s),
+                             positionGain=POSITION_GAIN * servos.servo_stiffness,
+                             velocityGain=VELOCITY_GAIN * servos.servo_damping, physicsClientId=client)
                 for joint_index, goal_rad in self._motor_goals:
-                    p.setJointMotorControl2(
-                        robot_id, joint_index, p.POSITION_CONTROL, targetPosition=goal_rad,
-                        maxVelocity=max_velocity, physicsClientId=client,
-                    )
+                    force = servos.gripper_torque_nm if joint_index == self._indices[-1] else MOTOR_FORCE_N_M
+                    p.setJointMotorControl2(robot_id, joint_index, p.POSITION_CONTROL, targetPosition=goal_rad,
+                                            force=force, **gains)
                 self._motor_goals = None
             p.stepSimulation(physicsClientId=client)
             self.steps += 1
@@ -360,15 +361,24 @@ class SO101Sim:
             self._window.show([state[0] for state in states], None if self.scene is None else self.scene.object_state(),
                               self.layout_seed)
 
-    def _send_varied_motor_goals(self, physics: Physics) -> None:
-        # Every tick (the command path moves the goal): gains times PyBullet's defaults, the gripper's force drawn.
-        count = len(self._indices)
-        p.setJointMotorControlArray(
-            self.robot_id, self._indices, p.POSITION_CONTROL, targetPositions=self._goal_rad.tolist(),
-            positionGains=[POSITION_GAIN * physics.servo_stiffness] * count,
-            velocityGains=[VELOCITY_GAIN * physics.servo_damping] * count,
-            forces=[MOTOR_FORCE_N_M] * (count - 1) + [physics.gripper_torque_nm], physicsClientId=self.client,
-        )
+    @property
+    def _servos(self) -> Physics:
+        return self._fixed_servos if self.physics is None else self.physics
+
+    def _take_physics(self, physics: Physics | None) -> None:
+        """The command path and motors as `physics` has them (None: fixed, the nominal servos): the motors get
+        the new gains with their next goals."""
+        self.physics = physics
+        self._command = CommandPath(self._servos, HOME_POSE_DEG, slews=False)
+        self._goal_rad = np.radians(self._command.goal_deg)
+        self._motor_goals = list(zip(self._indices, self._goal_rad.tolist()))
+
+    def _take_goal(self) -> None:
+        # The command path's goal now; the motors are told only of a change (PyBullet keeps a motor's command).
+        goal_rad = np.radians(self._command.goal_at(self.sim_time_s, self.time_step_s))
+        if not np.array_equal(goal_rad, self._goal_rad):
+            self._goal_rad = goal_rad
+            self._motor_goals = list(zip(self._indices, goal_rad.tolist()))
 
     def _send_servo_torques(self) -> None:
         # PyBullet forgets TORQUE_CONTROL torques after each step: they are sent every step.

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from so101.bodies.physics import DEFAULT_RANGES, RANGE_REASONS, PhysicsError, PhysicsRanges, physics_ranges
+from so101.bodies.physics import DEFAULT_RANGES, NOMINAL, RANGE_REASONS, PhysicsError, PhysicsRanges, physics_ranges
 from so101.bodies.servo_fit import FitError, JointFit, fit_joint, model_errors
 from so101.dataset.features import ACTION_KEY, STATE_KEY
 from so101.dataset.layout import DatasetError
@@ -59,11 +59,13 @@ def fail(line: str) -> int:
 
 
 def range_lines(ranges: PhysicsRanges) -> list[str]:
-    lines = []
+    """A line a range: its name, its span, fixed physics' value (NOMINAL's), and why."""
+    lines = [f"  {'range':<18} {'varied':<14} {'fixed':<8} why"]
     for spec in fields(PhysicsRanges):
         value = getattr(ranges, spec.name)
         shown = f"±{value:g}" if spec.name == "calibration_deg" else f"{value[0]:g}-{value[1]:g}"
-        lines.append(f"  {spec.name:<18} {shown:<14} {RANGE_REASONS[spec.name]}")
+        fixed = 0.0 if spec.name == "calibration_deg" else getattr(NOMINAL, spec.name)
+        lines.append(f"  {spec.name:<18} {shown:<14} {fixed:<8.4g} {RANGE_REASONS[spec.name]}")
     return lines
 
 
@@ -170,6 +172,7 @@ def run(args: argparse.Namespace) -> int:
     if ranges is None:
         return fail("--ranges takes a ranges file (NAME.json): fixed physics draws nothing")
     print(f"the ranges {'--physics varied draws from' if args.ranges is None else f'of {args.ranges}'}, "
-          "each episode's drawn from its seed (docs/loop/physics.md):")
+          "each episode's drawn from its seed, and fixed physics' point, the same on both simulators "
+          "(docs/loop/physics.md):")
     print("\n".join(range_lines(ranges)))
     return 0
