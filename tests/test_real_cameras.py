@@ -185,7 +185,7 @@ def test_a_policy_that_sees_drives_the_emulated_arm_from_file_cameras_within_its
             assert f"the cameras' {width}x{height} pictures are scaled to the policy's 32x24" in terminal.screen()
             started = servo_positions(arm)
             terminal.command("policy on", re.escape("  → told the policy: on"))
-            terminal.wait_for(re.escape(DRIVING), timeout_s=10, after=terminal.seen)
+            terminal.wait_for(re.escape(DRIVING), timeout_s=30, after=terminal.seen)  # on a busy machine
             time.sleep(3.0)
             driven = servo_positions(arm)
             assert max(abs(now - then) for now, then in zip(driven, started)) > 20, (started, driven)  # over 1.7°
@@ -200,7 +200,7 @@ def test_a_policy_that_sees_drives_the_emulated_arm_from_file_cameras_within_its
             wait_for_line(log_file, f"camera front: {front} is back")
             assert_held(arm)
             terminal.command("policy on", re.escape("  → told the policy: on"))
-            terminal.wait_for(re.escape(DRIVING), timeout_s=10, after=terminal.seen)
+            terminal.wait_for(re.escape(DRIVING), timeout_s=30, after=terminal.seen)  # on a busy machine
             time.sleep(1.0)
             quit_cleanly(terminal)
         finally:

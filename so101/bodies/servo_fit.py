@@ -22,8 +22,10 @@ import numpy.typing as npt
 
 MAX_DELAY_FRAMES = 12
 CLOSINGS = np.geomspace(0.03, 1.0, 28)
-# Speed limits tried: multiples of the fastest the joint was seen to turn (1.0: it was at its limit), and none.
-SPEED_FACTORS = (1.0, 1.1, 1.25, 1.5, 2.0, math.inf)
+# Speed limits tried: multiples of the fastest the joint was seen to turn in a frame, and none. Below 1: a
+# follower read at 50 Hz and recorded at 30 fps has frames that span two reads, so at its limit its fastest
+# frame shows it 25-35% faster than it turns.
+SPEED_FACTORS = (0.55, 0.65, 0.75, 0.85, 1.0, 1.15, 1.3, 1.5, 2.0, math.inf)
 # Candidates this close to the best fit as well as it (a mean error within 2%).
 NEAR = 1.02
 # A speed limit is claimed only where it fits 10% better than none: a smooth recording's sampling (a 50 Hz
@@ -49,6 +51,8 @@ class JointFit:
     error_before_deg: float  # p50 |state - action|: the state as a perfect servo would have it
     error_after_deg: float  # p50 |state - the fitted model's|
     fps: float
+    mean_before_deg: float  # the same, means: a recording that mostly rests has p50s near 0 either way
+    mean_after_deg: float
 
     @property
     def delay_s(self) -> float:
@@ -92,14 +96,16 @@ def fit_joint(joint: str, episodes: list[tuple[FloatArray, FloatArray]], fps: fl
     delay = int(np.argmin([np.where(coarse[1] == fastest_near, errors, np.inf).min() for errors, _ in by_delay]))
     _, delay, closing, speed, _ = _best(episodes, delay, coarse[0][coarse[1] == fastest_near],
                                         coarse[1][coarse[1] == fastest_near], fps)
-    # Then finer, around the best, at its delay (a noisy state makes the fastest turn seen too fast).
-    speeds = [math.inf] if math.isinf(speed) else list(np.linspace(0.8 * speed, 1.2 * speed, 17))
-    _, delay, closing, speed, offset = _best(episodes, delay, *_grid(np.geomspace(closing / 1.3, min(1.0, closing * 1.3), 15),
-                                                                      speeds), fps)
+    # Then finer, around the best, a frame either side of its delay: a limit a little off trades with a frame.
+    speeds = [math.inf] if math.isinf(speed) else list(np.linspace(0.85 * speed, 1.15 * speed, 13))
+    finer = _grid(np.geomspace(closing / 1.3, min(1.0, closing * 1.3), 15), speeds)
+    _, delay, closing, speed, offset = min(_best(episodes, near_delay, *finer, fps)
+                                           for near_delay in range(max(0, delay - 1), min(MAX_DELAY_FRAMES, delay + 1) + 1))
     before = np.concatenate([np.abs(states - actions) for actions, states in episodes])
     after = np.concatenate([np.abs(states - simulate(actions, states[0], delay, np.array([closing]), np.array([speed]),
                                                       np.array([offset]), fps)[:, 0]) for actions, states in episodes])
-    return JointFit(joint, delay, closing, speed, offset, float(np.median(before)), float(np.median(after)), fps)
+    return JointFit(joint, delay, closing, speed, offset, float(np.median(before)), float(np.median(after)), fps,
+                    float(np.mean(before)), float(np.mean(after)))
 
 
 def _grid(closings: npt.ArrayLike, speeds: npt.ArrayLike) -> tuple[FloatArray, FloatArray]:
@@ -128,8 +134,10 @@ def _best(episodes: list[tuple[FloatArray, FloatArray]], delay: int, closing: Fl
     return float(errors[found]), delay, float(closing[found]), float(speed[found]), float(offset[found])
 
 
-def model_errors(fit: JointFit, actions: FloatArray, states: FloatArray) -> tuple[float, float]:
-    """On an episode the fit did not use: p50 |state - action| (a perfect servo), p50 |state - the model's|."""
+def model_errors(fit: JointFit, actions: FloatArray, states: FloatArray) -> tuple[float, float, float, float]:
+    """On an episode the fit did not use: p50 |state - action| (a perfect servo), p50 |state - the model's|, and
+    the two means."""
     modelled = simulate(actions, states[0], fit.delay_frames, np.array([fit.closing]), np.array([fit.speed_deg_s]),
                         np.array([fit.offset_deg]), fit.fps)[:, 0]
-    return float(np.median(np.abs(states - actions))), float(np.median(np.abs(states - modelled)))
+    before, after = np.abs(states - actions), np.abs(states - modelled)
+    return float(np.median(before)), float(np.median(after)), float(np.mean(before)), float(np.mean(after))

@@ -124,24 +124,27 @@ def fit(args: argparse.Namespace) -> int:
             skipped.append(str(error))
     if not any(fit.joint != ACTUATED_JOINTS[-1].name for fit in fits):
         return fail(f"no arm joint could be fitted: {skipped[0]}")
-    print(f"  {'joint':<14} {'delay':>16} {'time constant':>14} {'speed limit':>12} {'offset':>8}   p50 before -> after (deg)")
+    print(f"  {'joint':<14} {'delay':>16} {'time constant':>14} {'speed limit':>12} {'offset':>8}   "
+          "p50, mean before -> after (deg)")
     for each in fits:
         delay = f"{each.delay_frames} frames, {each.delay_s * 1000:.0f} ms"
         speed = "none reached" if not np.isfinite(each.speed_deg_s) else f"{each.speed_deg_s:.0f} deg/s"
         print(f"  {each.joint:<14} {delay:>16} {each.time_constant_s * 1000:>11.0f} ms {speed:>12} {each.offset_deg:>+8.2f}   "
-              f"{each.error_before_deg:.2f} -> {each.error_after_deg:.2f}")
+              f"{each.error_before_deg:.2f}, {each.mean_before_deg:.2f} -> {each.error_after_deg:.2f}, {each.mean_after_deg:.2f}")
     for line in skipped:
         print(f"  not fitted: {line}")
-    before, after = np.median([f.error_before_deg for f in fits]), np.median([f.error_after_deg for f in fits])
+    # Means: a recording of steps that mostly rests has p50s near 0 whatever the model.
+    before, after = np.median([f.mean_before_deg for f in fits]), np.median([f.mean_after_deg for f in fits])
     if not after < before:
         return fail(f"the fit does not converge: its model follows the recording no better than the commands do "
-                    f"(p50 {after:.2f} deg against {before:.2f} deg); nothing written")
+                    f"(a mean {after:.2f} deg against {before:.2f} deg); nothing written")
     if held_out is not None:
         column = {joint.name: number for number, joint in enumerate(ACTUATED_JOINTS)}
         scored = [model_errors(each, joints[held_out][ACTION_KEY][:, column[each.joint]],
                                joints[held_out][STATE_KEY][:, column[each.joint]]) for each in fits]
-        print(f"held out, episode {held_out}: p50 {np.median([s[0] for s in scored]):.2f} deg before -> "
-              f"{np.median([s[1] for s in scored]):.2f} deg after (the joints' medians)")
+        p50s, means = [np.median([s[k] for s in scored]) for k in (0, 1)], [np.median([s[k] for s in scored]) for k in (2, 3)]
+        print(f"held out, episode {held_out}: p50 {p50s[0]:.2f} deg before -> {p50s[1]:.2f} deg after, "
+              f"mean {means[0]:.2f} -> {means[1]:.2f} deg (the joints' medians)")
     ranges, said = fitted_ranges(fits)
     text = json.dumps(asdict(ranges), indent=1) + "\n"
     if args.output is None:
