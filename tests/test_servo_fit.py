@@ -146,8 +146,10 @@ def test_physics_fit_writes_ranges_centred_on_the_servo_that_physics_files_take(
     ranges = physics_ranges(str(ranges_file))
     assert ranges is not None and ranges.command_delay_s == (0.1, 0.1667)  # 3 to 5 frames at 30 fps
     assert 0.85 * 102 < ranges.speed_limit_deg_s[0] < 0.85 * 138 and ranges.speed_limit_deg_s[1] / ranges.speed_limit_deg_s[0] == pytest.approx(1.15 / 0.85, rel=1e-3)
+    low_s, high_s = ranges.servo_time_constant_s  # the synthetic servo's: closing 30% a frame, 93.5 ms
+    assert low_s < -1 / (FPS * np.log(0.7)) < high_s and high_s / low_s == pytest.approx(1.25 / 0.75, rel=1e-2)
     assert lines[-1] == (f"wrote {ranges_file}: command_delay_s 0.1-0.1667 (the body's median delay, 4 frames, ± one), "
-                         f"speed_limit_deg_s {ranges.speed_limit_deg_s[0]:g}-{ranges.speed_limit_deg_s[1]:g} (the median "
+                         f"servo_time_constant_s {low_s:g}-{high_s:g} (their median, ±25%), speed_limit_deg_s {ranges.speed_limit_deg_s[0]:g}-{ranges.speed_limit_deg_s[1]:g} (the median "
                          f"limit of 4 joints, ±15%); the rest the defaults. Use it: --physics {ranges_file}")
 
 

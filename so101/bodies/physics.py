@@ -53,13 +53,18 @@ class PhysicsRanges:
     speed_limit_deg_s: tuple[float, float] = (150.0, 270.0)  # an STS3215 loaded, to its 0.222 s/60° unloaded
     calibration_deg: float = 2.0  # each joint's zero, ± this
     gripper_torque_nm: tuple[float, float] = (1.2, 3.35)  # below LeRobot's 50% limit, to the servo's full
+    # None: the servos' response is servo_stiffness times each simulator's own. A range (`so101 physics --fit`
+    # writes one): each simulator sets its own gain to close 63% of a small step's gap in this time.
+    servo_time_constant_s: tuple[float, float] | None = None
 
     def check(self, source: str = "the ranges") -> "PhysicsRanges":
         """These ranges, or PhysicsError naming `source` and what does not make sense."""
         positive = ("cube_size_m", "cube_mass_kg", "cube_friction", "servo_stiffness", "speed_limit_deg_s",
-                    "gripper_torque_nm")
+                    "gripper_torque_nm", "servo_time_constant_s")
         for spec in fields(self):
             value = getattr(self, spec.name)
+            if value is None and spec.name == "servo_time_constant_s":
+                continue
             if spec.name == "calibration_deg":
                 if not _finite(value) or value < 0:
                     raise PhysicsError(f"{source}: calibration_deg is a number of degrees >= 0 (each joint's zero ± it), "
@@ -90,6 +95,8 @@ RANGE_REASONS = {
     "speed_limit_deg_s": "an STS3215 loaded, up to its 0.222 s per 60 degrees unloaded",
     "calibration_deg": "each joint's zero, as a calibration by hand puts it (plus or minus)",
     "gripper_torque_nm": "LeRobot's half torque limit (about 1.7 N.m) to the servo's full 3.35 N.m",
+    "servo_time_constant_s": "none unless set (`so101 physics --fit` sets it from your arm): the servos' time "
+                             "constant, each simulator's gain set to reach it, in place of servo_stiffness",
 }
 
 
@@ -171,6 +178,7 @@ class Physics:
     speed_limit_deg_s: float
     calibration_offsets_deg: tuple[float, ...]  # six: what each joint reports minus where it is
     gripper_torque_nm: float
+    servo_time_constant_s: float | None = None  # None: servo_stiffness times each simulator's own servo
 
     @property
     def cube_half_size_m(self) -> float:
@@ -182,6 +190,8 @@ class Physics:
 
     def as_metadata(self) -> dict[str, object]:
         metadata: dict[str, object] = json.loads(json.dumps(asdict(self)))
+        if self.servo_time_constant_s is None:  # as datasets kept physics before there was one
+            del metadata["servo_time_constant_s"]
         return metadata
 
 
@@ -219,6 +229,8 @@ def draw_physics(seed: int, ranges: PhysicsRanges = DEFAULT_RANGES) -> Physics:
         speed_limit_deg_s=within(ranges.speed_limit_deg_s),
         calibration_offsets_deg=tuple(within((-ranges.calibration_deg, ranges.calibration_deg)) for _ in range(JOINTS)),
         gripper_torque_nm=within(ranges.gripper_torque_nm),
+        # Drawn last: the other values of a seed stay what they were before there was a time constant.
+        servo_time_constant_s=None if ranges.servo_time_constant_s is None else within(ranges.servo_time_constant_s),
     )
 
 
@@ -236,10 +248,10 @@ def physics_from_metadata(entry: object) -> Physics | None:
     if entry["physics"] == "fixed":
         return None
     names = [field.name for field in fields(Physics)]
-    missing = [name for name in names if name not in entry]
+    missing = [name for name in names if name not in entry and name != "servo_time_constant_s"]
     if missing:
         raise ValueError(f"an episode's varied physics has no {missing[0]!r}: it holds {', '.join(names)}")
-    values = {name: entry[name] for name in names}
+    values = {name: entry.get(name) for name in names}
     values["calibration_offsets_deg"] = tuple(float(offset) for offset in values["calibration_offsets_deg"])
     return Physics(**values)
 

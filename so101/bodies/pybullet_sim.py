@@ -347,7 +347,7 @@ class SO101Sim:
                 # step (tests/test_course_motion.py), for less work per tick.
                 servos = self._servos
                 gains = dict(maxVelocity=math.radians(servos.speed_limit_deg_s),
-                             positionGain=POSITION_GAIN * servos.servo_stiffness,
+                             positionGain=POSITION_GAIN * self._stiffness(servos),
                              velocityGain=VELOCITY_GAIN * servos.servo_damping, physicsClientId=client)
                 for joint_index, goal_rad in self._motor_goals:
                     force = servos.gripper_torque_nm if joint_index == self._indices[-1] else MOTOR_FORCE_N_M
@@ -364,6 +364,14 @@ class SO101Sim:
     @property
     def _servos(self) -> Physics:
         return self._fixed_servos if self.physics is None else self.physics
+
+    def _stiffness(self, servos: Physics) -> float:
+        """The motors' positionGain, times PyBullet's own: `servo_stiffness`, or what gives the physics' time
+        constant. A position motor closes positionGain of the gap each step: its time constant is the step over
+        the gain (40 ms at the node's 4 ms and 0.1), and it cannot close more than all of it."""
+        if servos.servo_time_constant_s is None:
+            return servos.servo_stiffness
+        return min(1.0, self.time_step_s / servos.servo_time_constant_s) / POSITION_GAIN
 
     def _take_physics(self, physics: Physics | None) -> None:
         """The command path and motors as `physics` has them (None: fixed, the nominal servos): the motors get

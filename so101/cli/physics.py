@@ -25,8 +25,9 @@ from so101.dataset.layout import DatasetError
 from so101.dataset.units import UNITS, UNITS_HELP
 from so101.robot import ACTUATED_JOINTS, NUM_ARM_JOINTS
 
-# The fitted speed limit, spread by this either way in the ranges written; the delay by a frame.
+# The fitted speed limit and time constant, spread by this either way in the ranges written; the delay by a frame.
 SPEED_SPREAD = 0.15
+TIME_CONSTANT_SPREAD = 0.25
 
 
 def episode_list(text: str) -> list[int]:
@@ -60,25 +61,32 @@ def fail(line: str) -> int:
 
 def range_lines(ranges: PhysicsRanges) -> list[str]:
     """A line a range: its name, its span, fixed physics' value (NOMINAL's), and why."""
-    lines = [f"  {'range':<18} {'varied':<14} {'fixed':<8} why"]
+    lines = [f"  {'range':<21} {'varied':<14} {'fixed':<8} why"]
     for spec in fields(PhysicsRanges):
         value = getattr(ranges, spec.name)
-        shown = f"±{value:g}" if spec.name == "calibration_deg" else f"{value[0]:g}-{value[1]:g}"
+        shown = ("not set" if value is None else f"±{value:g}" if spec.name == "calibration_deg"
+                 else f"{value[0]:g}-{value[1]:g}")
         fixed = 0.0 if spec.name == "calibration_deg" else getattr(NOMINAL, spec.name)
-        lines.append(f"  {spec.name:<18} {shown:<14} {fixed:<8.4g} {RANGE_REASONS[spec.name]}")
+        lines.append(f"  {spec.name:<21} {shown:<14} {'not set' if fixed is None else f'{fixed:.4g}':<8} "
+                     f"{RANGE_REASONS[spec.name]}")
     return lines
 
 
 def fitted_ranges(fits: list[JointFit]) -> tuple[PhysicsRanges, str]:
-    """The default ranges with the command delay and the speed limit centred on the body joints' fits; and a
-    line saying what was fitted."""
+    """The default ranges with the command delay, the servos' time constant and the speed limit centred on the
+    body joints' fits; and a line saying what was fitted."""
     body = [fit for fit in fits if fit.joint in {joint.name for joint in ACTUATED_JOINTS[:NUM_ARM_JOINTS]}]
     fps = body[0].fps
     delay = int(np.median([fit.delay_frames for fit in body]))
-    ranges = replace(DEFAULT_RANGES, command_delay_s=(round(max(0, delay - 1) / fps, 4), round((delay + 1) / fps, 4)))
+    # No shorter than a frame: a joint that closes its gap within one says only that it is at least that quick.
+    time_constant_s = max(1 / fps, float(np.median([fit.time_constant_s for fit in body])))
+    ranges = replace(DEFAULT_RANGES, command_delay_s=(round(max(0, delay - 1) / fps, 4), round((delay + 1) / fps, 4)),
+                     servo_time_constant_s=(round(time_constant_s * (1 - TIME_CONSTANT_SPREAD), 4),
+                                            round(time_constant_s * (1 + TIME_CONSTANT_SPREAD), 4)))
     limited = [fit.speed_deg_s for fit in body if np.isfinite(fit.speed_deg_s)]
     said = f"command_delay_s {ranges.command_delay_s[0]:g}-{ranges.command_delay_s[1]:g} (the body's median delay, " \
-           f"{delay} frames, ± one)"
+           f"{delay} frames, ± one), servo_time_constant_s {ranges.servo_time_constant_s[0]:g}-" \
+           f"{ranges.servo_time_constant_s[1]:g} (their median, ±{TIME_CONSTANT_SPREAD:.0%})"
     if limited:
         speed = float(np.median(limited))
         ranges = replace(ranges, speed_limit_deg_s=(round(speed * (1 - SPEED_SPREAD), 1),

@@ -97,6 +97,8 @@ def replay_physics(mode: str | None, body: str) -> str | None:
         return "fixed"
     centre = centred(ranges)
     print(f"replay: physics at the ranges' centre: command delay {centre.command_delay_s[0] * 1000:.0f} ms, speed limit "
-          f"{centre.speed_limit_deg_s[0]:g} deg/s, servo stiffness x{centre.servo_stiffness[0]:g}, damping "
-          f"x{centre.servo_damping[0]:g}, calibration exact", flush=True)
+          f"{centre.speed_limit_deg_s[0]:g} deg/s, "
+          + (f"servo stiffness x{centre.servo_stiffness[0]:g}" if centre.servo_time_constant_s is None else
+             f"servo time constant {centre.servo_time_constant_s[0] * 1000:.0f} ms")
+          + f", damping x{centre.servo_damping[0]:g}, calibration exact", flush=True)
     return json.dumps(asdict(centre), sort_keys=True)
