@@ -51,7 +51,7 @@ def servo_stiffness(servos: Physics) -> float:
     """The actuators' kp, times the MJCF's: `servo_stiffness`, or what gives the physics' time constant."""
     if servos.servo_time_constant_s is None:
         return servos.servo_stiffness
-    return min(MAX_STIFFNESS, (MJCF_TIME_CONSTANT_S / servos.servo_time_constant_s) ** MJCF_TIME_CONSTANT_POWER)
+    return min(MAX_STIFFNESS, float((MJCF_TIME_CONSTANT_S / servos.servo_time_constant_s) ** MJCF_TIME_CONSTANT_POWER))
 
 
 class SO101MuJoCo:

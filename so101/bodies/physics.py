@@ -26,7 +26,7 @@ import math
 import random
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
-from typing import Iterable
+from typing import Any, Iterable
 
 PHYSICS_MODES = ("fixed", "varied")
 DEFAULT_PHYSICS = "fixed"
@@ -251,8 +251,8 @@ def physics_from_metadata(entry: object) -> Physics | None:
     missing = [name for name in names if name not in entry and name != "servo_time_constant_s"]
     if missing:
         raise ValueError(f"an episode's varied physics has no {missing[0]!r}: it holds {', '.join(names)}")
-    values = {name: entry.get(name) for name in names}
-    values["calibration_offsets_deg"] = tuple(float(offset) for offset in values["calibration_offsets_deg"])
+    values: dict[str, Any] = {name: entry.get(name) for name in names}
+    values["calibration_offsets_deg"] = tuple(float(offset) for offset in entry["calibration_offsets_deg"])
     return Physics(**values)
 
 

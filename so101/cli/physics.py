@@ -80,13 +80,14 @@ def fitted_ranges(fits: list[JointFit]) -> tuple[PhysicsRanges, str]:
     delay = int(np.median([fit.delay_frames for fit in body]))
     # No shorter than a frame: a joint that closes its gap within one says only that it is at least that quick.
     time_constant_s = max(1 / fps, float(np.median([fit.time_constant_s for fit in body])))
+    time_constants_s = (round(time_constant_s * (1 - TIME_CONSTANT_SPREAD), 4),
+                        round(time_constant_s * (1 + TIME_CONSTANT_SPREAD), 4))
     ranges = replace(DEFAULT_RANGES, command_delay_s=(round(max(0, delay - 1) / fps, 4), round((delay + 1) / fps, 4)),
-                     servo_time_constant_s=(round(time_constant_s * (1 - TIME_CONSTANT_SPREAD), 4),
-                                            round(time_constant_s * (1 + TIME_CONSTANT_SPREAD), 4)))
+                     servo_time_constant_s=time_constants_s)
     limited = [fit.speed_deg_s for fit in body if np.isfinite(fit.speed_deg_s)]
     said = f"command_delay_s {ranges.command_delay_s[0]:g}-{ranges.command_delay_s[1]:g} (the body's median delay, " \
-           f"{delay} frames, ± one), servo_time_constant_s {ranges.servo_time_constant_s[0]:g}-" \
-           f"{ranges.servo_time_constant_s[1]:g} (their median, ±{TIME_CONSTANT_SPREAD:.0%})"
+           f"{delay} frames, ± one), servo_time_constant_s {time_constants_s[0]:g}-{time_constants_s[1]:g} " \
+           f"(their median, ±{TIME_CONSTANT_SPREAD:.0%})"
     if limited:
         speed = float(np.median(limited))
         ranges = replace(ranges, speed_limit_deg_s=(round(speed * (1 - SPEED_SPREAD), 1),
