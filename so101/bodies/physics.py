@@ -8,9 +8,10 @@ file of ranges: `physics_ranges`):
 - the calibration: each joint's zero off by up to ±N°, as a real calibration is: the arm reports
   the angles it believes it is at, and goes where it believes a target is;
 - the gripper's torque limit.
-`fixed` (the default) is the nominal point of the same physics (`NOMINAL`): the task's cube, the servos at
-their simulator's own gains, no delay, the course's 3 rad/s speed limit, an exact calibration and the
-STS3215's full 3.35 N·m at the gripper, through the same command path and motors as varied. The same seed gives the same
+`fixed` (the default) is the nominal point of the same physics (`NOMINAL`), through the same command path
+and motors: the task's cube, the servos at their simulator's own gains, no delay, an exact calibration,
+the STS3215's full 3.35 N·m at the gripper and the course's 3 rad/s speed limit (PyBullet's; MuJoCo's MJCF
+has none, and its fixed physics keeps none). The same seed gives the same
 physics on every machine and on both simulators (Python's `random.Random`, seeded by text). Pure: the
 bodies (so101.bodies.pybullet_sim, so101.bodies.mujoco_sim) apply it, the renderer
 (so101.bodies.task_cameras) draws the cube's size and the arm where it truly is, a dataset keeps it by

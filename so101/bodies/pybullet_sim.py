@@ -8,8 +8,8 @@ in degrees; PyBullet's radians stay inside.
 from __future__ import annotations
 
 import ctypes
-import tempfile
 import math
+import tempfile
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable, Sequence
@@ -302,7 +302,7 @@ class SO101Sim:
 
     def set_targets_deg(self, targets_deg: Sequence[float]) -> None:
         """Goal angles in degrees for all six actuated joints (arm 0-4, gripper); with varied physics they
-        go through its command path (its delay, speed limit and calibration)."""
+        go through its command path (its delay and calibration; the motors keep its speed limit)."""
         self._command.send(goal_deg(targets_deg), self.sim_time_s)
         self._take_goal()
 
