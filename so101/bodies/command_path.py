@@ -22,12 +22,15 @@ class CommandPath:
     def __init__(self, physics: Physics, goal_deg: npt.ArrayLike, slews: bool):
         self.physics = physics
         self.slews = slews
+        self._offsets_deg = np.asarray(physics.calibration_offsets_deg, dtype=np.float64)
         self.goal_deg = self._true(goal_deg)
         self._wanted = self.goal_deg.copy()
         self._queue: deque[tuple[float, npt.NDArray[np.float64]]] = deque()
+        self._settled = True
 
     def _true(self, believed_deg: npt.ArrayLike) -> npt.NDArray[np.float64]:
-        return np.array(self.physics.true_deg(np.ravel(believed_deg)), dtype=np.float64)
+        # Physics.true_deg's arithmetic, in numpy: the bodies send targets every frame.
+        return np.asarray(believed_deg, dtype=np.float64).ravel() - self._offsets_deg
 
     def send(self, targets_deg: npt.ArrayLike, now_s: float) -> None:
         """Targets as the arm believes them, sent at `now_s`: they reach the servos after the delay."""
@@ -35,11 +38,13 @@ class CommandPath:
             self._wanted = self._true(targets_deg)
         else:
             self._queue.append((now_s + self.physics.command_delay_s, self._true(targets_deg)))
+        self._settled = False
 
     @property
     def settled(self) -> bool:
-        """Nothing on its way and the goal where it is wanted: ticks until the next send change nothing."""
-        return not self._queue and np.array_equal(self.goal_deg, self._wanted)
+        """Nothing on its way and the goal where it is wanted: ticks until the next send change nothing (a
+        flag, not a comparison: the bodies ask it every tick)."""
+        return self._settled
 
     def goal_at(self, now_s: float, tick_s: float) -> npt.NDArray[np.float64]:
         """The servos' goals (true degrees) for the tick starting at `now_s`, `tick_s` long."""
@@ -47,12 +52,12 @@ class CommandPath:
             self._wanted = self._queue.popleft()[1]
         if not self.slews:
             self.goal_deg = self._wanted
-            return self.goal_deg
-        most = self.physics.speed_limit_deg_s * tick_s
-        self.goal_deg = self.goal_deg + np.clip(self._wanted - self.goal_deg, -most, most)
+        else:
+            most = self.physics.speed_limit_deg_s * tick_s
+            self.goal_deg = self.goal_deg + np.clip(self._wanted - self.goal_deg, -most, most)
+        self._settled = not self._queue and (not self.slews or np.array_equal(self.goal_deg, self._wanted))
         return self.goal_deg
 
     def reported(self, true_deg: npt.ArrayLike) -> npt.NDArray[np.float64]:
         """What the arm reports of joints at `true_deg`."""
-        offsets = np.asarray(self.physics.calibration_offsets_deg, dtype=np.float64)
-        return np.asarray(true_deg, dtype=np.float64) + offsets
+        return np.asarray(true_deg, dtype=np.float64) + self._offsets_deg

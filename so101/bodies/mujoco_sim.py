@@ -158,6 +158,8 @@ class SO101MuJoCo:
         """Goal angles in degrees for all six actuated joints (arm 0-4, gripper); with varied physics they
         go through its command path (its delay, speed limit and calibration)."""
         self._command.send(goal_deg(targets_deg), self.sim_time_s)
+        if not self._command.slews:  # the goal now, unless it waits out a delay: step() then takes all at once
+            self.data.ctrl[self._actuators] = np.radians(self._command.goal_at(self.sim_time_s, self.time_step_s))
 
     def reset_task(self, seed: int) -> None:
         """The task's scene laid out from `seed`, and the arm at home, still, its goal home (with varied
@@ -203,14 +205,15 @@ class SO101MuJoCo:
 
     def step(self, count: int = 1) -> None:
         """Advance the physics by `count` periods of `time_step_s`, the command path's goals each period."""
-        if self._command.settled:  # the goals already where they are wanted: all the steps at once
-            mujoco.mj_step(self.model, self.data, nstep=count * self.substeps)
-            self.steps += count
-        else:
-            for _ in range(count):
-                self.data.ctrl[self._actuators] = np.radians(self._command.goal_at(self.sim_time_s, self.time_step_s))
-                mujoco.mj_step(self.model, self.data, nstep=self.substeps)
-                self.steps += 1
+        left = count
+        while left and not self._command.settled:  # a goal on its way: the path's goal each period
+            self.data.ctrl[self._actuators] = np.radians(self._command.goal_at(self.sim_time_s, self.time_step_s))
+            mujoco.mj_step(self.model, self.data, nstep=self.substeps)
+            self.steps += 1
+            left -= 1
+        if left:  # the goals where they are wanted: the rest at once
+            mujoco.mj_step(self.model, self.data, nstep=left * self.substeps)
+            self.steps += left
         if self._window is not None and self._window.due():
             self._window.show(self.data.qpos[self._qpos], None if self.scene is None else self.scene.object_state(),
                               self.layout_seed)

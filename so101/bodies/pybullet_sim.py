@@ -213,6 +213,7 @@ class SO101Sim:
         self.physics: Physics | None = None  # varied physics' draw; None: fixed, the servos `NOMINAL`
         self._fixed_servos = replace(NOMINAL, speed_limit_deg_s=math.degrees(self.max_velocity_rad_s))
         self._command = CommandPath(self._fixed_servos, HOME_POSE_DEG, slews=False)
+        self._taken_deg = self._command.goal_deg  # the path's goal the motors were last given
         self._goal_rad: FloatArray = np.radians(np.asarray(HOME_POSE_DEG, dtype=np.float64))
         # (joint index, goal in radians) pairs for the per-joint motor calls, while they are
         # still to be made; None once the motors have them.
@@ -378,15 +379,17 @@ class SO101Sim:
         the new gains with their next goals."""
         self.physics = physics
         self._command = CommandPath(self._servos, HOME_POSE_DEG, slews=False)
+        self._taken_deg = self._command.goal_deg
         self._goal_rad = np.radians(self._command.goal_deg)
         self._motor_goals = list(zip(self._indices, self._goal_rad.tolist()))
 
     def _take_goal(self) -> None:
-        # The command path's goal now; the motors are told only of a change (PyBullet keeps a motor's command).
-        goal_rad = np.radians(self._command.goal_at(self.sim_time_s, self.time_step_s))
-        if not np.array_equal(goal_rad, self._goal_rad):
-            self._goal_rad = goal_rad
-            self._motor_goals = list(zip(self._indices, goal_rad.tolist()))
+        # The command path's goal now; the motors are told only of a new one (PyBullet keeps a motor's command).
+        goal_deg = self._command.goal_at(self.sim_time_s, self.time_step_s)
+        if goal_deg is not self._taken_deg:  # the path hands on each goal as it came (it does not slew here)
+            self._taken_deg = goal_deg
+            self._goal_rad = np.radians(goal_deg)
+            self._motor_goals = list(zip(self._indices, self._goal_rad.tolist()))
 
     def _send_servo_torques(self) -> None:
         # PyBullet forgets TORQUE_CONTROL torques after each step: they are sent every step.
