@@ -5,7 +5,8 @@
   joint's delay, time constant, speed limit and resting offset to how the recording's states followed its
   actions (so101.bodies.servo_fit), prints each joint's error before (the state as a perfect servo would
   have it) and after, on the episodes fitted and on one held out, and writes a ranges file centred on the
-  fit (the command delay and the speed limit; the rest the defaults) that `--physics FILE` takes.
+  fit (the command delay, the servos' time constant and the speed limit; the rest the defaults) that
+  `--physics FILE` takes.
 """
 
 from __future__ import annotations
@@ -184,7 +185,7 @@ def run(args: argparse.Namespace) -> int:
     if ranges is None:
         return fail("--ranges takes a ranges file (NAME.json): fixed physics draws nothing")
     print(f"the ranges {'--physics varied draws from' if args.ranges is None else f'of {args.ranges}'}, "
-          "each episode's drawn from its seed, and fixed physics' point, the same on both simulators "
-          "(docs/loop/physics.md):")
+          "each episode's drawn from its seed, and fixed physics' point (MuJoCo's keeps no speed limit; "
+          "docs/loop/physics.md):")
     print("\n".join(range_lines(ranges)))
     return 0
