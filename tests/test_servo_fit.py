@@ -36,46 +36,55 @@ def followed(actions: np.ndarray, delay: int, closing: float, speed: float, offs
     return states + np.random.default_rng(seed).normal(0, 0.2, len(states))  # a servo's read noise
 
 
+class EmulatedServo:
+    """`so101 fake-arm`'s shoulder_lift servo on a clock of its own, read and sent goals in degrees from its
+    centre."""
+
+    def __init__(self, delay_s: float, time_constant_s: float, speed: float):
+        self.now_s = 0.0
+        self.arm = FakeArm(ids=(2,), speed_steps_s=speed * STEPS_PER_DEG, clock=lambda: self.now_s,
+                           response=Response(delay_s=delay_s, time_constant_s=time_constant_s))
+        self.centre = self.arm.read_register(2, "Present_Position")
+        self.arm.write_register(2, "Torque_Enable", 1)
+
+    def read_deg(self) -> float:
+        return (self.arm.read_register(2, "Present_Position") - self.centre) / STEPS_PER_DEG
+
+    def send_deg(self, goal_deg: float) -> None:
+        self.arm.write_register(2, "Goal_Position", round(self.centre + goal_deg * STEPS_PER_DEG))
+
+
 def emulated(actions: np.ndarray, delay_s: float, time_constant_s: float, speed: float) -> np.ndarray:
-    """`so101 fake-arm`'s shoulder_lift servo driven at FPS on a clock of its own: each frame its position
-    is read, then the frame's goal is written, as LeRobot's follower does."""
-    now = [0.0]
-    arm = FakeArm(ids=(2,), speed_steps_s=speed * STEPS_PER_DEG, clock=lambda: now[0],
-                  response=Response(delay_s=delay_s, time_constant_s=time_constant_s))
+    """The servo driven at FPS: each frame its position is read, then the frame's goal is written, as LeRobot's
+    follower does."""
+    servo = EmulatedServo(delay_s, time_constant_s, speed)
     try:
-        centre = arm.read_register(2, "Present_Position")
-        arm.write_register(2, "Torque_Enable", 1)
         states = []
         for frame, action in enumerate(actions):
-            now[0] = frame / FPS
-            states.append((arm.read_register(2, "Present_Position") - centre) / STEPS_PER_DEG)
-            arm.write_register(2, "Goal_Position", round(centre + action * STEPS_PER_DEG))
+            servo.now_s = frame / FPS
+            states.append(servo.read_deg())
+            servo.send_deg(action)
         return np.array(states)
     finally:
-        arm.close()
+        servo.arm.close()
 
 
 def emulated_through_the_arm_node(actions: np.ndarray, delay_s: float, time_constant_s: float, speed: float,
                                   tick_s: float = 0.02) -> np.ndarray:
     """The same servo behind the real arm's dataflow: its node reads it and writes the newest goal every
     `tick_s` (50 Hz), and the recorder keeps, each frame at FPS, the newest state read."""
-    now = [0.0]
-    arm = FakeArm(ids=(2,), speed_steps_s=speed * STEPS_PER_DEG, clock=lambda: now[0],
-                  response=Response(delay_s=delay_s, time_constant_s=time_constant_s))
+    servo = EmulatedServo(delay_s, time_constant_s, speed)
     try:
-        centre = arm.read_register(2, "Present_Position")
-        arm.write_register(2, "Torque_Enable", 1)
         states, read = [], 0.0
         for tick in range(int(len(actions) / FPS / tick_s)):
-            now[0] = tick * tick_s
-            while len(states) < len(actions) and len(states) / FPS <= now[0]:
+            servo.now_s = tick * tick_s
+            while len(states) < len(actions) and len(states) / FPS <= servo.now_s:
                 states.append(read)  # the frame's state: the newest read
-            read = (arm.read_register(2, "Present_Position") - centre) / STEPS_PER_DEG
-            goal = actions[min(len(actions) - 1, int(now[0] * FPS))]
-            arm.write_register(2, "Goal_Position", round(centre + goal * STEPS_PER_DEG))
+            read = servo.read_deg()
+            servo.send_deg(actions[min(len(actions) - 1, int(servo.now_s * FPS))])
         return np.array(states + [read] * (len(actions) - len(states)))
     finally:
-        arm.close()
+        servo.arm.close()
 
 
 def steps_and_holds_deg(seed: int, frames: int = 450) -> np.ndarray:

@@ -29,6 +29,8 @@ from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 from typing import Any, Iterable
 
+from so101.robot import COURSE_MAX_VELOCITY_RAD_S
+
 PHYSICS_MODES = ("fixed", "varied")
 DEFAULT_PHYSICS = "fixed"
 JOINTS = 6
@@ -198,7 +200,7 @@ class Physics:
 
 # Fixed physics: the values every body runs at when nothing varies, the centre varied physics spreads around.
 # The cube's are the task's own cube (so101.tasks.objects); the speed limit the course's maxVelocity, 3 rad/s.
-COURSE_SPEED_LIMIT_DEG_S = math.degrees(3.0)
+COURSE_SPEED_LIMIT_DEG_S = math.degrees(COURSE_MAX_VELOCITY_RAD_S)
 NOMINAL = Physics(
     seed=0, cube_size_m=0.025, cube_mass_kg=0.030, cube_friction=1.0, servo_stiffness=1.0, servo_damping=1.0,
     command_delay_s=0.0, speed_limit_deg_s=COURSE_SPEED_LIMIT_DEG_S, calibration_offsets_deg=(0.0,) * JOINTS,
