@@ -15,7 +15,9 @@ import pytest
 from so101.bodies.backdrop import (
     SHIFT, ZOOM, BackdropError, Placement, backdrop_picture, checked_backdrop, fitted, placement_for,
 )
+from so101.bodies.backdrop_pool import HELD_OUT_PANORAMAS, HELD_OUT_SURFACES, SIZE, pool_folder, view_of_panorama
 from so101.bodies.registry import SIMULATED_BODIES
+from so101.bodies.scenario import Scenario
 from tests.helpers.dataflow import error_lines, run_so101
 
 MAGENTA = (255, 0, 255)  # no floor, arm, cube or box is this colour
@@ -48,8 +50,45 @@ def test_each_seed_draws_its_photo_and_under_varied_looks_a_small_shift_zoom_and
     assert placement_for(str(tmp_path), 7, True) == placement_for(str(tmp_path), 7, True)
 
 
+def test_a_panorama_is_seen_through_a_camera_that_looks_down_at_its_floor():
+    panorama = np.zeros((180, 360, 3), dtype=np.uint8)
+    panorama[90:] = (0, 200, 0)  # below the horizon, the floor: green; above, black
+    panorama[90:, 180:] = (0, 0, 200)  # the floor's half about heading 90° (longitudes 0-180°): blue
+    level = view_of_panorama(panorama, 90.0, 0.0, 60.0, (64, 48))
+    assert level[:20].max() == 0 and (level[28:, :, 2] == 200).all()  # the horizon across the middle
+    down = view_of_panorama(panorama, 90.0, 45.0, 60.0, (64, 48))
+    assert (down[:, :, 2] == 200).all()  # the floor ahead, all blue
+    behind = view_of_panorama(panorama, 270.0, 45.0, 60.0, (64, 48))
+    assert (behind[:, :, 1] == 200).mean() > 0.95
+
+
+def test_the_pool_is_made_the_same_on_every_machine_and_its_held_out_part_shares_nothing_with_it(tmp_path, monkeypatch):
+    import hashlib
+
+    def made(cache: Path) -> dict[str, dict[str, str]]:
+        monkeypatch.setenv("XDG_CACHE_HOME", str(cache))
+        return {name: {file.name: hashlib.sha256(file.read_bytes()).hexdigest() for file in pool_folder(name).iterdir()}
+                for name in ("pool", "pool-held-out")}
+
+    first, again = made(tmp_path / "a"), made(tmp_path / "b")
+    assert first == again
+    seen, held_out = first["pool"], first["pool-held-out"]
+    assert not set(seen.values()) & set(held_out.values()) and len(seen) > 100 and len(held_out) > 40
+    assert {name.split("-")[1] for name in held_out if name.endswith(".png")} == {*HELD_OUT_PANORAMAS, *HELD_OUT_SURFACES}
+    assert not {name.split("-")[1] for name in seen if name.endswith(".png")} & {*HELD_OUT_PANORAMAS, *HELD_OUT_SURFACES}
+    sources = (pool_folder("pool") / "SOURCES.txt").read_text().splitlines()
+    assert sorted(line.split(":")[0] for line in sources) == sorted(name for name in seen if name.endswith(".png"))
+    assert any("Poly Haven" in line and "(CC0)" in line for line in sources)
+    assert cv2.imread(str(next(pool_folder("pool").glob("*.png")))).shape == (SIZE[1], SIZE[0], 3)
+    # Unseen looks draw the front camera's backdrop from the held-out pool, unless one is given.
+    assert Scenario("unseen").backdrops == {"front": "pool-held-out"} and Scenario("varied").backdrops == {}
+    assert Scenario("unseen", backdrops={"front": "pool"}).backdrops == {"front": "pool"}
+    assert checked_backdrop("front=pool") == ("front", "pool")
+
+
 @pytest.mark.parametrize("given, message", [
-    ("front={missing}", "{missing} does not exist: give a photo of the workspace, or a folder of them"),
+    ("front={missing}", "{missing} does not exist: give a photo of the workspace, a folder of them, or pool or "
+                        "pool-held-out"),
     ("front={text}", "{text} cannot be read as a picture: give a .png, .jpg, .jpeg, .bmp, .webp file"),
     ("front={empty}", "{empty} holds no images (.png, .jpg, .jpeg, .bmp, .webp)"),
     ("side={good}", "--backdrop takes NAME=IMAGE, NAME front or wrist: got 'side="),

@@ -232,6 +232,10 @@ def test_learn_teaches_the_eyes_from_the_camera_and_over_the_backdrop_given_and_
                 "backdrops": {"front": str((tmp_path / "table.png").resolve())}}
     learning = Learning(tmp_path / "out", tmp_path, settings, {}, Path("python"), {})
     assert learning.scenario_args() == ["--scenario", json.dumps({key: settings[key] for key in ("camera_poses", "backdrops")})]
+    # Without a front backdrop, the default recipe draws half its pictures over the pool.
+    pooled = Learning(tmp_path / "out", tmp_path, {**settings, "backdrops": {}, "backdrop_pool_share": learn.POOL_SHARE},
+                      {}, Path("python"), {})
+    assert pooled.scenario_args()[-2:] == ["--pool-share", "0.5"]
     assert learning.camera_args() == ["--camera-pose", f"front={tmp_path / 'camera-front.json'}",
                                       "--backdrop", f"front={settings['backdrops']['front']}"]
     (tmp_path / "eyes").mkdir()  # what the eyes' training leaves: then the folder says what they assume
@@ -339,6 +343,10 @@ def test_pictures_are_drawn_with_their_episodes_physics_and_measured_on_seeds_tr
     assert np.allclose(drawn["tip_px"][varied], view.project([true_tip])[0], atol=1e-6)
     assert np.allclose(drawn["tip_px"][~varied], view.project([reported_tip])[0], atol=1e-6)
     assert np.hypot(*(view.project([true_tip])[0] - view.project([reported_tip])[0])) > 2  # the offsets show
+    # Over the backdrop pool (all of them here), the floor's corner shows a workspace, not the floor.
+    pooled = draw_pictures(frames, 6, 3, SIZE, "fixed", pool_share=1.0)
+    corner = (slice(None), slice(0, 4), slice(0, 4))
+    assert (np.abs(pooled["pictures"][corner].astype(int) - drawn["pictures"][corner]).max(axis=(1, 2, 3)) > 8).all()
     # Held-out pictures draw their looks and layouts from spans training never draws.
     (looks, layouts), (held_looks, held_layouts) = picture_seeds(False), picture_seeds(True)
     assert looks[1] <= held_looks[0] and layouts[1] <= held_layouts[0]

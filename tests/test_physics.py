@@ -99,6 +99,10 @@ def test_the_command_path_delays_limits_speed_and_is_off_by_the_calibration():
     fixed.send(target, now_s=0.0)
     assert np.array_equal(fixed.goal_at(0.0, tick), target) and np.array_equal(fixed.reported(target), target)
     assert fixed.settled
+    # NOMINAL's cube is the task's (so101.bodies may not import the tasks, so it restates them).
+    from so101.tasks.objects import Cube
+    assert (NOMINAL.cube_half_size_m, NOMINAL.cube_mass_kg, NOMINAL.cube_friction) == \
+        (Cube().half_size_m, Cube().mass_kg, Cube().friction)
 
 
 @pytest.mark.parametrize("body", SIMULATED_BODIES)

@@ -1,9 +1,11 @@
-"""The docs' backdrop picture (docs/bodies/backdrop.md): a table made here (wood grain under a pale wall, no
-photo from elsewhere), and the front camera's picture of seed 3 without and with it, side by side.
+"""The docs' backdrop pictures (docs/bodies/backdrop.md): a table made here (wood grain under a pale wall, no
+photo from elsewhere), and the front camera's picture of seed 3 without and with it, side by side; and the
+front picture of seeds 1-4 in varied looks over the backdrop pool (so101.bodies.backdrop_pool).
 
     python tools/backdrop_example.py OUT_DIR
 
-Writes OUT_DIR/table.png (1280x720) and OUT_DIR/backdrop_side_by_side.png (two 320x240 pictures).
+Writes OUT_DIR/table.png (1280x720), OUT_DIR/backdrop_side_by_side.png (two 320x240 pictures) and
+OUT_DIR/backdrop_pool.png (four 240x180 pictures).
 """
 
 from __future__ import annotations
@@ -42,7 +44,13 @@ def main() -> int:
             cameras.show_seed(3)
             pictures.append(cameras.draw(HOME_POSE_DEG, [], 320, 240, wrist=False)[0])
     cv2.imwrite(str(out / "backdrop_side_by_side.png"), np.concatenate(pictures, axis=1)[:, :, ::-1])
-    print(f"wrote {photo} and {out / 'backdrop_side_by_side.png'}")
+    pooled = []
+    with TaskCameras(CUBE_TO_BOX, log=lambda line: None, looks="varied", backdrops={"front": "pool"}) as cameras:
+        for seed in range(1, 5):
+            cameras.show_seed(seed)
+            pooled.append(cameras.draw(HOME_POSE_DEG, [], 240, 180, wrist=False)[0])
+    cv2.imwrite(str(out / "backdrop_pool.png"), np.concatenate(pooled, axis=1)[:, :, ::-1])
+    print(f"wrote {photo}, {out / 'backdrop_side_by_side.png'} and {out / 'backdrop_pool.png'}")
     return 0
 
 

@@ -22,6 +22,9 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
+from so101.bodies.backdrop_pool import POOL, POOL_HELD_OUT, pool_folder
+
+POOLS = (POOL, POOL_HELD_OUT)
 PHOTO_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".webp")
 CAMERAS = ("front", "wrist")
 SHIFT = 0.03  # of the picture's size, each way, under varied looks
@@ -35,8 +38,11 @@ class BackdropError(ValueError):
 
 
 def backdrop_photos(path: str | Path) -> tuple[Path, ...]:
-    """The photos at `path`: the file, or a folder's images in name order; BackdropError in one line for
-    a path that is neither, or a folder without images."""
+    """The photos at `path`: the file, or a folder's images in name order, or a pool's (`pool`,
+    `pool-held-out`: so101.bodies.backdrop_pool); BackdropError in one line for a path that is none of
+    these, or a folder without images."""
+    if str(path) in POOLS:
+        return backdrop_photos(pool_folder(str(path)))
     where = Path(path).expanduser()
     if where.is_dir():
         photos = tuple(sorted(item for item in where.iterdir() if item.suffix.lower() in PHOTO_SUFFIXES))
@@ -44,7 +50,8 @@ def backdrop_photos(path: str | Path) -> tuple[Path, ...]:
             raise BackdropError(f"{where} holds no images ({', '.join(PHOTO_SUFFIXES)})")
         return photos
     if not where.is_file():
-        raise BackdropError(f"{where} does not exist: give a photo of the workspace, or a folder of them")
+        raise BackdropError(f"{where} does not exist: give a photo of the workspace, a folder of them, or "
+                            f"{' or '.join(POOLS)}")
     return (where,)
 
 
@@ -73,7 +80,7 @@ def checked_backdrop(text: str) -> tuple[str, str]:
     photos = backdrop_photos(path)
     for photo in photos:
         read_photo(photo.resolve())
-    return name, str(Path(path).expanduser().resolve())
+    return name, path if path in POOLS else str(Path(path).expanduser().resolve())
 
 
 @dataclass(frozen=True)

@@ -210,14 +210,12 @@ class SO101Sim:
                 )
         self.max_velocity_rad_s = float(max_velocity_rad_s)
         self.physics_mode = physics
-        self.physics: Physics | None = None  # varied physics' draw; None: fixed, the servos `NOMINAL`
         self._fixed_servos = replace(NOMINAL, speed_limit_deg_s=math.degrees(self.max_velocity_rad_s))
-        self._command = CommandPath(self._fixed_servos, HOME_POSE_DEG, slews=False)
-        self._taken_deg = self._command.goal_deg  # the path's goal the motors were last given
-        self._goal_rad: FloatArray = np.radians(np.asarray(HOME_POSE_DEG, dtype=np.float64))
         # (joint index, goal in radians) pairs for the per-joint motor calls, while they are
         # still to be made; None once the motors have them.
-        self._motor_goals: list[tuple[int, float]] | None = list(zip(self._indices, self._goal_rad.tolist()))
+        self._motor_goals: list[tuple[int, float]] | None = None
+        self._goal_rad: FloatArray
+        self._take_physics(None)  # varied physics' draw, or None: fixed, the servos `NOMINAL`
         self.steps = 0
         # The torques sent on the last step (servo mode; zeros in position mode).
         self.last_torques_nm: FloatArray = np.zeros(len(self._indices))

@@ -1,7 +1,8 @@
 """What an episode looks like and how it behaves: one value, from the command line to every node.
 
 A task's episode is laid out from its seed. Four things vary with it beyond the layout:
-- its pictures' looks (so101.bodies.looks: `fixed`, `varied`, `unseen`);
+- its pictures' looks (so101.bodies.looks: `fixed`, `varied`, `unseen`, which also draws the front
+  camera's backdrop from the pool held out of the eyes' pictures where none is given);
 - where its simulated cameras stand (so101.bodies.camera_file: `--camera-pose NAME=FILE`);
 - its physics (so101.bodies.physics: `fixed`, `varied`, or a ranges file's ranges);
 - a photo of the workspace behind each camera's scene (so101.bodies.backdrop: `--backdrop NAME=IMAGE`).
@@ -20,6 +21,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from so101.bodies.backdrop import BackdropError, Placement, backdrop_photos, placement_for
+from so101.bodies.backdrop_pool import with_unseen_pool
 from so101.bodies.camera_file import CameraFile, CameraFileError, cameras_metadata, parse_camera_poses
 from so101.bodies.looks import DEFAULT_LOOKS, LOOKS_CHOICES, looks_metadata
 from so101.bodies.physics import DEFAULT_PHYSICS, PhysicsError, physics_metadata, physics_mode
@@ -40,6 +42,9 @@ class Scenario:
     camera_poses: dict[str, CameraFile] = field(default_factory=dict)
     physics: str = DEFAULT_PHYSICS  # as physics_mode gives it: fixed, varied, or the ranges as JSON text
     backdrops: dict[str, str] = field(default_factory=dict)  # a camera's name -> a photo, or a folder of them
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "backdrops", with_unseen_pool(self.looks, self.backdrops))
 
     def text(self) -> str:
         """This scenario as nodes are told it: JSON of what differs from the defaults ("" for none)."""

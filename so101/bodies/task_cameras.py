@@ -21,6 +21,7 @@ import numpy as np
 import numpy.typing as npt
 
 from so101.bodies.backdrop import backdrop_picture, placement_for
+from so101.bodies.backdrop_pool import with_unseen_pool
 from so101.bodies.camera import DEFAULT_CAMERA, WRIST_CAMERA, WRIST_CAMERA_NAME, Camera, WristCamera
 from so101.bodies.camera_file import CameraFile, drawn_front, fixed_cameras, wrist_placement
 from so101.bodies.looks import DEFAULT_LOOKS, Looks, looks_for
@@ -85,7 +86,7 @@ class TaskCameras:
     `show_seed(seed)` draws that episode's cube, and the arm where it truly is when its calibration
     reports `angles_deg` (so101.bodies.physics), as the body it draws has them. `backdrops` (a camera's
     name to a photo, or a folder of them: so101.bodies.backdrop): that episode's photo where the floor
-    and the sky would be."""
+    and the sky would be; unseen looks draw the front camera's from the held-out pool where none is given."""
 
     def __init__(self, task: SceneTask | None, assets_dir: Path | str | None = None,
                  log: Callable[[str], None] = print, looks: str = DEFAULT_LOOKS,
@@ -101,7 +102,7 @@ class TaskCameras:
         self.physics: Physics | None = None
         self.looks_mode = looks
         self.looks: Looks | None = None
-        self.backdrops = dict(backdrops or {})
+        self.backdrops = with_unseen_pool(looks, dict(backdrops or {}))
         self.placements = {name: placement_for(path, 0, looks != DEFAULT_LOOKS) for name, path in self.backdrops.items()}
         # Light pictures whatever the task: one look, defined once, and a picture in milliseconds.
         self._model = SO101MuJoCo(mode="direct", assets_dir=assets_dir, log=log, renders=True, task=task,

@@ -3,7 +3,9 @@
 The recipe, each stage said with its time as it ends:
 1. demonstrations: `so101 demos` (the scripted expert, the simulator's state, no pictures);
 2. with `--sees`, pictures for the eyes: thousands of front pictures drawn from those demonstrations'
-   frames, each in varied looks with its answers (so101.perception.pictures), and a few held out;
+   frames, each in varied looks with its answers (so101.perception.pictures), and a few held out; half
+   of them over photos and surfaces of the backdrop pool (so101.bodies.backdrop_pool), or all over
+   `--backdrop front=IMAGE` where one is given;
 3. training, the two at once, one PyTorch thread each: LeRobot's `lerobot-train` makes a state policy
    of the demonstrations (in the policy environment), and with `--sees` the eyes learn to find the
    cube, the box and the gripper's tip in the pictures (so101.perception.training);
@@ -41,6 +43,7 @@ from so101.runtime.dataflow import ROOT
 from so101.tasks import TASKS
 
 STATE_FILE = "so101_learn.json"
+POOL_SHARE = 0.5  # of the eyes' pictures over the backdrop pool, where no --backdrop front is given
 HELD_OUT_SEED = 900_000  # the held-out pictures' demonstrations: layouts no score uses
 # The layouts the candidates are scored on to choose one: no score in the docs uses them (those are 1000-1049).
 VALIDATION_SEED = 800_000
@@ -139,6 +142,8 @@ def run(args: argparse.Namespace) -> int:
         settings["camera_poses"] = {name: pose.as_dict() for name, pose in sorted(args.camera_poses.items())}
     if args.backdrops:
         settings["backdrops"] = dict(sorted(args.backdrops.items()))
+    if args.sees and "front" not in args.backdrops:  # eyes for a table they will not have seen
+        settings["backdrop_pool_share"] = POOL_SHARE
     state_file = out / STATE_FILE
     if out.exists() and not state_file.is_file() and any(out.iterdir()):
         return _fail(f"{out} is not empty and not a folder `so101 learn` began: give a new folder")
@@ -295,7 +300,8 @@ class Learning:
     def scenario_args(self) -> list[str]:
         """What the pictures are drawn in, beyond varied looks: the camera poses and backdrops given."""
         given = {key: self.settings[key] for key in ("camera_poses", "backdrops") if key in self.settings}
-        return ["--scenario", json.dumps(given)] if given else []
+        share = self.settings.get("backdrop_pool_share", 0.0)
+        return (["--scenario", json.dumps(given)] if given else []) + (["--pool-share", str(share)] if share else [])
 
     def camera_args(self) -> list[str]:
         """The validation's --camera-pose and --backdrop options: where the eyes were taught."""
@@ -425,7 +431,8 @@ class Learning:
                                   "body": self.settings["body"], "eyes": EYES_DIR, "policy": POLICY_DIR,
                                   "eyes_held_out": eyes.get("trained", {}).get("held_out", {}),
                                   "kept": self.best(), "validation": self.scores, "stages_s": self.done,
-                                  **{key: self.settings[key] for key in ("camera_poses", "backdrops") if key in self.settings}})
+                                  **{key: self.settings[key] for key in ("camera_poses", "backdrops", "backdrop_pool_share")
+                                     if key in self.settings}})
 
 
 def validation_successes(eval_output: str) -> int | None:

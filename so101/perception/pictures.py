@@ -18,6 +18,7 @@ what the perception node computes at run time, which knows no calibration's offs
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 from dataclasses import dataclass, field
@@ -28,6 +29,7 @@ import numpy as np
 import numpy.typing as npt
 import pyarrow.parquet as pq
 
+from so101.bodies.backdrop_pool import POOL
 from so101.bodies.camera_file import CameraFile
 from so101.bodies.physics import Physics, physics_from_metadata
 from so101.dataset.features import ENVIRONMENT_KEY, STATE_KEY, from_lerobot
@@ -111,11 +113,12 @@ def picture_seeds(held_out: bool) -> tuple[tuple[int, int], tuple[int, int]]:
 def draw_pictures(frames: Frames, count: int, seed: int, size: tuple[int, int], looks: str,
                   progress: Callable[[int], None] = lambda done: None, held_out: bool = False,
                   poses: dict[str, CameraFile] | None = None, backdrops: dict[str, str] | None = None,
-                  ) -> dict[str, np.ndarray]:
+                  pool_share: float = 0.0) -> dict[str, np.ndarray]:
     """`count` front pictures at `size` (width, height) of frames drawn from `frames` by `seed`, each in
     looks of its own, with their answers (see the module's doc); `held_out`: looks and layouts that
     training pictures never draw. `poses` and `backdrops` (so101.bodies.scenario's): where the cameras
-    stand, and the photos behind them."""
+    stand, and the photos behind them. `pool_share`: where no front backdrop is given, that share of the
+    pictures is drawn over the backdrop pool (so101.bodies.backdrop_pool), the others over the floor."""
     from so101.bodies.task_cameras import TaskCameras
     from so101.kinematics import Kinematics
 
@@ -131,9 +134,15 @@ def draw_pictures(frames: Frames, count: int, seed: int, size: tuple[int, int], 
     cube_px, box_px, tip_px = np.zeros((count, 2)), np.zeros((count, 2)), np.zeros((count, 2))
     states, tips, cube_half = np.zeros((count, 10)), np.zeros((count, 3)), np.zeros(count)
     looks_seeds, layout_seeds = picture_seeds(held_out)
-    with TaskCameras(CUBE_TO_BOX, log=lambda message: None, looks=looks, poses=poses, backdrops=backdrops) as cameras, \
-            Kinematics() as kinematics:
+    pooled = pool_share > 0 and "front" not in (backdrops or {})
+    with contextlib.ExitStack() as stack:
+        plain = stack.enter_context(TaskCameras(CUBE_TO_BOX, log=lambda message: None, looks=looks, poses=poses,
+                                                backdrops=backdrops))
+        over_pool = stack.enter_context(TaskCameras(CUBE_TO_BOX, log=lambda message: None, looks=looks, poses=poses,
+                                                    backdrops={**(backdrops or {}), "front": POOL})) if pooled else plain
+        kinematics = stack.enter_context(Kinematics())
         for done, frame in enumerate(chosen):
+            cameras = over_pool if pooled and draw.random() < pool_share else plain
             cameras.show_seed(int(draw.integers(*looks_seeds)))
             physics = frames.physics_of(frame)
             cameras.show_physics(physics)

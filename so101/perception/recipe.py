@@ -26,15 +26,18 @@ class Recipe:
     # camera -> its camera file's fields; empty: the simulator's floor and cameras.
     backdrops: dict[str, str] = field(default_factory=dict)
     camera_poses: dict[str, dict] = field(default_factory=dict)
+    pool_share: float = 0.0  # of the eyes' pictures drawn over the backdrop pool (so101.bodies.backdrop_pool)
 
     def elsewhere(self, backdrops: dict[str, str], camera_poses: dict[str, dict]) -> list[str]:
         """One line for each camera this run draws otherwise than the eyes were taught: another backdrop, or
         another pose (`camera_poses` as files' fields)."""
         lines, floor = [], "the simulator's floor"
+        taught_floor = f"{floor} and the backdrop pool" if self.pool_share else floor
         for name in sorted(set(self.backdrops) | set(backdrops)):
             if self.backdrops.get(name) != backdrops.get(name):
-                lines.append(f"note: the eyes were taught over {self.backdrops.get(name) or floor} behind the {name} "
-                             f"camera, and run over {backdrops.get(name) or floor}")
+                taught = self.backdrops.get(name) or (taught_floor if name == "front" else floor)
+                lines.append(f"note: the eyes were taught over {taught} behind the {name} camera, and run over "
+                             f"{backdrops.get(name) or floor}")
         for name in sorted(set(self.camera_poses) | set(camera_poses)):
             if self.camera_poses.get(name) != camera_poses.get(name):
                 taught = "a camera file's pose" if name in self.camera_poses else "the simulator's own"
@@ -61,9 +64,10 @@ def read_recipe(folder: Path) -> Recipe | None:
         written = json.loads((folder / RECIPE_FILE).read_text(encoding="utf-8"))
         task = str(written["task"])
         backdrops, camera_poses = dict(written.get("backdrops", {})), dict(written.get("camera_poses", {}))
+        pool_share = float(written.get("backdrop_pool_share", 0.0))
     except (OSError, ValueError, KeyError, TypeError, AttributeError) as error:
         raise ValueError(f"{folder / RECIPE_FILE} is not a recipe file ({type(error).__name__}: {error})") from None
-    recipe = Recipe(folder, read_eyes_facts(folder / EYES_DIR), task, backdrops, camera_poses)
+    recipe = Recipe(folder, read_eyes_facts(folder / EYES_DIR), task, backdrops, camera_poses, pool_share)
     if not (recipe.policy_dir / "config.json").is_file():
         raise ValueError(f"{folder} is a recipe without its policy ({POLICY_DIR}/config.json): "
                          "`so101 learn` did not finish; run it again to resume")
