@@ -38,9 +38,31 @@ class Camera:
         return eye, forward, rolled_right, rolled_up
 
 
-def cross(a: tuple[float, ...], b: tuple[float, ...]) -> tuple[float, float, float]:
+Vector = tuple[float, float, float]
+
+
+def cross(a: tuple[float, ...], b: tuple[float, ...]) -> Vector:
     """a x b, for three-number tuples (the camera files' vectors)."""
     return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+
+
+def dot(a: tuple[float, ...], b: tuple[float, ...]) -> float:
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+def unit(a: tuple[float, ...]) -> Vector:
+    length = math.sqrt(dot(a, a))
+    return (a[0] / length, a[1] / length, a[2] / length)
+
+
+def look_at_axes(eye: tuple[float, ...], target: tuple[float, ...], up: tuple[float, ...]) -> tuple[Vector, Vector, Vector]:
+    """(right, up, forward) of the picture of a camera at `eye` looking at `target`, unit and square; `up`
+    (where the picture's top points) made square to the line of sight, as a camera file's need not be.
+    The one place a camera's frame is made from where it stands and looks: camera files, the wrist
+    camera's placement and the words that say how to move a camera all take it from here."""
+    forward = unit((target[0] - eye[0], target[1] - eye[1], target[2] - eye[2]))
+    right = unit(cross(forward, up))
+    return right, cross(right, forward), forward
 
 
 @dataclass(frozen=True)

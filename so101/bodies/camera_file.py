@@ -23,12 +23,11 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
-from so101.bodies.camera import TASK_FRONT_CAMERA, WRIST_CAMERA, Camera, WristCamera, cross
+from so101.bodies.camera import TASK_FRONT_CAMERA, WRIST_CAMERA, Camera, Vector, WristCamera, cross, dot, look_at_axes
 from so101.bodies.looks import Looks, looks_for
 
 CAMERA_NAMES = ("front", "wrist")
 FRAMES = {"front": "base", "wrist": "gripper"}
-Vector = tuple[float, float, float]
 # The size a camera file says when none is given: the task's pictures' default (so101 demos).
 DEFAULT_SIZE = (320, 240)
 # A line of sight closer than this to vertical has no yaw: the front camera must be tilted at least this far.
@@ -135,15 +134,13 @@ def read_camera_file(path: Path | str, name: str | None = None) -> CameraFile:
 def orbit_of(front: CameraFile) -> Camera:
     """The front camera file as the renderer's orbiting camera (its look_at the target, its up a roll)."""
     eye, target = front.position_m, front.look_at_m
-    sight = tuple(b - a for a, b in zip(eye, target))
-    distance = _norm(sight)
-    forward = tuple(v / distance for v in sight)
-    level = Camera(target, distance, math.degrees(math.atan2(forward[1], forward[0])) - 90.0,
+    _, square_up, forward = look_at_axes(eye, target, front.up)
+    level = Camera(target, _norm(tuple(b - a for a, b in zip(eye, target))),
+                   math.degrees(math.atan2(forward[1], forward[0])) - 90.0,
                    math.degrees(math.asin(max(-1.0, min(1.0, forward[2])))), front.fov_deg)
+    # The roll: how far the file's up is turned from the level camera's, about the line of sight.
     _, _, right, up = level.axes()
-    along = sum(u * f for u, f in zip(front.up, forward))
-    square_up = tuple(u - along * f for u, f in zip(front.up, forward))
-    roll = math.degrees(math.atan2(sum(a * b for a, b in zip(square_up, right)), sum(a * b for a, b in zip(square_up, up))))
+    roll = math.degrees(math.atan2(dot(square_up, right), dot(square_up, up)))
     return replace(level, yaw_deg=(level.yaw_deg + 180.0) % 360.0 - 180.0, roll_deg=roll)
 
 
@@ -200,12 +197,9 @@ def parse_camera_poses(text: str) -> dict[str, CameraFile]:
 def wrist_placement(camera: WristCamera) -> tuple[Vector, tuple[float, float, float, float]]:
     """Where MuJoCo puts `camera` on the gripper: its position, and its orientation as a quaternion
     (w, x, y, z) that turns MuJoCo's camera (looking along its -z, its +y up) to look at target_m."""
-    eye, target = camera.eye_m, camera.target_m
-    sight = tuple(e - t for e, t in zip(eye, target))
-    backward = tuple(v / _norm(sight) for v in sight)
-    across = cross(camera.up, backward)
-    right = tuple(v / _norm(across) for v in across)
-    top = cross(backward, right)
+    eye = camera.eye_m
+    right, top, forward = look_at_axes(eye, camera.target_m, camera.up)
+    backward = (-forward[0], -forward[1], -forward[2])
     # The rotation's columns are right, top, backward; its quaternion (Shepperd's method, the largest term first).
     m = ((right[0], top[0], backward[0]), (right[1], top[1], backward[1]), (right[2], top[2], backward[2]))
     trace = m[0][0] + m[1][1] + m[2][2]

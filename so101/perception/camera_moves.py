@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 
-from so101.bodies.camera import cross
+from so101.bodies.camera import Vector, cross, dot, look_at_axes, unit
 from so101.bodies.camera_file import CameraFile
 
 # A move or a turn below these is left out: below what a hand can set a camera to.
@@ -19,29 +19,14 @@ MOVE_MIN_M = 0.002
 TURN_MIN_DEG = 0.3
 IN_PLACE = "in place"
 
-Vector = tuple[float, float, float]
-
-
-def _dot(a: Vector, b: Vector) -> float:
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-
-
-def _unit(a: Vector) -> Vector:
-    length = math.sqrt(_dot(a, a))
-    return (a[0] / length, a[1] / length, a[2] / length)
-
 
 def _scaled_sum(x: float, a: Vector, y: float, b: Vector) -> Vector:
     return (x * a[0] + y * b[0], x * a[1] + y * b[1], x * a[2] + y * b[2])
 
 
 def camera_axes(camera: CameraFile) -> tuple[Vector, Vector, Vector]:
-    """(right, up, forward) of the camera's picture, unit and square, in its file's frame; `up` made square
-    to the line of sight (a file's need not be)."""
-    forward = _unit((camera.look_at_m[0] - camera.position_m[0], camera.look_at_m[1] - camera.position_m[1],
-                     camera.look_at_m[2] - camera.position_m[2]))
-    right = _unit(cross(forward, camera.up))
-    return right, cross(right, forward), forward
+    """(right, up, forward) of the camera's picture, unit and square, in its file's frame."""
+    return look_at_axes(camera.position_m, camera.look_at_m, camera.up)
 
 
 def amount(value: float) -> str:
@@ -58,18 +43,18 @@ def move_in_words(current: CameraFile, target: CameraFile) -> str:
     shift = (target.position_m[0] - current.position_m[0], target.position_m[1] - current.position_m[1],
              target.position_m[2] - current.position_m[2])
     moves = [f"{amount(100 * along)} cm {positive if along > 0 else negative}"
-             for along, positive, negative in ((_dot(shift, right), "right", "left"), (_dot(shift, up), "up", "down"),
-                                               (_dot(shift, forward), "forward", "back"))
+             for along, positive, negative in ((dot(shift, right), "right", "left"), (dot(shift, up), "up", "down"),
+                                               (dot(shift, forward), "forward", "back"))
              if abs(along) >= MOVE_MIN_M]
     # The aim, after the move: pan about the camera's up, then tilt about its new right, then roll about its sight.
     _, target_up, target_forward = camera_axes(target)
-    across, along_up, ahead = _dot(target_forward, right), _dot(target_forward, up), _dot(target_forward, forward)
+    across, along_up, ahead = dot(target_forward, right), dot(target_forward, up), dot(target_forward, forward)
     turn_deg = math.degrees(math.atan2(across, ahead))
     tilt_deg = math.degrees(math.atan2(along_up, math.hypot(across, ahead)))
-    level_right = _unit(_scaled_sum(ahead, right, -across, forward))  # the right after pan and tilt, before roll
+    level_right = unit(_scaled_sum(ahead, right, -across, forward))  # the right after pan and tilt, before roll
     level_up = cross(level_right, target_forward)
     # Positive: the target's top leans to the right of where the top is now (clockwise, seen from behind).
-    roll_deg = math.degrees(math.atan2(_dot(target_up, level_right), _dot(target_up, level_up)))
+    roll_deg = math.degrees(math.atan2(dot(target_up, level_right), dot(target_up, level_up)))
     aims = [f"{verb} {{it}} {amount(angle)}° {positive if angle > 0 else negative}"
             for angle, verb, positive, negative in ((turn_deg, "turn", "right", "left"), (tilt_deg, "tilt", "up", "down"))
             if abs(angle) >= TURN_MIN_DEG]
