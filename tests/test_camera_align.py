@@ -21,8 +21,8 @@ import numpy as np
 import pytest
 
 from so101.bodies.camera_file import CameraFile, default_camera_file, front_file_of, orbit_of
-from so101.launch.camera_overlay import OUTLINE_RGB, outline_of, outline_on_edges, overlay_picture
-from so101.perception.camera_moves import move_in_words
+from so101.camera_pose.overlay import OUTLINE_RGB, outline_of, outline_on_edges, overlay_picture
+from so101.camera_pose.moves import move_in_words
 
 SO101 = Path(sys.executable).parent / "so101"
 # The arm where the emulated one is moved by hand, and the tests draw it: all of it in the front camera's picture.

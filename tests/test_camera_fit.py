@@ -18,7 +18,7 @@ from so101.bodies.camera import TASK_FRONT_CAMERA, WRIST_CAMERA
 from so101.bodies.camera_file import (
     CameraFileError, camera_file_from, default_camera_file, front_file_of, orbit_of, read_camera_file, wrist_placement,
 )
-from so101.perception.camera_fit import Pose, chosen_frames, pose_error
+from so101.camera_pose.fit import Pose, chosen_frames, pose_error
 from so101.perception.geometry import view_of
 
 # -- the file ----------------------------------------------------------------------------------------------------
@@ -106,7 +106,7 @@ def test_the_renderer_draws_a_rolled_camera_where_its_geometry_projects():
 
 
 def test_pictures_where_nothing_moves_say_the_camera_shows_no_arm():
-    from so101.perception.camera_fit import CameraFitError, fit_camera
+    from so101.camera_pose.fit import CameraFitError, fit_camera
     from so101.robot import HOME_POSE_DEG
 
     floor = np.full((4, 120, 160, 3), 200, dtype=np.uint8)
@@ -116,7 +116,7 @@ def test_pictures_where_nothing_moves_say_the_camera_shows_no_arm():
 
 def test_a_fit_that_fails_leaves_the_file_there_and_says_why_in_one_line(tmp_path, monkeypatch, capsys):
     from so101.cli.main import main
-    from so101.perception import camera_fit
+    from so101.camera_pose import fit as camera_fit
 
     kept = tmp_path / "front.json"
     kept.write_text("mine\n", encoding="utf-8")
@@ -192,6 +192,6 @@ def test_the_fit_recovers_the_camera_an_episode_was_drawn_from_and_redraws_its_f
 
 
 def _turn(*turn_rad: float) -> np.ndarray:
-    from so101.perception.camera_fit import _rotation
+    from so101.camera_pose.fit import _rotation
 
     return _rotation(np.array(turn_rad))

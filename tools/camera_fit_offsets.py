@@ -29,7 +29,7 @@ sys.path.insert(0, str(ROOT))
 
 from so101.bodies.camera_file import camera_file_from, default_camera_file, orbit_of  # noqa: E402
 from so101.dataset.layout import episode_scenario  # noqa: E402
-from so101.perception.camera_fit import Pose, _rotation, fit_from_dataset, pose_error  # noqa: E402
+from so101.camera_pose.fit import Pose, _rotation, fit_from_dataset, pose_error  # noqa: E402
 
 # The offsets: the lens up to this far, turned up to this much, the field of view up to this much.
 MOVE_M, TURN_DEG, ZOOM_DEG = 0.05, 10.0, 5.0

@@ -5,7 +5,7 @@ from each, to see which camera is which before `so101 teleop --body real --camer
 And where a camera stands, against the simulated one of the same name:
 - `--default NAME` prints the simulated camera's own file (the start of a fit, a template to edit);
 - `--fit NAME --from DATASET` fits the camera's place and field of view to an episode's pictures and
-  joint states (so101.perception.camera_fit) and writes its camera file (`-o FILE`);
+  joint states (so101.camera_pose.fit) and writes its camera file (`-o FILE`);
 - `--align NAME` shows the live picture and the simulated camera's picture of the arm where it stands
   now, one over the other, to move the camera until the two arms coincide.
 """
@@ -141,7 +141,7 @@ def print_default(name: str, size_text: str | None) -> int:
 
 def fit(args: argparse.Namespace) -> int:
     from so101.bodies.camera_file import CameraFileError, default_camera_file, read_camera_file
-    from so101.perception.camera_fit import CameraFitError, fit_from_dataset
+    from so101.camera_pose.fit import CameraFitError, fit_from_dataset
 
     if args.dataset is None:
         return fail("--fit NAME needs --from DATASET: the episode whose pictures and joint states are fitted")
@@ -154,7 +154,7 @@ def fit(args: argparse.Namespace) -> int:
                                   calibration=args.calibration and args.calibration.expanduser())
     except (CameraFitError, CameraFileError) as error:
         return fail(str(error))
-    from so101.perception.camera_moves import move_in_words
+    from so101.camera_pose.moves import move_in_words
 
     # Against the simulated camera, the one demonstrations are drawn from unless --camera-pose says otherwise.
     words = move_in_words(fitted, default_camera_file(args.fit))

@@ -6,7 +6,7 @@ hand, no goal ever written), the simulated camera's picture of the arm at those 
 outline drawn. A person moves the camera until the real arm fills the outline. The overlay shows in a
 window where there is a display (glfw, MuJoCo's own drawing of pixels and text) and always in a browser
 (a viser page). With a fitted camera file (`--fitted`, from `so101 cameras --fit`) it also says in words
-which way to move the camera (so101.perception.camera_moves).
+which way to move the camera (so101.camera_pose.moves).
 
 Every way out (Ctrl-C, SIGTERM, the window closed, `q`, a failure) switches torque off and closes the
 camera, and says so in one line.
@@ -35,8 +35,8 @@ from so101.feetech.calibration import (
     MOTOR_IDS, MOTOR_NAMES, CalibrationError, load_calibration, parse_joint_signs, steps_to_deg,
 )
 from so101.feetech.checks import check_calibration_on_servos, check_servos_answer
-from so101.launch.camera_overlay import overlay_picture, outline_on_edges, agreement_text, window_size, ascii_line, window_lines, panel_markdown
-from so101.perception.camera_moves import move_in_words
+from so101.camera_pose.overlay import overlay_picture, outline_on_edges, agreement_text, window_size, ascii_line, window_lines, panel_markdown
+from so101.camera_pose.moves import move_in_words
 from so101.runtime.display import choose_mujoco_gl, display_available
 
 RgbImage = npt.NDArray[np.uint8]
