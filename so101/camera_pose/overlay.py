@@ -86,11 +86,6 @@ def window_size(width: int, height: int) -> tuple[int, int]:
     return round(width * scale), round(height * scale)
 
 
-def ascii_line(text: str) -> str:
-    """A line MuJoCo's window font can draw (it has ASCII only)."""
-    return text.replace("°", " deg").encode("ascii", "replace").decode("ascii")
-
-
 def window_lines(words: str | None, agreement: str) -> list[str]:
     """What the window writes over its foot: the fitted file's words, a clause a line, and the agreement."""
     lines = ["from the fitted file:"] + [f"  {clause}" for clause in words.split("; ")] if words is not None else []

@@ -239,7 +239,7 @@ def make_backdrop(args: argparse.Namespace) -> int:
 
 def align(args: argparse.Namespace) -> int:
     from so101.bodies.camera_file import CameraFileError, default_camera_file, read_camera_file
-    from so101.launch.camera_align import AlignError, AlignRequest, run_align
+    from so101.camera_pose.align import AlignError, AlignRequest, run_align
 
     name = args.align
     if args.align_camera is None:

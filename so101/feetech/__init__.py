@@ -1,1 +1,2 @@
-"""The Feetech STS3215 servo bus: the register table, the bus, LeRobot's calibration, and an emulated arm."""
+"""The Feetech STS3215 servo bus: the register table, the bus, LeRobot's calibration, the arm read only
+(arm_reader.py), and an emulated arm."""

@@ -1,1 +1,2 @@
-"""The windows: where a display is found, and the viewer processes that mirror the arm."""
+"""The windows: where a display is found, the viewer processes that mirror the arm, and a
+window that shows a picture with lines of text (picture_window.py)."""
