@@ -9,7 +9,8 @@ machine and on both simulators (Python's `random.Random`, seeded by text, is the
 platform); `fixed` (the default) keeps the pictures as they always were. `unseen` draws looks held out
 of `varied`, to score how eyes taught on `varied` do on looks they never saw, as a real camera's will
 be: colours from palettes of their own, a lower, dimmer or brighter light, and the cameras moved and
-turned beyond `varied`'s spread (front 1-2 cm, 2-3°; field of view 2-3°; wrist 2-3 mm). Pure: the renderer
+turned beyond `varied`'s spread (front 1-2 cm, 2-3°; field of view 2-3°; wrist 2-3 mm), and (drawn by the
+renderer) the front camera's backdrop from the pool held out of the eyes' pictures (so101.bodies.backdrop_pool). Pure: the renderer
 (so101.bodies.task_cameras) applies them; a dataset keeps them by episode (`as_metadata`).
 """
 
