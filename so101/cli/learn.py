@@ -156,6 +156,8 @@ def run(args: argparse.Namespace) -> int:
             saved = None
         if not isinstance(saved, dict) or not isinstance(saved.get("settings"), dict):
             return _fail(f"{state_file} is not a file `so101 learn` wrote: give a new folder")
+        if "backdrop_pool_share" not in saved["settings"]:  # begun before the pool: it resumes as it began
+            settings.pop("backdrop_pool_share", None)
         if saved.get("settings") != settings:
             differ = ", ".join(f"{key} {saved['settings'].get(key)!r} there, {value!r} now"
                                for key, value in settings.items() if saved.get("settings", {}).get(key) != value)
