@@ -4,11 +4,12 @@ Serves a page (so101/web/view.py, with viser) showing the SO-101 from the URDF's
 by the body's `joint_state` and `gripper_state`, with the angles as text and a rolling plot; the
 camera's `image` where the dataflow has one (`--record` on a simulation), a marker while the
 recorder's `record_status` says an episode is recording, and a task's cube and box, posed by the
-body's `object_state` (SO101_TASK names the task). It poses the arm at most REDRAW_HZ
+body's `object_state` (SO101_TASK names the task) and drawn in each layout's look (the seed in the
+body's `task_status`, the looks and physics of SO101_SCENARIO). It poses the arm at most REDRAW_HZ
 times a second, whatever the body's rate, and runs below the body's priority: a browser
 closing, reloading or stalling costs the body nothing. Read-only: the page sends nothing into
 the dataflow.
-Settings: so101.web.settings.WebViewSettings (SO101_WEB_HOST, SO101_WEB_PORT).
+Settings: so101.web.settings.WebViewSettings (SO101_WEB_HOST, SO101_WEB_PORT, SO101_TASK, SO101_SCENARIO).
 """
 
 from __future__ import annotations
@@ -26,6 +27,8 @@ import numpy as np  # noqa: E402
 from dora import Node  # noqa: E402
 
 from so101.assets import ModelFilesError, urdf_path  # noqa: E402
+from so101.bodies.looks import looks_for  # noqa: E402
+from so101.bodies.physics import physics_for  # noqa: E402
 from so101.bodies.node_loop import announce  # noqa: E402
 from so101.dataset.messages import recording_from_metadata  # noqa: E402
 from so101.robot import NUM_ARM_JOINTS  # noqa: E402
@@ -35,7 +38,7 @@ from so101.runtime.processes import yield_cpu_to_the_body  # noqa: E402
 from so101.tasks import task_named  # noqa: E402
 from so101.web.settings import WebViewSettings, page_address  # noqa: E402
 from so101.web.urdf_scene import load_urdf_scene  # noqa: E402
-from so101.web.view import WebView  # noqa: E402
+from so101.web.view import WebView, layout_look  # noqa: E402
 
 NODE_ID = "web_view"
 # A browser's screen refreshes 60 times a second: more poses than that are never seen.
@@ -66,8 +69,9 @@ def main() -> int:
         view = WebView(scene, settings.host, settings.port)
     except OSError as error:  # the port is taken, or the address is not this machine's
         return cannot_start(OSError(f"cannot serve on {settings.host}:{settings.port}: {error.strerror or error}"), NODE_ID)
-    if settings.task:
-        view.add_task(task_named(settings.task))
+    task = task_named(settings.task) if settings.task else None
+    if task is not None:
+        view.add_task(task)
     announce(f"web view: {page_address(settings.host, settings.port)}")
     arm_deg: tuple[float, ...] | None = None
     gripper_deg = 0.0
@@ -93,6 +97,12 @@ def main() -> int:
                 if now - objects_at >= 1.0 / REDRAW_HZ:
                     view.show_objects(event["value"].to_pylist())
                     objects_at = now
+                continue
+            elif event["id"] == "task_status":  # the layout's seed: its look, where looks or physics vary
+                seed = (event.get("metadata") or {}).get("seed")
+                if task is not None and isinstance(seed, int) and seed >= 0:
+                    view.show_layout(layout_look(task, looks_for(settings.looks, seed),
+                                                 physics_for(settings.physics, seed)))
                 continue
             elif event["id"] == "record_status":
                 view.show_recording(recording_from_metadata(event.get("metadata") or {}))

@@ -437,7 +437,7 @@ def test_record_adds_the_recorder_and_the_camera_and_wires_the_prompt():
     assert nodes["recorder"]["path"].endswith("nodes/recorder.py") and nodes["recorder"]["env"] == {"SO101_RECORD_DIR": "/d"}
 
 
-def test_the_web_view_reads_the_camera_and_the_recorders_status_where_there_are_some():
+def test_the_web_view_reads_the_camera_the_recorders_status_and_the_tasks_layouts_where_there_are_some():
     bare = {node["id"]: node for node in with_web_view(dataflow_copy({}), "simulation", {})["nodes"]}
     assert set(bare["web_view"]["inputs"]) == {"joint_state", "gripper_state"}
     recording = with_recorder(dataflow_copy({}), "simulation", {}, {"SO101_RECORD_IMAGE_SIZE": "320x240"}, 30)
@@ -447,6 +447,12 @@ def test_the_web_view_reads_the_camera_and_the_recorders_status_where_there_are_
         "joint_state": "simulation/joint_state", "gripper_state": "simulation/gripper_state",
         "image": "camera/image", "record_status": "recorder/record_status"}
     assert nodes["web_view"]["env"] == {"SO101_WEB_PORT": "8200"} and "outputs" not in nodes["web_view"]
+    tasked = with_web_view(with_task(dataflow_copy({}), "simulation", "cube_to_box", 3), "simulation", {})
+    web_view = next(node for node in tasked["nodes"] if node["id"] == "web_view")
+    assert {name: spec["source"] for name, spec in web_view["inputs"].items() if name.endswith("_state") or name == "task_status"} == {
+        "joint_state": "simulation/joint_state", "gripper_state": "simulation/gripper_state",
+        "object_state": "simulation/object_state", "task_status": "simulation/task_status"}  # the seed: each layout's look
+    assert web_view["env"] == {"SO101_TASK": "cube_to_box"}
 
 
 def test_a_policy_that_sees_and_the_recorder_share_one_camera_at_the_higher_rate():

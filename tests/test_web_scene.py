@@ -11,11 +11,13 @@ import pybullet
 import pytest
 
 from so101.assets import urdf_path
+from so101.bodies.looks import varied_looks
+from so101.bodies.physics import draw_physics
 from so101.robot import ACTUATED_JOINTS
 from so101.runtime.cluster import free_port
 from so101.web.urdf_scene import axis_angle, load_urdf_scene, multiply, rotate, rpy
 from so101.web.settings import page_address
-from so101.web.view import WebView, angles_markdown, recording_html
+from so101.web.view import LOOKS_LIGHT_INTENSITY, WebView, angles_markdown, layout_look, recording_html, rgb255
 
 pytestmark = pytest.mark.slow
 
@@ -123,5 +125,18 @@ def test_a_tasks_cube_and_box_are_drawn_where_object_state_puts_them():
         assert np.allclose(view._cube.position, state[0:3])
         view.show_objects([0.25, *state[1:]])
         assert np.allclose(view._cube.position, [0.25, -0.1, 0.0125])
+        # Each layout as its pictures draw it: seed 7's colours, floor, light and cube size, then fixed again.
+        looks, physics = varied_looks(7), draw_physics(7)
+        view.show_layout(layout_look(CUBE_TO_BOX, looks, physics))
+        assert view._cube.dimensions == pytest.approx((physics.cube_size_m,) * 3) and physics.cube_size_m != 0.025
+        assert view._cube.color == rgb255(looks.object_rgbas[0]) != rgb255(CUBE_TO_BOX.cube.rgba)
+        assert all(plate.color == rgb255(looks.object_rgbas[1]) for plate in view._plates) and len(view._plates) == 5
+        assert view._ground.plane_color == rgb255(looks.floor_rgba) and view._ground.plane_opacity == 1.0
+        # The light stands against its direction, as bright as the page's own at the looks' middle strength.
+        assert np.allclose(np.negative(view._light.position) / 2.0, looks.light_dir) and view._light.visible
+        assert view._light.intensity == pytest.approx(LOOKS_LIGHT_INTENSITY * looks.light_diffuse)
+        view.show_layout(layout_look(CUBE_TO_BOX, None, None))
+        assert view._cube.dimensions == pytest.approx((0.025,) * 3) and view._cube.color == rgb255(CUBE_TO_BOX.cube.rgba)
+        assert view._ground.plane_opacity == 0.0 and not view._light.visible
     finally:
         view.close()

@@ -61,7 +61,7 @@ from so101.runtime.argtypes import (
 )
 from so101.runtime.dataflow import (
     CAMERA_NODE_ID, LEADER_READY_MARKS, LOADED_MARKS, PERCEPTION_NODE_ID, POLICY_READY_MARKS, PROMPT_NODE_FILE, ROOT,
-    WEB_VIEW_MARKS, dataflow_copy, tell_nodes,
+    WEB_VIEW_MARKS, WEB_VIEW_NODE_ID, dataflow_copy, tell_nodes,
     with_camera, with_expert, with_leader, with_perception, with_policy, with_recorder, with_task,
 )
 from so101.runtime.lockstep import DEFAULT_LOCKSTEP_FPS
@@ -214,10 +214,11 @@ def run(args: argparse.Namespace) -> int:
         print("so101 teleop: --backdrop is drawn behind a task's simulated cameras: it goes with --task NAME on a "
               "simulated body, and --record DIR or a --policy that sees", file=sys.stderr)
         return 2
-    # The body has its physics, the camera draws the pictures, the recorder keeps them, the eyes see from where they stand.
-    scenario = Scenario(args.looks, dict(args.camera_poses), args.physics, dict(args.backdrops))
-    tell_nodes(descriptor, (launch.body.node_id, *drawing), scenario.env())
+    # The body has its physics, the camera draws the pictures, the recorder keeps them, the eyes see from where they
+    # stand, the page draws each layout as the pictures do.
     web_line = add_web_view(args, descriptor, launch.body, "teleop")
+    scenario = Scenario(args.looks, dict(args.camera_poses), args.physics, dict(args.backdrops))
+    tell_nodes(descriptor, (launch.body.node_id, *drawing, WEB_VIEW_NODE_ID), scenario.env())
     if web_line:
         ready_marks += (WEB_VIEW_MARKS,)
     if place is None:

@@ -393,7 +393,7 @@ def body_task(descriptor: dict, body_node_id: str) -> str:
 def with_web_view(descriptor: dict, body_node_id: str, web_env: dict[str, str], root: PurePath = ROOT) -> dict:
     """A dataflow (dataflow_copy's dict) with the web view added: it reads the body's state and, where the
     dataflow has them, the camera's pictures, the recorder's `record_status` and a task's `object_state`
-    (the page then draws the task's objects)."""
+    and `task_status` (the page then draws the task's objects, each layout in its look)."""
     inputs = {
         "joint_state": _queued(f"{body_node_id}/joint_state", STATE_QUEUE),
         "gripper_state": _queued(f"{body_node_id}/gripper_state", STATE_QUEUE),
@@ -407,6 +407,7 @@ def with_web_view(descriptor: dict, body_node_id: str, web_env: dict[str, str], 
     task = body_task(descriptor, body_node_id)
     if task:
         inputs["object_state"] = _queued(f"{body_node_id}/object_state", STATE_QUEUE)
+        inputs["task_status"] = {"source": f"{body_node_id}/task_status", "queue_size": 10}
         web_env = {**web_env, "SO101_TASK": task}
     descriptor["nodes"].append({
         "id": WEB_VIEW_NODE_ID, "path": str(root / WEB_VIEW_NODE_FILE.relative_to(ROOT)), "restart_policy": "never",

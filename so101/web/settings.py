@@ -7,8 +7,11 @@ from pathlib import Path
 from typing import Mapping
 
 from so101.assets import ASSETS_ENV_VAR
+from so101.bodies.scenario import SCENARIO_ENV_VAR, SCENARIO_HELP, ReadsScenario, Scenario, parse_scenario
 from so101.tasks.settings import read_task
-from so101.runtime.settings import EnvironSettings, Setting, read_optional_path, read_stripped_text, setting
+from so101.runtime.settings import (
+    EnvironSettings, Setting, read_optional_path, read_parsed, read_stripped_text, setting,
+)
 
 DEFAULT_HOST = "127.0.0.1"  # this machine only: anyone who can reach the port sees the arm
 DEFAULT_PORT = 8101
@@ -31,11 +34,13 @@ def read_port(environ: Mapping[str, str], declared_setting: Setting) -> int:
 
 
 @dataclass(frozen=True)
-class WebViewSettings(EnvironSettings):
+class WebViewSettings(ReadsScenario, EnvironSettings):
     host: str = setting("SO101_WEB_HOST", DEFAULT_HOST,
                         "the address the page is served on; 127.0.0.1 = this machine only", read_stripped_text)
     port: int = setting("SO101_WEB_PORT", str(DEFAULT_PORT), "the page's TCP port", read_port)
     task: str = setting("SO101_TASK", "", "the task whose objects the page draws, posed by `object_state`; empty = none",
                         read_task)
+    scenario: Scenario = setting(SCENARIO_ENV_VAR, "", SCENARIO_HELP + "; the page draws each layout in its looks and "
+                                 "its cube at its physics' size", read_parsed(parse_scenario))
     assets_dir: Path | None = setting(
         ASSETS_ENV_VAR, "", "where the model is; empty = where `so101 assets` puts it", read_optional_path)

@@ -7,6 +7,11 @@ text, a rolling plot of the last seconds, the body's camera picture when it has 
 marker while an episode records. viser serves its page from its installed package and the
 meshes from the model files: nothing comes from the internet. Read-only: the page has no
 control that sends anything to the arm.
+
+A task's objects are drawn as the pictures draw each layout (`layout_look`): the cube at the size its
+physics gives it and, under varied or unseen looks, the floor's and objects' colours and the light's
+direction and strength. A backdrop is a photo behind one camera's view, and stays out of a page
+seen from anywhere.
 """
 
 from __future__ import annotations
@@ -15,6 +20,7 @@ import html
 import logging
 import time
 from collections import deque
+from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
@@ -23,6 +29,8 @@ import trimesh
 import viser
 from viser import uplot
 
+from so101.bodies.looks import LIGHT_DIFFUSE, Looks
+from so101.bodies.physics import Physics
 from so101.robot import ACTUATED_JOINTS
 from so101.tasks.cube_to_box import CubeToBox
 from so101.web.urdf_scene import UrdfScene
@@ -39,11 +47,40 @@ CAMERA_POSITION = (0.55, -0.45, 0.40)
 CAMERA_LOOK_AT = (0.10, 0.0, 0.15)
 # A task's object that moved less than this since the pages last drew it is not sent again.
 MOVED_M = 0.0002
+# Under varied looks the page's own lights give way to one light as the looks draw it: at the middle of
+# the looks' strengths as bright as the page's own main light (viser's 3.0), and from this far away.
+LOOKS_LIGHT_INTENSITY = 3.0 / (sum(LIGHT_DIFFUSE) / 2)
+LOOKS_LIGHT_DISTANCE_M = 2.0
 
 
 def rgb255(rgba: Sequence[float]) -> tuple[int, int, int]:
     red, green, blue = (round(component * 255) for component in rgba[:3])
     return red, green, blue
+
+
+@dataclass(frozen=True)
+class LayoutLook:
+    """What the page draws of one layout, as its pictures draw it."""
+
+    cube_size_m: float
+    cube_rgb: tuple[int, int, int]
+    box_rgb: tuple[int, int, int]
+    floor_rgb: tuple[int, int, int] | None  # None: the page's own see-through grid
+    light_position: tuple[float, float, float] | None  # None: the page's own lights
+    light_intensity: float
+
+
+def layout_look(task: CubeToBox, looks: Looks | None, physics: Physics | None) -> LayoutLook:
+    """A layout's look on the page: `looks` (None: fixed, the task's own colours and the page's lights)
+    and `physics` (None: fixed, the task's cube) as so101.bodies.looks and .physics draw them for its seed."""
+    cube_size_m = 2 * (task.cube.half_size_m if physics is None else physics.cube_half_size_m)
+    if looks is None:
+        return LayoutLook(cube_size_m, rgb255(task.cube.rgba), rgb255(task.box.rgba), None, None, 0.0)
+    cube_rgba, box_rgba = looks.object_rgbas[:2]  # the task's objects in the model's order: the cube, the box
+    # A directional light shines from where it stands towards the origin: it stands against its direction.
+    position = tuple(-LOOKS_LIGHT_DISTANCE_M * part for part in looks.light_dir)
+    return LayoutLook(cube_size_m, rgb255(cube_rgba), rgb255(box_rgba), rgb255(looks.floor_rgba),
+                      (position[0], position[1], position[2]), LOOKS_LIGHT_INTENSITY * looks.light_diffuse)
 
 
 def recording_html(recording: tuple[int, str] | None) -> str:
@@ -77,7 +114,7 @@ class WebView:
         # In front of the arm, a little to its right and above (metres, the URDF's frame: x forward, z up).
         server.initial_camera.position = CAMERA_POSITION
         server.initial_camera.look_at = CAMERA_LOOK_AT
-        server.scene.add_grid("/ground", width=0.6, height=0.6, cell_size=0.05)
+        self._ground = server.scene.add_grid("/ground", width=0.6, height=0.6, cell_size=0.05)
         server.scene.add_frame(scene.link_path(scene.root_link), show_axes=False)
         self._joints = {joint.name: joint for joint in scene.joints}
         self._joint_frames = {}
@@ -91,6 +128,9 @@ class WebView:
                 np.asarray(mesh.faces, dtype=np.uint32), color=rgb255(visual.rgba), position=visual.xyz, wxyz=visual.wxyz)
         self._cube: viser.BoxHandle | None = None
         self._box: viser.FrameHandle | None = None
+        self._plates: list[viser.BoxHandle] = []
+        self._light: viser.DirectionalLightHandle | None = None
+        self._look: LayoutLook | None = None
         self._shown_objects: npt.NDArray[np.float64] | None = None
         self._recording = server.gui.add_html("", visible=False)
         self._angles = server.gui.add_markdown(angles_markdown([0.0] * len(ACTUATED_JOINTS)))
@@ -141,11 +181,34 @@ class WebView:
             return
         scene = self.server.scene
         self._box = scene.add_frame("/box", show_axes=False, visible=False)
-        for number, (centre, half_extents) in enumerate(task.box.plates()):
-            scene.add_box(f"/box/plate_{number}", color=rgb255(task.box.rgba),
-                          dimensions=np.multiply(2, half_extents), position=centre)
+        self._plates = [scene.add_box(f"/box/plate_{number}", color=rgb255(task.box.rgba),
+                                      dimensions=np.multiply(2, half_extents), position=centre)
+                        for number, (centre, half_extents) in enumerate(task.box.plates())]
         size = 2 * task.cube.half_size_m
         self._cube = scene.add_box("/cube", color=rgb255(task.cube.rgba), dimensions=(size, size, size), visible=False)
+        self._look = layout_look(task, None, None)
+
+    def show_layout(self, look: LayoutLook) -> None:
+        """The task's objects (add_task's), floor and light in a layout's look; only what changed is sent."""
+        server, cube, before = self.server, self._cube, self._look
+        if server is None or cube is None or look == before:
+            return
+        with server.atomic():
+            if before is None or look.cube_size_m != before.cube_size_m:
+                cube.dimensions = (look.cube_size_m,) * 3
+            cube.color = look.cube_rgb
+            for plate in self._plates:
+                plate.color = look.box_rgb
+            self._ground.plane_color = look.floor_rgb or (255, 255, 255)
+            self._ground.plane_opacity = 0.0 if look.floor_rgb is None else 1.0
+            server.scene.configure_default_lights(enabled=look.light_position is None, cast_shadow=False)
+            if look.light_position is not None:
+                if self._light is None:
+                    self._light = server.scene.add_light_directional("/looks_light", cast_shadow=False)
+                self._light.position, self._light.intensity = look.light_position, look.light_intensity
+            if self._light is not None:
+                self._light.visible = look.light_position is not None
+        self._look = look
 
     def show_objects(self, object_state: Sequence[float]) -> None:
         """The task's objects posed as an object_state has them (the cube's centre and x y z w quaternion,
