@@ -14,9 +14,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from so101.bodies.camera import TASK_FRONT_CAMERA, WRIST_CAMERA
+from so101.bodies.camera import TASK_FRONT_CAMERA, WRIST_CAMERA, wrist_placement
 from so101.bodies.camera_file import (
-    CameraFileError, camera_file_from, default_camera_file, front_file_of, orbit_of, read_camera_file, wrist_placement,
+    CameraFileError, camera_file_from, default_camera_file, front_file_of, orbit_of, read_camera_file,
 )
 from so101.camera_pose.fit import Pose, chosen_frames, pose_error
 from so101.perception.geometry import view_of

@@ -76,6 +76,28 @@ class WristCamera:
     fov_deg: float = 62.0
 
 
+def wrist_placement(camera: WristCamera) -> tuple[Vector, tuple[float, float, float, float]]:
+    """Where MuJoCo puts `camera` on the gripper: its position, and its orientation as a quaternion
+    (w, x, y, z) that turns MuJoCo's camera (looking along its -z, its +y up) to look at target_m."""
+    eye = camera.eye_m
+    right, top, forward = look_at_axes(eye, camera.target_m, camera.up)
+    backward = (-forward[0], -forward[1], -forward[2])
+    # The rotation's columns are right, top, backward; its quaternion (Shepperd's method, the largest term first).
+    m = ((right[0], top[0], backward[0]), (right[1], top[1], backward[1]), (right[2], top[2], backward[2]))
+    trace = m[0][0] + m[1][1] + m[2][2]
+    if trace > 0:
+        s = 2.0 * math.sqrt(trace + 1.0)
+        quat = (0.25 * s, (m[2][1] - m[1][2]) / s, (m[0][2] - m[2][0]) / s, (m[1][0] - m[0][1]) / s)
+    else:
+        i = max(range(3), key=lambda k: m[k][k])
+        j, k = (i + 1) % 3, (i + 2) % 3
+        s = 2.0 * math.sqrt(1.0 + m[i][i] - m[j][j] - m[k][k])
+        q = [0.0, 0.0, 0.0]
+        q[i], q[j], q[k] = 0.25 * s, (m[j][i] + m[i][j]) / s, (m[k][i] + m[i][k]) / s
+        quat = ((m[k][j] - m[j][k]) / s, q[0], q[1], q[2])
+    return (eye[0], eye[1], eye[2]), quat
+
+
 def check_picture(renders: bool, width: int, height: int) -> None:
     """What every body refuses before drawing: no renderer (made with renders=False), or no pixels."""
     if not renders:

@@ -13,6 +13,8 @@
   pictures' on average; null for a camera that was not fitted.
 
 A pinhole: the principal point at the picture's centre, no lens distortion. Pure: no simulator.
+Here the format, its checks, and the files as the renderer's cameras (so101.bodies.camera); where an
+episode's looks move them, and what a dataset keeps of it: so101.bodies.episode_cameras.
 """
 
 from __future__ import annotations
@@ -24,7 +26,6 @@ from pathlib import Path
 from typing import Any
 
 from so101.bodies.camera import TASK_FRONT_CAMERA, WRIST_CAMERA, Camera, Vector, WristCamera, cross, dot, look_at_axes
-from so101.bodies.looks import Looks, looks_for
 
 CAMERA_NAMES = ("front", "wrist")
 FRAMES = {"front": "base", "wrist": "gripper"}
@@ -192,70 +193,3 @@ def parse_camera_poses(text: str) -> dict[str, CameraFile]:
     if not isinstance(fields, dict):
         raise CameraFileError("a JSON object mapping a camera's name to its camera file's fields")
     return {name: camera_file_from(value, str(name)) for name, value in fields.items()}
-
-
-def wrist_placement(camera: WristCamera) -> tuple[Vector, tuple[float, float, float, float]]:
-    """Where MuJoCo puts `camera` on the gripper: its position, and its orientation as a quaternion
-    (w, x, y, z) that turns MuJoCo's camera (looking along its -z, its +y up) to look at target_m."""
-    eye = camera.eye_m
-    right, top, forward = look_at_axes(eye, camera.target_m, camera.up)
-    backward = (-forward[0], -forward[1], -forward[2])
-    # The rotation's columns are right, top, backward; its quaternion (Shepperd's method, the largest term first).
-    m = ((right[0], top[0], backward[0]), (right[1], top[1], backward[1]), (right[2], top[2], backward[2]))
-    trace = m[0][0] + m[1][1] + m[2][2]
-    if trace > 0:
-        s = 2.0 * math.sqrt(trace + 1.0)
-        quat = (0.25 * s, (m[2][1] - m[1][2]) / s, (m[0][2] - m[2][0]) / s, (m[1][0] - m[0][1]) / s)
-    else:
-        i = max(range(3), key=lambda k: m[k][k])
-        j, k = (i + 1) % 3, (i + 2) % 3
-        s = 2.0 * math.sqrt(1.0 + m[i][i] - m[j][j] - m[k][k])
-        q = [0.0, 0.0, 0.0]
-        q[i], q[j], q[k] = 0.25 * s, (m[j][i] + m[i][j]) / s, (m[k][i] + m[i][k]) / s
-        quat = ((m[k][j] - m[j][k]) / s, q[0], q[1], q[2])
-    return (eye[0], eye[1], eye[2]), quat
-
-
-def drawn_front(fixed: Camera, looks: Looks | None) -> Camera:
-    """The front camera as an episode's looks place it: `fixed` moved by their jitter (none: as it is)."""
-    if looks is None:
-        return fixed
-    target = tuple(float(a + b) for a, b in zip(fixed.target_xyz_m, looks.front_shift_m))
-    return replace(fixed, target_xyz_m=(target[0], target[1], target[2]), yaw_deg=fixed.yaw_deg + looks.front_turn_deg[0],
-                   pitch_deg=fixed.pitch_deg + looks.front_turn_deg[1], fov_deg=fixed.fov_deg + looks.front_fov_deg)
-
-
-def drawn_wrist(fixed: WristCamera, looks: Looks | None) -> WristCamera:
-    """The wrist camera as an episode's looks place it: moved within its mount, its aim kept."""
-    if looks is None:
-        return fixed
-    shift = looks.wrist_shift_m
-    return WristCamera(tuple(a + b for a, b in zip(fixed.eye_m, shift)),  # type: ignore[arg-type]
-                       tuple(a + b for a, b in zip(fixed.target_m, shift)),  # type: ignore[arg-type]
-                       fixed.up, fixed.fov_deg + looks.wrist_fov_deg)
-
-
-def fixed_cameras(poses: dict[str, CameraFile]) -> tuple[Camera, WristCamera]:
-    """A task's front and wrist cameras before the looks move them: the files' where given, else the simulator's own."""
-    front = orbit_of(poses["front"]) if "front" in poses else TASK_FRONT_CAMERA
-    wrist = wrist_of(poses["wrist"]) if "wrist" in poses else WRIST_CAMERA
-    return front, wrist
-
-
-def episode_cameras(poses: dict[str, CameraFile], looks: Looks | None, names: tuple[str, ...],
-                    width: int, height: int) -> dict[str, dict[str, Any]]:
-    """What a dataset keeps of where an episode's cameras `names` stood (so101_episode_cameras): each one's
-    camera file, as drawn for that episode's looks, at the pictures' size."""
-    front, wrist = fixed_cameras(poses)
-    kept: dict[str, dict[str, Any]] = {}
-    for name in names:
-        drawn = (front_file_of(drawn_front(front, looks), width, height) if name == "front"
-                 else wrist_file_of(drawn_wrist(wrist, looks), width, height))
-        kept[name] = {key: value for key, value in drawn.as_dict().items() if key != "residual_px"}
-    return kept
-
-
-def cameras_metadata(poses: dict[str, CameraFile], looks_mode: str, seed: int, names: tuple[str, ...],
-                     size: tuple[int, int]) -> dict[str, object]:
-    """episode_cameras for an episode of seed `seed` drawn in `looks_mode` (so101.bodies.looks)."""
-    return dict(episode_cameras(poses, looks_for(looks_mode, seed), names, size[0], size[1]))

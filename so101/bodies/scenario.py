@@ -3,7 +3,7 @@
 A task's episode is laid out from its seed. Four things vary with it beyond the layout:
 - its pictures' looks (so101.bodies.looks: `fixed`, `varied`, `unseen`, which also draws the front
   camera's backdrop from the pool held out of the eyes' pictures where none is given);
-- where its simulated cameras stand (so101.bodies.camera_file: `--camera-pose NAME=FILE`);
+- where its simulated cameras stand (so101.bodies.episode_cameras, from camera files: `--camera-pose NAME=FILE`);
 - its physics (so101.bodies.physics: `fixed`, `varied`, or a ranges file's ranges);
 - a photo of the workspace behind each camera's scene (so101.bodies.backdrop: `--backdrop NAME=IMAGE`).
 
@@ -22,7 +22,8 @@ from typing import Any
 
 from so101.bodies.backdrop import BackdropError, Placement, backdrop_photos, placement_for
 from so101.bodies.backdrop_pool import with_unseen_pool
-from so101.bodies.camera_file import CameraFile, CameraFileError, cameras_metadata, parse_camera_poses
+from so101.bodies.camera_file import CameraFile, CameraFileError, parse_camera_poses
+from so101.bodies.episode_cameras import cameras_metadata
 from so101.bodies.looks import DEFAULT_LOOKS, LOOKS_CHOICES, looks_metadata
 from so101.bodies.physics import DEFAULT_PHYSICS, PhysicsError, physics_metadata, physics_mode
 

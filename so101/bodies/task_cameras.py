@@ -22,8 +22,9 @@ import numpy.typing as npt
 
 from so101.bodies.backdrop import backdrop_picture, placement_for
 from so101.bodies.backdrop_pool import with_unseen_pool
-from so101.bodies.camera import DEFAULT_CAMERA, WRIST_CAMERA, WRIST_CAMERA_NAME, Camera, WristCamera
-from so101.bodies.camera_file import CameraFile, drawn_front, fixed_cameras, wrist_placement
+from so101.bodies.camera import DEFAULT_CAMERA, WRIST_CAMERA, WRIST_CAMERA_NAME, Camera, WristCamera, wrist_placement
+from so101.bodies.camera_file import CameraFile
+from so101.bodies.episode_cameras import drawn_front, fixed_cameras
 from so101.bodies.looks import DEFAULT_LOOKS, Looks, looks_for
 from so101.bodies.physics import DEFAULT_PHYSICS, Physics, physics_for
 from so101.bodies.protocol import AnglesDeg, ObjectState, RgbImage, SceneTask

@@ -14,7 +14,7 @@ import numpy.typing as npt
 
 from so101.bodies import mujoco_model  # noqa: F401  (first: it chooses MuJoCo's OpenGL back end)
 from so101.bodies.camera import WRIST_CAMERA, WRIST_CAMERA_NAME, WristCamera
-from so101.bodies.camera_file import wrist_placement
+from so101.bodies.camera import wrist_placement
 from so101.bodies.jaw_pads import JawPad
 from so101.bodies.physics import Physics
 from so101.tasks.objects import Cube, Layout, SceneFacts, cube_with, on_the_floor
