@@ -189,14 +189,12 @@ class WebView:
         self._look = layout_look(task, None, None)
 
     def show_layout(self, look: LayoutLook) -> None:
-        """The task's objects (add_task's), floor and light in a layout's look; only what changed is sent."""
-        server, cube, before = self.server, self._cube, self._look
-        if server is None or cube is None or look == before:
+        """The task's objects (add_task's), floor and light in a layout's look; nothing is sent for the look shown."""
+        server, cube = self.server, self._cube
+        if server is None or cube is None or look == self._look:
             return
         with server.atomic():
-            if before is None or look.cube_size_m != before.cube_size_m:
-                cube.dimensions = (look.cube_size_m,) * 3
-            cube.color = look.cube_rgb
+            cube.dimensions, cube.color = (look.cube_size_m,) * 3, look.cube_rgb
             for plate in self._plates:
                 plate.color = look.box_rgb
             self._ground.plane_color = look.floor_rgb or (255, 255, 255)
