@@ -209,10 +209,13 @@ def backdrop_lines(args: argparse.Namespace, size: tuple[int, int] | None) -> li
     looks = getattr(args, "looks", DEFAULT_LOOKS) if size else DEFAULT_LOOKS  # looks only where pictures are drawn
     for name, path in sorted(with_unseen_pool(looks, getattr(args, "backdrops", {})).items()):
         photos = backdrop_photos(path)
-        height, width = read_photo(photos[0].resolve()).shape[:2]
-        which = f"{path}, {width}x{height}" if len(photos) == 1 else f"{len(photos)} photos in {path}, one a seed"
         if path in POOLS:
             which = f"the {path} backdrops ({len(photos)} pictures in {photos[0].parent}), one a seed"
+        elif len(photos) == 1:
+            height, width = read_photo(photos[0].resolve()).shape[:2]
+            which = f"{path}, {width}x{height}"
+        else:
+            which = f"{len(photos)} photos in {path}, one a seed"
         fit = f"scaled to cover the {size[0]}x{size[1]} pictures and cropped about the centre" if size else ""
         lines.append(f"the {name} camera's backdrop: {which}; {fit}")
     return lines
