@@ -196,8 +196,10 @@ def test_learn_keeps_the_policy_that_scored_best_on_the_validation_layouts(tmp_p
     assert learning.best() == "seed4"  # a tie goes to the first seed; the rounds are not scored yet
     learning.scores.update({"round1": 18, "round2": 19})
     assert learning.best() == "round2" and learning.trained("round2") == tmp_path / "round2/checkpoints/last/pretrained_model"
-    learning.scores["round2"] = 18
-    assert learning.best() == "seed4"  # a round must beat what it learned from
+    learning.scores["round2"] = 17
+    assert learning.best() == "round1"  # a tie between a candidate and rounds goes to the latest round
+    learning.scores["round1"] = 17
+    assert learning.best() == "seed4"  # a round below what it learned from is not kept
     assert Learning(tmp_path, tmp_path, {"seed": 1, "candidates": 1}, {}, Path("python"), {}).best() == "seed1"
 
 

@@ -330,11 +330,14 @@ class Learning:
         return f"the state policy of seed {name[4:]}" if name.startswith("seed") else f"the state policy of DAgger {name[:5]} {name[5:]}"
 
     def best(self) -> str:
-        """The policy kept: the most validation successes; on a tie the earlier (a candidate before a round, the
-        first seed before the next); without a validation, the first candidate."""
-        names = self.candidates() + [f"round{number}" for number in range(1, self.settings.get("rounds", 0) + 1)]
+        """The policy kept: the most validation successes; on a tie the later round (it learned from all the
+        demonstrations of the policy it ties with, and the expert's corrections of it besides), else the first
+        seed; without a validation, the first candidate."""
+        candidates = self.candidates()
+        names = candidates + [f"round{number}" for number in range(1, self.settings.get("rounds", 0) + 1)]
         scored = [name for name in names if name in self.scores] or names[:1]
-        return max(scored, key=lambda name: (self.scores.get(name, -1), -names.index(name)))
+        return max(scored, key=lambda name: (self.scores.get(name, -1), names.index(name) >= len(candidates),
+                                             names.index(name) if name not in candidates else -names.index(name)))
 
     def dagger_demos(self, number: int, episodes: int) -> None:
         """Round `number`'s demonstrations: the demonstrations so far, copied, and `episodes` more in which the best
