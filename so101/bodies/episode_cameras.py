@@ -40,7 +40,7 @@ def fixed_cameras(poses: dict[str, CameraFile]) -> tuple[Camera, WristCamera]:
 
 def episode_cameras(poses: dict[str, CameraFile], looks: Looks | None, names: tuple[str, ...],
                     width: int, height: int) -> dict[str, dict[str, Any]]:
-    """What a dataset keeps of where an episode's cameras `names` stood (so101_episode_cameras): each one's
+    """What a dataset keeps of where an episode's cameras `names` stood (its scenario's `cameras`): each one's
     camera file, as drawn for that episode's looks, at the pictures' size."""
     front, wrist = fixed_cameras(poses)
     kept: dict[str, dict[str, Any]] = {}

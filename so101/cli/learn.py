@@ -336,8 +336,9 @@ class Learning:
         candidates = self.candidates()
         names = candidates + [f"round{number}" for number in range(1, self.settings.get("rounds", 0) + 1)]
         scored = [name for name in names if name in self.scores] or names[:1]
-        return max(scored, key=lambda name: (self.scores.get(name, -1), names.index(name) >= len(candidates),
-                                             names.index(name) if name not in candidates else -names.index(name)))
+        # Ties: a round's place (1 or more) above a candidate's negated one (0 or less), so the later round, the first seed.
+        return max(scored, key=lambda name: (self.scores.get(name, -1),
+                                             -names.index(name) if name in candidates else names.index(name)))
 
     def dagger_demos(self, number: int, episodes: int) -> None:
         """Round `number`'s demonstrations: the demonstrations so far, copied, and `episodes` more in which the best
