@@ -11,7 +11,7 @@ policy environment (`so101 policy-env`: LeRobot and torch, once per machine, sev
 the tests of trained policies run in; where it cannot be made, it says why and those tests are
 skipped, saying so (`test --no-policy-env` skips it on purpose). The suite runs in parallel, one
 worker per core (at most four; tests/conftest.py keeps dora's tests apart and runs the real-time
-ones alone): on 2 cores 16 1/2 to 17 1/2 minutes, against 25 1/2 one test at a time (`test -n 0`;
+ones alone): on 2 cores 16 to 21 minutes, against 25 1/2 one test at a time (`test -n 0`;
 docs/tests.md).
 Any further arguments go to the command that runs (so101 teleop or pytest).
 """

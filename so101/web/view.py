@@ -180,13 +180,13 @@ class WebView:
         if self.server is None:
             return
         scene = self.server.scene
+        look = layout_look(task, None, None)  # the task's own, until a layout's look is shown
         self._box = scene.add_frame("/box", show_axes=False, visible=False)
-        self._plates = [scene.add_box(f"/box/plate_{number}", color=rgb255(task.box.rgba),
+        self._plates = [scene.add_box(f"/box/plate_{number}", color=look.box_rgb,
                                       dimensions=np.multiply(2, half_extents), position=centre)
                         for number, (centre, half_extents) in enumerate(task.box.plates())]
-        size = 2 * task.cube.half_size_m
-        self._cube = scene.add_box("/cube", color=rgb255(task.cube.rgba), dimensions=(size, size, size), visible=False)
-        self._look = layout_look(task, None, None)
+        self._cube = scene.add_box("/cube", color=look.cube_rgb, dimensions=(look.cube_size_m,) * 3, visible=False)
+        self._look = look
 
     def show_layout(self, look: LayoutLook) -> None:
         """The task's objects (add_task's), floor and light in a layout's look; nothing is sent for the look shown."""
